@@ -1,0 +1,42 @@
+"""methodgen: geometric integrators generated from your Hamiltonian.
+
+Pipeline (data flows one way)::
+
+    scene.toml -> Hamiltonian -> derive -> discretize (Scheme) -> verify
+               -> lower (IR) -> emit (templates) -> generated/*.py -> run / bench
+
+Public API
+----------
+Hamiltonian(H, q, p, params=None, constraints=(), name=None)
+discretize(system, method) -> Scheme
+generate(scheme, path=None) -> module
+build(system, method, path=None) -> module      (reuses an up-to-date file without deriving)
+load_scene(name_or_path) -> Scene
+methods() / scenes()
+"""
+
+from ._version import __version__
+from .emit import generate
+from .errors import (GenerationError, InputError, MethodgenError, MethodNotApplicable,
+                     ParseError, SceneError)
+from .problem import Hamiltonian
+from .schemes import Scheme, Traits, applicable_methods, discretize, method_names
+from .build import build
+from .scene import Scene, load_scene, scene_names
+
+__all__ = [
+    "__version__", "Hamiltonian", "discretize", "generate", "build", "Scheme", "Traits",
+    "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
+    "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
+    "GenerationError",
+]
+
+
+def methods() -> list[str]:
+    """Names of all methods in the library."""
+    return method_names()
+
+
+def scenes() -> list[str]:
+    """Names of the built-in scenes."""
+    return scene_names()

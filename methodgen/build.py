@@ -1,0 +1,63 @@
+"""From a system (or scene) to an imported generated module, reusing files.
+
+:func:`build` computes the signature of ``(system, method)`` first — cheap, no
+derivation — and imports an existing file whose signature matches and whose
+content is intact.  Only otherwise does it derive, lower and emit.  A file
+whose content does not match its hash (edited, truncated) is never trusted:
+it is regenerated and a warning says so.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from types import ModuleType
+
+from .emit import cache_dir, emit_source, file_status, load_module, module_filename, signature, write_atomic
+from .problem import Hamiltonian
+from .schemes import discretize
+
+__all__ = ["build", "generated_dir", "scene_module_path"]
+
+
+def generated_dir() -> Path | None:
+    """The repository's ``generated/`` folder when running from a source checkout, else None."""
+    root = Path(__file__).resolve().parent.parent
+    if (root / "pyproject.toml").is_file() and (root / "generated").is_dir():
+        return root / "generated"
+    return None
+
+
+def scene_module_path(scene, method: str) -> Path:
+    """Where the module of ``scene`` × ``method`` lives: ``generated/`` for built-ins in a checkout, else the cache."""
+    fname = module_filename(scene.name, method)
+    gen = generated_dir()
+    if scene.builtin and gen is not None:
+        return gen / fname
+    sig = signature(scene.system, method)
+    return cache_dir() / module_filename(f"{scene.name}_{sig[:12]}", method)
+
+
+def build(system: Hamiltonian, method: str, path=None) -> ModuleType:
+    """Return the generated module for ``system`` and ``method``, generating it only if needed.
+
+    Parameters
+    ----------
+    system : Hamiltonian
+    method : str
+    path : path-like, optional
+        Target file; default: the per-user cache, named by the signature.
+    """
+    sig = signature(system, method)
+    if path is None:
+        path = cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method)
+    path = Path(path)
+    status = file_status(path, sig)
+    if status == "ok":
+        return load_module(path)
+    if status == "corrupt":
+        warnings.warn(f"generated module {path} does not match its content hash (edited or "
+                      "truncated); regenerating it", RuntimeWarning, stacklevel=2)
+    scheme = discretize(system, method)
+    write_atomic(path, emit_source(scheme, sig))
+    return load_module(path)

@@ -1,0 +1,198 @@
+"""Symbolic analysis of a Hamiltonian: gradients, structure, invariants.
+
+Pure SymPy, no numerics.  Each function derives one thing and is cached on the
+(immutable) :class:`~methodgen.problem.Hamiltonian`, so a scheme asks only for
+what it needs ("model only what the scene requires").
+
+References
+----------
+.. [1] E. Hairer, C. Lubich, G. Wanner, *Geometric Numerical Integration*,
+   2nd ed., Springer 2006, ch. IV (first integrals) and VII.1 (constraints).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import sympy as sp
+
+from .problem import Hamiltonian
+
+__all__ = [
+    "Invariant", "Separable", "gradient", "vector_field", "separable_split", "radial_profile",
+    "angular_momenta", "invariants", "poisson_bracket",
+]
+
+
+@dataclass(frozen=True)
+class Invariant:
+    """A monitored quantity ``I(q, p)``; ``exact`` if ``{I, H} = 0`` was shown symbolically."""
+
+    name: str
+    expr: sp.Expr
+    exact: bool = True
+    why: str = ""
+
+
+@dataclass(frozen=True)
+class Separable:
+    """``H = T(p) + U(q)``; ``Minv`` is ``M⁻¹`` when ``T = ½ pᵀ M⁻¹ p`` (else None)."""
+
+    T: sp.Expr
+    U: sp.Expr
+    Minv: sp.Matrix | None
+
+    @property
+    def quadratic_kinetic(self) -> bool:
+        return self.Minv is not None
+
+    @property
+    def isotropic(self) -> bool:
+        """``M⁻¹`` is a multiple of the identity (rotations act symplectically on T)."""
+        if self.Minv is None:
+            return False
+        d = self.Minv.shape[0]
+        c = self.Minv[0, 0]
+        return all(sp.simplify(self.Minv[i, j] - (c if i == j else 0)) == 0
+                   for i in range(d) for j in range(d))
+
+
+def _cache(fn):
+    """Cache a derivation per system object (systems are immutable)."""
+    store: dict[int, tuple[Hamiltonian, object]] = {}
+
+    @functools.wraps(fn)
+    def wrapper(system: Hamiltonian):
+        hit = store.get(id(system))
+        if hit is not None and hit[0] is system:
+            return hit[1]
+        out = fn(system)
+        store[id(system)] = (system, out)
+        return out
+
+    return wrapper
+
+
+@_cache
+def gradient(system: Hamiltonian) -> sp.Matrix:
+    """∇H as a column of length 2d: ``(∂H/∂q, ∂H/∂p)``."""
+    return sp.Matrix([sp.diff(system.H, s) for s in system.y])
+
+
+@_cache
+def vector_field(system: Hamiltonian) -> sp.Matrix:
+    """``f(y) = J ∇H(y)`` with ``J = [[0, I], [-I, 0]]`` (column of length 2d)."""
+    g = gradient(system)
+    d = system.dim
+    return sp.Matrix(list(g[d:]) + [-v for v in g[:d]])
+
+
+@_cache
+def separable_split(system: Hamiltonian) -> Separable | None:
+    """Split ``H = T(p) + U(q)`` if possible, with the mass matrix when T is quadratic.
+
+    The split is by additive terms of ``H`` (after ``expand`` if needed); a term
+    mixing q and p makes the system non-separable.  ``T`` is quadratic when its
+    Hessian in p is constant and ``T = ½ pᵀ (∂²T/∂p²) p`` exactly.
+    """
+    qs, ps = set(system.q), set(system.p)
+    for H in (system.H, sp.expand(system.H)):
+        T, U, ok = sp.S.Zero, sp.S.Zero, True
+        for term in sp.Add.make_args(H):
+            fs = term.free_symbols
+            if fs & qs and fs & ps:
+                ok = False
+                break
+            if fs & ps:
+                T += term
+            else:
+                U += term
+        if ok:
+            break
+    else:
+        return None
+    p = sp.Matrix(system.p)
+    hess = sp.hessian(T, system.p)
+    Minv = None
+    if not (hess.free_symbols & (qs | ps)):
+        if sp.expand(T - (p.T * hess * p)[0, 0] / 2) == 0:
+            Minv = hess
+    return Separable(T=T, U=U, Minv=Minv)
+
+
+@_cache
+def radial_profile(system: Hamiltonian) -> tuple[sp.Symbol, sp.Expr] | None:
+    """If ``U(q) = V(|q|²)`` return ``(s, V(s))``, else None.
+
+    ``V`` is found by restricting U to the first axis, ``V(s) = U(√s, 0, …, 0)``
+    with ``s > 0``, and accepted only if ``U(q) - V(qᵀq)`` simplifies to 0.
+    """
+    sep = separable_split(system)
+    if sep is None:
+        return None
+    U = sep.U
+    s = sp.Symbol("_s", positive=True)
+    if not (U.free_symbols & set(system.q)):
+        return s, U
+    first = {system.q[0]: sp.sqrt(s)}
+    first.update({qi: sp.S.Zero for qi in system.q[1:]})
+    try:
+        V = U.xreplace(first)
+    except (ZeroDivisionError, TypeError):  # pragma: no cover - defensive
+        return None
+    if V.has(sp.zoo, sp.nan, sp.oo):
+        return None
+    r2 = sum(qi**2 for qi in system.q)
+    if sp.simplify(U - V.xreplace({s: r2})) != 0:
+        return None
+    return s, V
+
+
+def poisson_bracket(system: Hamiltonian, F: sp.Expr, G: sp.Expr) -> sp.Expr:
+    """``{F, G} = Σ ∂F/∂q_i ∂G/∂p_i - ∂F/∂p_i ∂G/∂q_i``."""
+    return sp.Add(*[sp.diff(F, qi) * sp.diff(G, pi) - sp.diff(F, pi) * sp.diff(G, qi)
+                    for qi, pi in zip(system.q, system.p)])
+
+
+def _angular_name(system: Hamiltonian, i: int, j: int) -> str:
+    d = system.dim
+    if d == 2:
+        return "L"
+    if d == 3:
+        return {(1, 2): "Lx", (0, 2): "Ly", (0, 1): "Lz"}[(i, j)]
+    return f"L_{system.q[i].name}_{system.q[j].name}"
+
+
+@_cache
+def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
+    """Components of angular momentum ``q × p`` that are first integrals.
+
+    For each coordinate plane (i, j) the component ``L_ij = q_i p_j - q_j p_i``
+    (in 3D ``(Lx, Ly, Lz) = q × p``) is kept if its Poisson bracket with H
+    simplifies to exactly 0, i.e. H is invariant under rotations in that plane.
+    Constrained systems are skipped (the constraint forces may break it).
+    """
+    d = system.dim
+    if d < 2:
+        return ()
+    out = []
+    for i in range(d):
+        for j in range(i + 1, d):
+            qi, qj, pi, pj = system.q[i], system.q[j], system.p[i], system.p[j]
+            if d == 3 and (i, j) == (0, 2):
+                L = qj * pi - qi * pj  # Ly = z px - x pz
+            else:
+                L = qi * pj - qj * pi
+            if any(sp.simplify(poisson_bracket(system, L, g)) != 0
+                   for g in [system.H, *system.constraints]):
+                continue
+            out.append(Invariant(_angular_name(system, i, j), L, True,
+                                 f"{{{_angular_name(system, i, j)}, H}} = 0 exactly"))
+    return tuple(sorted(out, key=lambda inv: inv.name) if d == 3 else out)
+
+
+@_cache
+def invariants(system: Hamiltonian) -> tuple[Invariant, ...]:
+    """All monitored invariants: H first, then the exact first integrals found."""
+    return (Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)

@@ -1,0 +1,262 @@
+"""Emission: IR → Python source through jinja2 templates → file → module.
+
+* The jinja2 environment is strict (``StrictUndefined``: a template variable
+  missing from the IR is an error, not an empty string), with ``trim_blocks``
+  and ``lstrip_blocks`` so templates can be indented readably.
+* Every file starts with a provenance header: generator, SymPy and template
+  versions, the source Hamiltonian, the **signature** (a hash of everything
+  the output depends on, computable *without* deriving anything) and a
+  **content hash** of the body, so an edited or truncated file is detected.
+* Files are written atomically (temporary file in the same folder, fsync,
+  ``os.replace``): an interrupted write never leaves a half module, and two
+  processes generating the same file leave one valid file.
+* Generated modules are imported from their file (never ``exec`` of a string).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import re
+import sys
+import tempfile
+from pathlib import Path
+from types import ModuleType
+
+import jinja2
+import sympy
+
+from ._version import __version__
+from .errors import GenerationError
+from .lower import Kernel, ModuleIR, lower
+
+__all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
+           "load_module", "generate", "module_filename", "cache_dir"]
+
+HEADER_SIGNATURE = "# signature: "
+HEADER_CONTENT = "# content-sha256: "
+
+
+def template_dir() -> Path:
+    """The templates folder: inside the installed package, or the repo's top-level ``templates/``."""
+    here = Path(__file__).resolve().parent
+    for cand in (here / "templates", here.parent / "templates"):
+        if (cand / "module.py.j2").is_file():
+            return cand
+    raise GenerationError(f"methodgen templates not found next to {here}; the installation is incomplete")
+
+
+def template_hash() -> str:
+    """SHA-256 over the names and bytes of all templates (sorted)."""
+    h = hashlib.sha256()
+    for path in sorted(template_dir().glob("*.j2")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def signature(system, method: str) -> str:
+    """Hash of everything a generated module depends on.
+
+    Computed from the system's fingerprint, the method name, and the versions
+    of methodgen, SymPy and the templates — no derivation needed, so a cached
+    module can be reused without re-deriving the scheme.
+    """
+    parts = [system.fingerprint(), method, __version__, sympy.__version__, template_hash()]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def module_filename(system_name: str, method: str) -> str:
+    return f"{system_name}_{method}".replace("-", "_") + ".py"
+
+
+def cache_dir() -> Path:
+    """Per-user cache for generated modules (``$METHODGEN_CACHE`` or the XDG cache)."""
+    env = os.environ.get("METHODGEN_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "methodgen"
+
+
+# --- rendering --------------------------------------------------------------
+
+def _environment() -> jinja2.Environment:
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(template_dir())),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
+    env.filters["pyrepr"] = repr
+    env.filters["pytuple"] = lambda seq: repr(tuple(seq))
+    return env
+
+
+def _vector_view(kern: Kernel, groups: list[tuple[str, tuple[int, ...]]], returns: str) -> dict:
+    """Map a kernel's flat outputs onto named arrays (``_R[..., i]``, ``_J[..., i, j]``)."""
+    targets = []
+    bounds = []
+    start = 0
+    for name, shape in groups:
+        size = 1
+        for s in shape:
+            size *= s
+        bounds.append((start, start + size, name, shape))
+        start += size
+    for (flat,), code in kern.outputs:
+        for lo, hi, name, shape in bounds:
+            if lo <= flat < hi:
+                local = flat - lo
+                idx = []
+                for dim in reversed(shape):
+                    idx.append(local % dim)
+                    local //= dim
+                idx = ", ".join(str(i) for i in reversed(idx))
+                targets.append((f"{name}[..., {idx}]", code))
+                break
+    allocs = [(name, repr(tuple(shape))) for name, shape in groups]
+    return {"temps": kern.temps, "targets": targets, "allocs": allocs, "returns": returns}
+
+
+def _docsafe(text: str) -> str:
+    return " ".join(text.replace("\\", " ").replace('"""', "'''").split())
+
+
+def render(ir: ModuleIR) -> str:
+    """Render the module source for ``ir`` (deterministic)."""
+    n, d2 = ir.n_unknowns, 2 * ir.dim
+    vector = {
+        "increment": _vector_view(ir.vector["increment"], [("_out", (d2,))], "_out"),
+        "hamiltonian": _vector_view(ir.vector["hamiltonian"], [("_out", (1,))], "_out[..., 0]"),
+        "invariants": _vector_view(ir.vector["invariants"],
+                                   [("_out", (len(ir.invariant_names),))], "_out"),
+    }
+    if n:
+        vector["guess"] = _vector_view(ir.vector["guess"], [("_out", (n,))], "_out")
+        vector["res"] = _vector_view(ir.vector["res"], [("_R", (n,))], "_R")
+        vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_J", (n, n))], "_R, _J")
+    defaults = "{" + ", ".join(f"{k!r}: {v}" for k, v in zip(ir.param_names, ir.param_defaults)) + "}"
+    clean = ir.__class__(**{**ir.__dict__, "source": _docsafe(ir.source),
+                            "constraints": tuple(_docsafe(c) for c in ir.constraints)})
+    header = [
+        f"Generated by methodgen {__version__} from templates/module.py.j2 -- do not edit.",
+        f"system: {ir.system_name}; method: {ir.method}",
+        f"H = {clean.source}",
+        f"methodgen {__version__}; sympy {sympy.__version__}; templates sha256 {template_hash()[:16]}",
+        HEADER_SIGNATURE[2:] + ir.signature,
+    ]
+    body_env = _environment()
+    text = body_env.get_template("module.py.j2").render(
+        ir=clean, vector=vector, header=header, defaults_text=defaults,
+        traits_text=repr(ir.traits))
+    text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
+    digest = hashlib.sha256(text.encode()).hexdigest()
+    return HEADER_CONTENT + digest + "\n" + text
+
+
+# --- files --------------------------------------------------------------------
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (temporary file + ``os.replace``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def file_status(path: Path, expected_signature: str | None = None) -> str:
+    """Classify a generated file.
+
+    Returns
+    -------
+    str
+        ``"missing"``; ``"corrupt"`` (no header, or the body does not match
+        its content hash: edited or truncated); ``"stale"`` (valid, but its
+        signature differs from ``expected_signature``); or ``"ok"``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return "missing"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return "corrupt"
+    first, _, body = text.partition("\n")
+    if not first.startswith(HEADER_CONTENT):
+        return "corrupt"
+    if hashlib.sha256(body.encode()).hexdigest() != first[len(HEADER_CONTENT):].strip():
+        return "corrupt"
+    if expected_signature is not None:
+        m = re.search(r"^" + re.escape(HEADER_SIGNATURE) + r"([0-9a-f]{64})$", body, re.M)
+        if not m or m.group(1) != expected_signature:
+            return "stale"
+    return "ok"
+
+
+def load_module(path: Path) -> ModuleType:
+    """Import a generated module from its file (content hash checked first)."""
+    path = Path(path).resolve()
+    status = file_status(path)
+    if status != "ok":
+        raise GenerationError(f"generated module {path} is {status}; regenerate it")
+    digest = hashlib.sha256(str(path).encode()).hexdigest()[:12]
+    name = f"methodgen_generated.{path.stem}_{digest}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:  # pragma: no cover - defensive
+        raise GenerationError(f"cannot import {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(name, None)
+        raise
+    return module
+
+
+def generate(scheme, path: str | os.PathLike | None = None) -> ModuleType:
+    """Emit ``scheme`` as a numpy module, write it, import it and return the module.
+
+    Parameters
+    ----------
+    scheme : Scheme
+        From :func:`methodgen.discretize`.
+    path : path-like, optional
+        File to write.  Default: the per-user cache (:func:`cache_dir`), under a
+        name that includes the signature.  A file that is already up to date
+        (same signature, intact content) is not rewritten.
+
+    Returns
+    -------
+    module
+        The imported generated module.
+    """
+    sig = signature(scheme.system, scheme.method)
+    name = scheme.system.name or "system"
+    if path is None:
+        path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.method)
+    path = Path(path)
+    if file_status(path, sig) != "ok":
+        write_atomic(path, emit_source(scheme, sig, path.stem))
+    return load_module(path)
+
+
+def emit_source(scheme, sig: str | None = None, module_name: str | None = None) -> str:
+    """The full source text of the generated module for ``scheme``."""
+    sig = sig or signature(scheme.system, scheme.method)
+    name = module_name or module_filename(scheme.system.name or "system", scheme.method)[:-3]
+    return render(lower(scheme, sig, name))

@@ -1,0 +1,226 @@
+"""Safe parsing of expression text into SymPy.
+
+Hamiltonians and constraints arrive as text (from Python calls or scene files).
+Text is *data*: it is parsed with :func:`ast.parse` (which never executes
+anything) and the resulting tree is walked with a whitelist.  Only numbers,
+declared names, the arithmetic operators ``+ - * / **`` and calls of the
+functions in :data:`FUNCTIONS` are accepted; everything else — attribute access,
+subscripts, lambdas, comprehensions, keyword arguments, strings, dunder names —
+is refused *before* any SymPy object is built.  ``sympify`` is never called on
+user text.
+
+Float literals are converted to exact rationals (``0.1`` becomes ``1/10``) so
+that the symbolic proofs of :mod:`methodgen.verify` stay exact.
+"""
+
+from __future__ import annotations
+
+import ast
+import keyword
+import re
+from typing import Mapping
+
+import sympy as sp
+
+from .errors import ParseError
+
+#: Functions allowed in expression text, mapped to their SymPy constructors.
+FUNCTIONS: dict[str, object] = {
+    "sqrt": sp.sqrt,
+    "exp": sp.exp,
+    "log": sp.log,
+    "sin": sp.sin,
+    "cos": sp.cos,
+    "tan": sp.tan,
+    "sinh": sp.sinh,
+    "cosh": sp.cosh,
+    "tanh": sp.tanh,
+    "atan": sp.atan,
+}
+
+#: Named constants of the grammar.
+CONSTANTS: dict[str, sp.Expr] = {"pi": sp.pi}
+
+#: Names a user symbol may not take (the grammar's own words).
+RESERVED = frozenset(FUNCTIONS) | frozenset(CONSTANTS)
+
+_NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+MAX_TEXT = 20_000
+MAX_DEPTH = 60
+MAX_INT_EXPONENT = 64
+
+
+def check_name(name: object, what: str = "symbol") -> str:
+    """Validate a user symbol name and return it.
+
+    A valid name starts with a letter, continues with letters, digits or
+    underscores, is not a Python keyword and is not a word of the grammar
+    (:data:`RESERVED`).  Leading underscores (and so dunder names) are refused.
+    """
+    if not isinstance(name, str):
+        raise ParseError(f"{what} name must be a string, got {type(name).__name__} {name!r}")
+    if not _NAME_RE.match(name):
+        raise ParseError(
+            f"invalid {what} name {name!r}: a name starts with a letter and contains only "
+            "letters, digits and underscores (no leading underscore)"
+        )
+    if keyword.iskeyword(name) or keyword.issoftkeyword(name):
+        raise ParseError(f"invalid {what} name {name!r}: it is a Python keyword; choose another name")
+    if name in RESERVED:
+        raise ParseError(
+            f"invalid {what} name {name!r}: it is a function or constant of the expression "
+            f"grammar ({', '.join(sorted(RESERVED))})"
+        )
+    return name
+
+
+def parse_expr(text: str, symbols: Mapping[str, sp.Symbol], *, what: str = "expression") -> sp.Expr:
+    """Parse ``text`` into a real scalar SymPy expression over ``symbols``.
+
+    Parameters
+    ----------
+    text : str
+        Expression in Python syntax restricted to the whitelist described in the
+        module docstring, e.g. ``"(px**2 + py**2)/(2*m) - k/sqrt(x**2 + y**2)"``.
+    symbols : mapping of str to sympy.Symbol
+        The declared names (coordinates, momenta, parameters).
+    what : str
+        How to call the expression in error messages ("Hamiltonian", "constraint 1").
+
+    Returns
+    -------
+    sympy.Expr
+
+    Raises
+    ------
+    ParseError
+        On syntax errors, undeclared names, disallowed constructs, or
+        expressions that are not real scalars.
+    """
+    if not isinstance(text, str):
+        raise ParseError(f"{what} must be a string, got {type(text).__name__}")
+    if len(text) > MAX_TEXT:
+        raise ParseError(f"{what} is longer than {MAX_TEXT} characters")
+    if not text.strip():
+        raise ParseError(f"{what} is empty")
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError as exc:
+        col = f" at column {exc.offset}" if exc.offset else ""
+        raise ParseError(f"syntax error in {what}{col}: {exc.msg}: {text!r}") from None
+    expr = _Builder(symbols, what).build(tree.body, 0)
+    if not isinstance(expr, sp.Expr) or isinstance(expr, (sp.MatrixBase,)):
+        raise ParseError(f"{what} must be a scalar expression")
+    if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+        raise ParseError(f"{what} is not a finite real expression: {expr}")
+    return expr
+
+
+class _Builder:
+    """Walk an :mod:`ast` tree with a whitelist and build SymPy objects."""
+
+    _BINOPS = {
+        ast.Add: lambda a, b: a + b,
+        ast.Sub: lambda a, b: a - b,
+        ast.Mult: lambda a, b: a * b,
+        ast.Div: lambda a, b: a / b,
+    }
+
+    def __init__(self, symbols: Mapping[str, sp.Symbol], what: str):
+        self.symbols = symbols
+        self.what = what
+
+    def fail(self, node: ast.AST, msg: str) -> ParseError:
+        col = getattr(node, "col_offset", None)
+        where = f" (column {col + 1})" if col is not None else ""
+        return ParseError(f"{self.what}{where}: {msg}")
+
+    def build(self, node: ast.AST, depth: int) -> sp.Expr:
+        if depth > MAX_DEPTH:
+            raise self.fail(node, f"expression nested deeper than {MAX_DEPTH} levels")
+        if isinstance(node, ast.Constant):
+            return self.constant(node)
+        if isinstance(node, ast.Name):
+            return self.name(node)
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            arg = self.build(node.operand, depth + 1)
+            return -arg if isinstance(node.op, ast.USub) else arg
+        if isinstance(node, ast.BinOp):
+            if isinstance(node.op, ast.Pow):
+                return self.power(node, depth)
+            op = self._BINOPS.get(type(node.op))
+            if op is None:
+                raise self.fail(node, f"operator {type(node.op).__name__} is not allowed; use + - * / **")
+            left = self.build(node.left, depth + 1)
+            right = self.build(node.right, depth + 1)
+            if isinstance(node.op, ast.Div) and right == 0:
+                raise self.fail(node, "division by zero")
+            return op(left, right)
+        if isinstance(node, ast.Call):
+            return self.call(node, depth)
+        raise self.fail(node, self.describe(node) + " is not allowed in an expression; allowed are "
+                        "numbers, declared names, + - * / ** and the functions "
+                        + ", ".join(sorted(FUNCTIONS)))
+
+    @staticmethod
+    def describe(node: ast.AST) -> str:
+        kinds = {
+            ast.Attribute: "attribute access",
+            ast.Subscript: "subscripting",
+            ast.Lambda: "lambda",
+            ast.Tuple: "a tuple (expressions must be scalar)",
+            ast.List: "a list (expressions must be scalar)",
+            ast.Compare: "a comparison",
+            ast.BoolOp: "a boolean operator",
+            ast.IfExp: "a conditional expression",
+            ast.NamedExpr: "an assignment expression",
+        }
+        return kinds.get(type(node), f"syntax element {type(node).__name__}")
+
+    def constant(self, node: ast.Constant) -> sp.Expr:
+        value = node.value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(node, f"literal {value!r} is not a real number")
+        if isinstance(value, int):
+            return sp.Integer(value)
+        if value != value or value in (float("inf"), float("-inf")):
+            raise self.fail(node, "non-finite number")
+        # repr gives the shortest decimal that round-trips: 0.1 -> 1/10 exactly.
+        return sp.Rational(repr(value))
+
+    def name(self, node: ast.Name) -> sp.Expr:
+        ident = node.id
+        if ident.startswith("_"):
+            raise self.fail(node, f"name {ident!r} is not allowed (names may not start with '_')")
+        if ident in self.symbols:
+            return self.symbols[ident]
+        if ident in CONSTANTS:
+            return CONSTANTS[ident]
+        if ident in FUNCTIONS:
+            raise self.fail(node, f"function {ident!r} must be called, e.g. {ident}(x)")
+        declared = ", ".join(sorted(self.symbols)) or "(none)"
+        raise self.fail(node, f"unknown symbol {ident!r}; declared symbols are: {declared}")
+
+    def power(self, node: ast.BinOp, depth: int) -> sp.Expr:
+        base = self.build(node.left, depth + 1)
+        exponent = self.build(node.right, depth + 1)
+        # Guard against exponent towers such as 9**9**9 that would make SymPy
+        # compute astronomically large integers.
+        if exponent.is_number and (abs(exponent) > MAX_INT_EXPONENT):
+            raise self.fail(node, f"exponent {exponent} is larger than {MAX_INT_EXPONENT} in magnitude")
+        if base.is_number and exponent.is_number and base == 0 and exponent.is_negative:
+            raise self.fail(node, "zero to a negative power")
+        return base**exponent
+
+    def call(self, node: ast.Call, depth: int) -> sp.Expr:
+        if not isinstance(node.func, ast.Name):
+            raise self.fail(node, "only direct calls of " + ", ".join(sorted(FUNCTIONS)) + " are allowed")
+        fname = node.func.id
+        if fname not in FUNCTIONS:
+            raise self.fail(node, f"unknown function {fname!r}; allowed functions are "
+                            + ", ".join(sorted(FUNCTIONS)))
+        if node.keywords or len(node.args) != 1 or any(isinstance(a, ast.Starred) for a in node.args):
+            raise self.fail(node, f"{fname} takes exactly one positional argument")
+        arg = self.build(node.args[0], depth + 1)
+        return FUNCTIONS[fname](arg)

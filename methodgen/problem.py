@@ -1,0 +1,210 @@
+"""The problem description: a Hamiltonian system, possibly with holonomic constraints.
+
+A :class:`Hamiltonian` is immutable plain data: ordered coordinates ``q``,
+momenta ``p``, the Hamiltonian ``H(q, p)`` as a SymPy expression, parameter
+symbols with default values, and constraint expressions ``g(q)``.  It is the
+first stage of the pipeline (problem → derive → scheme → verify → lower → emit
+→ runtime) and knows nothing about methods.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from typing import Iterable, Mapping, Sequence
+
+import sympy as sp
+
+from .errors import InputError, ParseError
+from .parse import check_name, parse_expr
+
+__all__ = ["Hamiltonian"]
+
+
+def _names(items: Iterable, what: str) -> tuple[str, ...]:
+    if isinstance(items, (str, bytes)):
+        raise InputError(f"{what} must be a list of names, got the string {items!r}")
+    out = []
+    for item in items:
+        if isinstance(item, sp.Symbol):
+            item = item.name
+        out.append(check_name(item, what))
+    return tuple(out)
+
+
+class Hamiltonian:
+    """A Hamiltonian system ``H(q, p)`` with parameters and optional constraints.
+
+    Parameters
+    ----------
+    H : str or sympy.Expr
+        The Hamiltonian.  Text is parsed with the safe whitelist parser of
+        :mod:`methodgen.parse` (never evaluated); a SymPy expression may use any
+        symbols whose *names* are declared below.
+    q, p : sequence of str or sympy.Symbol, length d
+        Coordinates and conjugate momenta, in the order of the state vector
+        ``y = (q_1..q_d, p_1..p_d)``.
+    params : mapping of str to float, optional
+        Parameter names and their default numerical values (finite reals).
+    constraints : sequence of str or sympy.Expr, optional
+        Holonomic constraints ``g_i(q) = 0`` (functions of ``q`` and parameters).
+    name : str, optional
+        A label used in generated file names and reports.
+
+    Attributes
+    ----------
+    H : sympy.Expr
+    q, p : tuple of sympy.Symbol
+    params : tuple of sympy.Symbol
+    param_values : dict of str to float
+    constraints : tuple of sympy.Expr
+    source : str
+        The Hamiltonian as the user wrote it (text) or ``str(H)``.
+
+    Examples
+    --------
+    >>> import methodgen as mg
+    >>> kepler = mg.Hamiltonian("(px**2+py**2)/(2*m) - k/sqrt(x**2+y**2)",
+    ...                         q=["x", "y"], p=["px", "py"], params={"m": 1.0, "k": 1.0})
+    >>> kepler.dim
+    2
+    """
+
+    __slots__ = ("H", "q", "p", "params", "param_values", "constraints", "source",
+                 "constraint_sources", "name", "_symbols")
+
+    def __init__(self, H, q: Sequence, p: Sequence, params: Mapping[str, float] | None = None,
+                 constraints: Sequence = (), name: str | None = None):
+        qn = _names(q, "coordinate")
+        pn = _names(p, "momentum")
+        if len(qn) == 0:
+            raise InputError("a Hamiltonian needs at least one coordinate q")
+        if len(qn) != len(pn):
+            raise InputError(f"q has {len(qn)} names but p has {len(pn)}: each coordinate needs one momentum")
+        params = {} if params is None else params
+        if not isinstance(params, Mapping):
+            raise InputError(f"params must be a mapping name -> value, got {type(params).__name__}")
+        parn = _names(list(params), "parameter")
+        values: dict[str, float] = {}
+        for key, value in params.items():
+            key = key.name if isinstance(key, sp.Symbol) else key
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(f"parameter {key!r} must be a real number, got {value!r}")
+            value = float(value)
+            if not math.isfinite(value):
+                raise InputError(f"parameter {key!r} must be finite, got {value!r}")
+            values[key] = value
+        allnames = qn + pn + parn
+        seen: set[str] = set()
+        for n in allnames:
+            if n in seen:
+                raise InputError(f"name {n!r} is declared twice (q, p and params must be distinct)")
+            seen.add(n)
+
+        symbols = {n: sp.Symbol(n, real=True) for n in allnames}
+        object.__setattr__(self, "_symbols", symbols)
+        object.__setattr__(self, "q", tuple(symbols[n] for n in qn))
+        object.__setattr__(self, "p", tuple(symbols[n] for n in pn))
+        object.__setattr__(self, "params", tuple(symbols[n] for n in parn))
+        object.__setattr__(self, "param_values", values)
+
+        expr, source = self._expr(H, "Hamiltonian")
+        if not expr.free_symbols & set(self.p):
+            raise InputError("the Hamiltonian does not depend on any momentum p; "
+                             "it would not define a Hamiltonian flow")
+        object.__setattr__(self, "H", expr)
+        object.__setattr__(self, "source", source)
+
+        if isinstance(constraints, (str, bytes)):
+            raise InputError("constraints must be a list of expressions, got a single string")
+        cons, csrc = [], []
+        for i, c in enumerate(constraints):
+            e, s = self._expr(c, f"constraint {i + 1}")
+            if e.free_symbols & set(self.p):
+                raise InputError(f"constraint {i + 1} ({s}) depends on momenta; only holonomic "
+                                 "constraints g(q) = 0 are supported")
+            if not e.free_symbols & set(self.q):
+                raise InputError(f"constraint {i + 1} ({s}) does not depend on q")
+            cons.append(e)
+            csrc.append(s)
+        if len(cons) >= len(qn):
+            raise InputError(f"{len(cons)} constraints on {len(qn)} coordinates leave no motion; "
+                             "need fewer constraints than coordinates")
+        object.__setattr__(self, "constraints", tuple(cons))
+        object.__setattr__(self, "constraint_sources", tuple(csrc))
+        if name is not None:
+            check_name(name.replace("-", "_"), "system")
+        object.__setattr__(self, "name", name)
+
+    def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
+        if isinstance(value, str):
+            return parse_expr(value, self._symbols, what=what), value.strip()
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
+        if not isinstance(value, sp.Expr):
+            raise InputError(f"{what} must be a string or a SymPy expression, got {type(value).__name__}")
+        # Map the user's symbols onto ours by name (theirs may lack real=True).
+        repl = {}
+        for s in value.free_symbols:
+            if s.name not in self._symbols:
+                declared = ", ".join(sorted(self._symbols))
+                raise InputError(f"{what}: unknown symbol {s.name!r}; declared symbols are: {declared}")
+            repl[s] = self._symbols[s.name]
+        expr = value.xreplace(repl)
+        if expr.atoms(sp.Function) - expr.atoms(sp.exp, sp.log, sp.sin, sp.cos, sp.tan, sp.sinh,
+                                                  sp.cosh, sp.tanh, sp.atan):
+            bad = sorted(str(f.func) for f in expr.atoms(sp.Function))
+            raise InputError(f"{what}: functions {bad} are not supported in generated code")
+        if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+            raise InputError(f"{what} is not a finite real expression: {expr}")
+        return expr, str(value)
+
+    def __setattr__(self, key, value):
+        raise AttributeError("Hamiltonian is immutable")
+
+    # -- convenience -------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        """Number of degrees of freedom d (the state has 2d components)."""
+        return len(self.q)
+
+    @property
+    def y(self) -> tuple[sp.Symbol, ...]:
+        """State symbols ``(q..., p...)``."""
+        return self.q + self.p
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.y)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.params)
+
+    def symbol(self, name: str) -> sp.Symbol:
+        """The SymPy symbol declared under ``name``."""
+        return self._symbols[name]
+
+    def fingerprint(self) -> str:
+        """A stable SHA-256 over everything that defines the system.
+
+        Used in the signature of generated modules; independent of dict order
+        and of Python's hash randomisation.
+        """
+        parts = [
+            "q=" + ",".join(s.name for s in self.q),
+            "p=" + ",".join(s.name for s in self.p),
+            "params=" + ",".join(f"{k}:{self.param_values[k]!r}" for k in self.param_names),
+            "H=" + sp.srepr(self.H),
+            "g=" + ";".join(sp.srepr(g) for g in self.constraints),
+            f"name={self.name}",
+        ]
+        return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+    def __repr__(self) -> str:
+        extra = f", constraints={list(self.constraint_sources)}" if self.constraints else ""
+        return (f"Hamiltonian({self.source!r}, q={[s.name for s in self.q]}, "
+                f"p={[s.name for s in self.p]}, params={self.param_values}{extra})")
+
+    def _repr_latex_(self) -> str:
+        return f"$H = {sp.latex(self.H)}$"

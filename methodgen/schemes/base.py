@@ -1,0 +1,270 @@
+"""The symbolic scheme: what a method needs the generator to emit.
+
+A :class:`Scheme` is frozen data produced by one method builder (one small
+file per method family in this package).  It holds
+
+* ``unknowns`` ``z`` and the ``residual`` ``R(z; y0, h, params) = 0`` of the
+  nonlinear system solved per step (implicit methods), or nothing (explicit);
+* ``increment`` ``Δy(z; y0, h, params)``, so ``y1 = y0 + Δy`` (the update is
+  applied with compensated summation at run time);
+* ``guess``, the Newton starting value for ``z``;
+* ``traits``: order, symmetry, symplecticity, energy preservation and the
+  invariants the method preserves exactly for *this* system;
+* for discrete-gradient methods, the discrete gradient ``∇̄H(y0, y1)`` itself
+  (used by the verification layer).
+
+Unknowns are *increments* (``Δq`` or ``Δy``), not end states: increments are
+small, so Newton's stopping test and the update lose fewer digits, which is
+what keeps the round-off error of long runs small.
+
+Internal symbol names start with an underscore (user names cannot), so they
+never collide with a user's coordinates or parameters:
+``_h`` the step size, ``_d_<name>`` an increment, ``_n_<name>`` an end state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable
+
+import sympy as sp
+
+from ..derive import Invariant, gradient, invariants, separable_split, vector_field
+from ..problem import Hamiltonian
+
+STEP = sp.Symbol("_h", real=True)
+
+
+def increment_symbol(s: sp.Symbol) -> sp.Symbol:
+    return sp.Symbol("_d_" + s.name, real=True)
+
+
+def next_symbol(s: sp.Symbol) -> sp.Symbol:
+    return sp.Symbol("_n_" + s.name, real=True)
+
+
+def latex_names(system: Hamiltonian) -> dict[sp.Symbol, str]:
+    """LaTeX names for internal symbols: ``Δx``, ``x_1``, ``h``; user symbols get index 0."""
+    names: dict[sp.Symbol, str] = {STEP: "h"}
+    for s in system.y:
+        base = sp.latex(s)
+        names[increment_symbol(s)] = rf"\Delta {base}"
+        names[next_symbol(s)] = rf"{{{base}}}_{{1}}"
+    return names
+
+
+@dataclass(frozen=True)
+class Traits:
+    """What a scheme claims, for this system.
+
+    Attributes
+    ----------
+    order : int
+        Classical order of convergence.
+    symmetric : bool
+        Φ_{-h} ∘ Φ_h = id.
+    symplectic : bool
+        The step map is symplectic (on the constraint manifold for RATTLE).
+    energy_preserving : bool
+        H(y1) = H(y0) exactly (up to the solve's round-off).
+    preserved : tuple of str
+        Names of monitored invariants the step preserves exactly.
+    solve : str
+        "newton", "linear" (one linear solve) or "explicit".
+    discrete_gradient : bool
+        The method is ``y1 = y0 + h J ∇̄H`` with a discrete gradient ∇̄H.
+    notes : tuple of str
+        How the scheme was derived (e.g. which cancelled form was used).
+    """
+
+    order: int
+    symmetric: bool
+    symplectic: bool
+    energy_preserving: bool
+    preserved: tuple[str, ...] = ()
+    solve: str = "newton"
+    discrete_gradient: bool = False
+    notes: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict:
+        return {
+            "order": self.order, "symmetric": self.symmetric, "symplectic": self.symplectic,
+            "energy_preserving": self.energy_preserving, "preserved": list(self.preserved),
+            "solve": self.solve, "discrete_gradient": self.discrete_gradient,
+            "notes": list(self.notes),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Scheme:
+    """A discretised system (see the module docstring).
+
+    Attributes
+    ----------
+    system : Hamiltonian
+    method : str
+    traits : Traits
+    unknowns : tuple of sympy.Symbol, length n (empty for explicit methods)
+    residual : sympy.Matrix, shape (n, 1)
+    guess : sympy.Matrix, shape (n, 1)
+    increment : sympy.Matrix, shape (2d, 1)
+    discrete_gradient : sympy.Matrix or None, shape (2d, 1), in ``y0`` and ``y1`` symbols
+    invariants : tuple of Invariant
+    description : str
+    """
+
+    system: Hamiltonian
+    method: str
+    traits: Traits
+    unknowns: tuple[sp.Symbol, ...]
+    residual: sp.Matrix
+    guess: sp.Matrix
+    increment: sp.Matrix
+    discrete_gradient: sp.Matrix | None = None
+    invariants: tuple[Invariant, ...] = ()
+    description: str = ""
+    options: tuple[tuple[str, object], ...] = field(default=())
+
+    h = STEP
+
+    @property
+    def y0(self) -> tuple[sp.Symbol, ...]:
+        return self.system.y
+
+    @property
+    def y1(self) -> tuple[sp.Symbol, ...]:
+        """Symbols of the end state used in :attr:`discrete_gradient`."""
+        return tuple(next_symbol(s) for s in self.system.y)
+
+    @cached_property
+    def jacobian(self) -> sp.Matrix:
+        """``∂R/∂z``, shape (n, n)."""
+        if not self.unknowns:
+            return sp.zeros(0, 0)
+        return self.residual.jacobian(sp.Matrix(self.unknowns))
+
+    @property
+    def implicit(self) -> bool:
+        return self.traits.solve == "newton"
+
+    def equations(self) -> list[sp.Eq]:
+        """The residual equations ``R_i(z) = 0`` as SymPy equalities."""
+        return [sp.Eq(r, 0) for r in self.residual]
+
+    def latex(self) -> str:
+        names = latex_names(self.system)
+        rows = [sp.latex(sp.Eq(r, 0), symbol_names=names) for r in self.residual]
+        upd = [rf"{sp.latex(s)}_1 = {sp.latex(s)} + {sp.latex(d, symbol_names=names)}"
+               for s, d in zip(self.system.y, self.increment)]
+        return r"\begin{aligned}" + r"\\ ".join(rows + upd) + r"\end{aligned}"
+
+    def _repr_latex_(self) -> str:
+        return "$" + self.latex() + "$"
+
+    def __str__(self) -> str:
+        lines = [f"{self.method} scheme for H = {self.system.H}"]
+        t = self.traits
+        lines.append(f"  order {t.order}, symmetric={t.symmetric}, symplectic={t.symplectic}, "
+                     f"energy_preserving={t.energy_preserving}, preserves {list(t.preserved)}")
+        if self.unknowns:
+            lines.append(f"  unknowns: {', '.join(s.name for s in self.unknowns)}")
+            for r in self.residual:
+                lines.append(f"  0 = {r}")
+        for s, d in zip(self.system.y, self.increment):
+            lines.append(f"  {s.name}_1 = {s.name} + {d}")
+        for n in t.notes:
+            lines.append(f"  note: {n}")
+        return "\n".join(lines)
+
+    __repr__ = __str__
+
+
+# ---------------------------------------------------------------------------
+# Discrete-gradient–type methods: y1 = y0 + h J ∇̄H(y0, y1)
+# ---------------------------------------------------------------------------
+
+def _is_quadratic(expr: sp.Expr, syms) -> bool:
+    try:
+        poly = sp.Poly(expr, *syms)
+    except sp.PolynomialError:
+        return False
+    return poly.total_degree() <= 2 and not (poly.free_symbols_in_domain & set(syms))
+
+
+def quadratic_invariants(system: Hamiltonian) -> tuple[str, ...]:
+    """Names of monitored invariants that are quadratic polynomials in y.
+
+    Symplectic Runge–Kutta methods (the midpoint rule) preserve every
+    quadratic first integral exactly [HLW06, Thm IV.2.2].
+    """
+    return tuple(inv.name for inv in invariants(system) if _is_quadratic(inv.expr, system.y))
+
+
+def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple], sp.Matrix],
+                    traits: Traits, description: str) -> Scheme:
+    """Build the scheme ``y1 = y0 + h J ∇̄H(y0, y1)``.
+
+    Parameters
+    ----------
+    dg : callable (y0, y1) -> Matrix (2d, 1)
+        The (discrete) gradient in terms of the start and end states.
+
+    Notes
+    -----
+    When ``H = ½ pᵀM⁻¹p + U(q)`` and the q-part of ∇̄H depends on q only while
+    its p-part is ``M⁻¹(p0+p1)/2``, the momenta are eliminated:
+    ``p1 = p0 - h ∇̄U(q0, q1)`` and ``q1 - q0 = h M⁻¹(p0 - h/2 ∇̄U)``, so Newton
+    works on d unknowns ``Δq`` instead of 2d (a 3×3 system for Kepler instead
+    of 6×6).  The start value is the Störmer–Verlet prediction.
+    """
+    d = system.dim
+    y0 = system.y
+    y1 = tuple(next_symbol(s) for s in y0)
+    grad_bar = dg(y0, y1)
+    h = STEP
+    sep = separable_split(system)
+    q0, p0 = sp.Matrix(system.q), sp.Matrix(system.p)
+    p1s = set(y1[d:]) | set(system.p)
+    reducible = (
+        sep is not None and sep.Minv is not None
+        and not any(e.free_symbols & p1s for e in grad_bar[:d])
+        and all(sp.simplify(grad_bar[d + i] - (sep.Minv * (p0 + sp.Matrix(y1[d:])))[i] / 2) == 0
+                for i in range(d))
+    )
+    if reducible:
+        z = tuple(increment_symbol(s) for s in system.q)
+        zq = sp.Matrix(z)
+        sub = {y1[i]: y0[i] + z[i] for i in range(d)}
+        Gq = sp.Matrix([e.xreplace(sub) for e in grad_bar[:d]])
+        residual = zq - h * sep.Minv * (p0 - h / 2 * Gq)
+        increment = sp.Matrix(list(zq) + list(-h * Gq))
+        gradU0 = sp.Matrix([sp.diff(sep.U, s) for s in system.q])
+        guess = h * sep.Minv * (p0 - h / 2 * gradU0)
+        notes = ("momenta eliminated (separable H with quadratic kinetic energy): "
+                 "Newton on Δq only",)
+    else:
+        z = tuple(increment_symbol(s) for s in y0)
+        zv = sp.Matrix(z)
+        sub = {y1[i]: y0[i] + z[i] for i in range(2 * d)}
+        G = sp.Matrix([e.xreplace(sub) for e in grad_bar])
+        JG = sp.Matrix(list(G[d:]) + [-g for g in G[:d]])
+        residual = zv - h * JG
+        increment = zv
+        guess = h * vector_field(system)
+        notes = ()
+    traits = Traits(**{**traits.__dict__, "notes": traits.notes + notes})
+    return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
+                  guess=guess, increment=increment, discrete_gradient=grad_bar,
+                  invariants=invariants(system), description=description)
+
+
+def midpoint_gradient(system: Hamiltonian) -> Callable:
+    """∇H at the midpoint, as a function of (y0, y1)."""
+    grad = gradient(system)
+
+    def dg(y0, y1):
+        mid = {a: (a + b) / 2 for a, b in zip(y0, y1)}
+        return grad.xreplace(mid)
+
+    return dg
