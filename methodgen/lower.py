@@ -74,6 +74,8 @@ class VectorPrinter(NumPyPrinter):
 
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
+        if e == -1:
+            return f"1/{self.parenthesize(b, sp.printing.precedence.PRECEDENCE['Pow'])}"
         if e.is_Rational and e.q == 2 and abs(e.p) != 1:
             root = f"numpy.sqrt({self._print(b)})"
             power = f"{root}**{abs(e.p)}"

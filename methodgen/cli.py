@@ -1,0 +1,257 @@
+"""Command line: ``methodgen run | generate | scenes | methods``.
+
+Every command that reports numbers takes ``--json`` and then prints exactly one
+JSON object on stdout and nothing else there.  Errors a user can cause print
+one line ``methodgen: error: …`` on stderr and exit non-zero, without a
+traceback: 2 for bad input, 3 for a numerical failure (Newton did not
+converge, non-finite state), 1 for a failed ``generate --check``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .build import build, generated_dir, scene_module_path
+from .emit import emit_source, file_status, module_filename, signature, write_atomic
+from .errors import InputError, MethodgenError
+from .scene import load_scene, scene_names
+from .schemes import METHODS, discretize
+
+EXIT_INPUT = 2
+EXIT_NUMERICAL = 3
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own errors: usage + exit 2, no traceback
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_INPUT, f"methodgen: error: {message}\n")
+
+
+def _finite_or_none(x: float):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {v}")
+    return v
+
+
+def _step(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if v == 0 or not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"h must be finite and non-zero, got {text}")
+    return v
+
+
+# --- run -----------------------------------------------------------------------
+
+def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
+              steps: int | None = None) -> dict:
+    """Run a scene and return the report dictionary (the ``--json`` object)."""
+    scene = load_scene(scene_name)
+    method = method or scene.method
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
+    h = scene.h if h is None else h
+    steps = scene.steps if steps is None else steps
+    module = build(scene.system, method, path=scene_module_path(scene, method))
+    y0 = np.array(scene.y0)
+    info: dict = {}
+    t0 = time.perf_counter()
+    traj = module.integrate(y0, h, steps, info=info)
+    seconds = time.perf_counter() - t0
+    inv = module.invariants(traj)
+    report_inv = {}
+    for name in module.INVARIANT_NAMES:
+        vals = inv[name]
+        init = float(vals[0])
+        abs_err = float(np.max(np.abs(vals - init))) if len(vals) else 0.0
+        rel = abs_err / abs(init) if init != 0 else (0.0 if abs_err == 0 else math.inf)
+        report_inv[name] = {"initial": init, "final": float(vals[-1]), "max_abs_error": abs_err,
+                            "max_rel_error": _finite_or_none(rel)}
+    its = info.get("newton_iterations", np.zeros(0))
+    return {
+        "scene": scene.name,
+        "method": method,
+        "h": h,
+        "steps": steps,
+        "t_final": h * steps,
+        "y0": list(scene.y0),
+        "y_final": [float(v) for v in traj[-1]],
+        "state_names": list(module.STATE_NAMES),
+        "invariants": report_inv,
+        "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
+                   "max_iterations": int(its.max()) if its.size else 0},
+        "seconds": seconds,
+        "us_per_step": seconds / steps * 1e6 if steps else 0.0,
+        "module": str(getattr(module, "__file__", "")),
+    }
+
+
+def _print_run(rep: dict) -> None:
+    print(f"scene {rep['scene']}  method {rep['method']}  h = {rep['h']:g}  steps = {rep['steps']}  "
+          f"(t = 0 .. {rep['t_final']:g})")
+    print(f"module: {rep['module']}")
+    print(f"{'invariant':>10} {'initial':>22} {'final':>22} {'max abs error':>14} {'max rel error':>14}")
+    for name, v in rep["invariants"].items():
+        rel = v["max_rel_error"]
+        rel_s = f"{rel:14.3e}" if rel is not None else f"{'inf':>14}"
+        print(f"{name:>10} {v['initial']:22.15g} {v['final']:22.15g} {v['max_abs_error']:14.3e} {rel_s}")
+    nw = rep["newton"]
+    print(f"Newton iterations per step: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
+    print(f"wall time {rep['seconds']:.3f} s, {rep['us_per_step']:.2f} µs/step")
+    names = rep["state_names"]
+    print("y_final: " + ", ".join(f"{n}={v:.15g}" for n, v in zip(names, rep["y_final"])))
+
+
+def cmd_run(args) -> int:
+    rep = run_scene(args.scene, args.method, args.h, args.steps)
+    if args.json:
+        print(json.dumps(rep))
+    else:
+        _print_run(rep)
+    return 0
+
+
+# --- generate ------------------------------------------------------------------
+
+def _targets(names: list[str]):
+    for name in names or scene_names():
+        scene = load_scene(name)
+        for method in scene.methods:
+            yield scene, method
+
+
+def cmd_generate(args) -> int:
+    out = Path(args.out) if args.out else generated_dir()
+    if out is None:
+        raise InputError("no generated/ folder found (not a source checkout); pass --out DIR")
+    expected = set()
+    problems, written, same = [], [], []
+    for scene, method in _targets(args.scenes):
+        if not scene.builtin:
+            raise InputError(f"{scene.name} is not a built-in scene; use the Python API "
+                             "methodgen.generate for your own scenes")
+        path = out / module_filename(scene.name, method)
+        expected.add(path.name)
+        sig = signature(scene.system, method)
+        source = emit_source(discretize(scene.system, method), sig)
+        current = path.read_text(encoding="utf-8") if path.is_file() else None
+        if current == source:
+            same.append(path)
+            continue
+        if args.check:
+            problems.append(f"{path}: {'missing' if current is None else 'differs from what the generator emits today'}")
+        else:
+            write_atomic(path, source)
+            written.append(path)
+    if args.check and not args.scenes:
+        for extra in sorted(out.glob("*.py")):
+            if extra.name not in expected:
+                problems.append(f"{extra}: not generated from any built-in scene")
+    if args.json:
+        print(json.dumps({"ok": not problems, "problems": problems, "written": [str(p) for p in written],
+                          "unchanged": [str(p) for p in same]}))
+    else:
+        for p in written:
+            print(f"wrote {p}")
+        for p in problems:
+            print(p)
+        if args.check and not problems:
+            print(f"generated/ is in sync ({len(same)} modules)")
+    return 1 if problems else 0
+
+
+# --- listings ---------------------------------------------------------------------
+
+def cmd_scenes(args) -> int:
+    rows = []
+    for name in scene_names():
+        s = load_scene(name)
+        rows.append({"name": s.name, "description": s.description, "methods": list(s.methods),
+                     "dim": s.system.dim, "constraints": len(s.system.constraints)})
+    if args.json:
+        print(json.dumps({"scenes": rows}))
+    else:
+        for r in rows:
+            print(f"{r['name']:<20} {', '.join(r['methods']):<32} {r['description']}")
+    return 0
+
+
+def cmd_methods(args) -> int:
+    rows = [{"name": name, "summary": mod.SUMMARY} for name, mod in METHODS.items()]
+    if args.json:
+        print(json.dumps({"methods": rows}))
+    else:
+        for r in rows:
+            print(f"{r['name']:<18} {r['summary']}")
+    return 0
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="methodgen", description="Geometric integrators generated from your Hamiltonian.")
+    parser.add_argument("--version", action="version", version=f"methodgen {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("run", help="run a scene and report invariants, Newton statistics and timing")
+    p.add_argument("scene", help="built-in scene name or path to a scene TOML file")
+    p.add_argument("--method", help="method (default: the scene's first method)")
+    p.add_argument("--h", type=_step, help="step size (default: the scene's)")
+    p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("generate", help="(re)generate the modules of the built-in scenes into generated/")
+    p.add_argument("scenes", nargs="*", help="scene names (default: all built-in scenes)")
+    p.add_argument("--check", action="store_true", help="only check that the files are in sync; exit 1 if not")
+    p.add_argument("--out", help="output folder (default: the checkout's generated/)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_generate)
+
+    p = sub.add_parser("scenes", help="list the built-in scenes")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_scenes)
+
+    p = sub.add_parser("methods", help="list the methods")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_methods)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except MethodgenError as exc:
+        print(f"methodgen: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except (RuntimeError, FloatingPointError) as exc:
+        # ConvergenceError / NonFiniteError of generated modules.
+        if type(exc).__name__ in ("ConvergenceError", "NonFiniteError"):
+            print(f"methodgen: error: {exc}", file=sys.stderr)
+            return EXIT_NUMERICAL
+        raise
+    except KeyboardInterrupt:
+        print("methodgen: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""The command line: the main job, JSON contract, clean errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def run(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "methodgen", *args], capture_output=True, text=True, **kw)
+
+
+def test_run_kepler_json_contract():
+    res = run("run", "kepler", "--steps", "2000", "--json")
+    assert res.returncode == 0, res.stderr
+    rep = json.loads(res.stdout)  # exactly one JSON object on stdout
+    for key in ("scene", "method", "h", "steps", "y_final", "invariants", "newton", "seconds", "us_per_step"):
+        assert key in rep
+    assert rep["scene"] == "kepler" and rep["method"] == "energy-momentum" and rep["steps"] == 2000
+    assert len(rep["y_final"]) == 6
+    assert set(rep["invariants"]) == {"H", "Lx", "Ly", "Lz"}
+    for v in rep["invariants"].values():
+        assert set(v) >= {"initial", "max_abs_error", "max_rel_error"}
+    assert rep["invariants"]["H"]["max_rel_error"] < 1e-13
+    assert 1 <= rep["newton"]["mean_iterations"] <= rep["newton"]["max_iterations"] <= 10
+    assert rep["seconds"] > 0 and rep["us_per_step"] > 0
+
+
+def test_run_text_report_and_overrides():
+    res = run("run", "harmonic", "--method", "energy-momentum", "--h", "0.05", "--steps", "100")
+    assert res.returncode == 0, res.stderr
+    assert "energy-momentum" in res.stdout and "µs/step" in res.stdout and "Newton" in res.stdout
+
+
+def test_run_scene_file(tmp_path):
+    f = tmp_path / "duffing.toml"
+    f.write_text('name = "duffing"\n[system]\nH = "p**2/2 + q**4/4 - q**2/2"\nq = ["q"]\np = ["p"]\n'
+                 '[run]\nmethod = "energy-momentum"\nh = 0.05\nsteps = 200\ny0 = [0.1, 0.5]\n')
+    res = run("run", str(f), "--json", env=None)
+    assert res.returncode == 0, res.stderr
+    rep = json.loads(res.stdout)
+    assert rep["invariants"]["H"]["max_abs_error"] < 1e-14
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (("run", "nosuchscene"), "no built-in scene or file"),
+    (("run", "kepler", "--method", "nosuch"), "unknown method"),
+    (("run", "kepler", "--h", "0"), "non-zero"),
+    (("run", "kepler", "--steps", "-3"), "non-negative"),
+    (("run", "kepler", "--h", "nan"), "finite"),
+    (("frobnicate",), "invalid choice"),
+])
+def test_bad_input_exits_nonzero_without_traceback(args, fragment):
+    res = run(*args)
+    assert res.returncode == 2
+    assert fragment in res.stderr
+    assert "Traceback" not in res.stderr and res.stdout == ""
+
+
+def test_numerical_failure_exits_3_with_step(tmp_path):
+    f = tmp_path / "tight.toml"
+    f.write_text('name = "tight"\n[system]\nH = "(px**2+py**2)/2 - 1/sqrt(x**2+y**2)"\nq = ["x", "y"]\n'
+                 'p = ["px", "py"]\n[run]\nmethod = "energy-momentum"\nh = 0.5\nsteps = 50\n'
+                 'y0 = [0.05, 0.0, 0.0, 0.1]\n')
+    res = run("run", str(f))
+    assert res.returncode == 3
+    assert "step" in res.stderr and "smaller step size" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_listings():
+    res = run("scenes", "--json")
+    names = {s["name"] for s in json.loads(res.stdout)["scenes"]}
+    assert {"kepler", "harmonic"} <= names
+    res = run("methods", "--json")
+    assert {"midpoint", "energy-momentum"} <= {m["name"] for m in json.loads(res.stdout)["methods"]}

@@ -1,0 +1,107 @@
+"""The safe expression parser: accepted grammar, refused input, no evaluation."""
+
+from __future__ import annotations
+
+import pytest
+import sympy as sp
+
+import methodgen as mg
+from methodgen.errors import InputError, ParseError
+from methodgen.parse import parse_expr
+
+X, Y = sp.symbols("x y", real=True)
+SYMS = {"x": X, "y": Y}
+
+
+def test_arithmetic_and_functions():
+    e = parse_expr("x**2/2 - 3*sqrt(x*y) + exp(-y) + sin(pi*x)", SYMS)
+    assert sp.simplify(e - (X**2 / 2 - 3 * sp.sqrt(X * Y) + sp.exp(-Y) + sp.sin(sp.pi * X))) == 0
+
+
+def test_float_literals_become_exact_rationals():
+    e = parse_expr("0.1*x + 2.5", SYMS)
+    assert e == sp.Rational(1, 10) * X + sp.Rational(5, 2)
+    assert not e.atoms(sp.Float)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("x +", "syntax error"),
+    ("x + z", "unknown symbol 'z'"),
+    ("x.real", "attribute access"),
+    ("x[0]", "subscripting"),
+    ("(lambda: 1)()", "only direct calls"),
+    ("lambda x: x", "lambda"),
+    ("foo(x)", "unknown function 'foo'"),
+    ("sqrt(x, y)", "exactly one positional argument"),
+    ("sqrt", "must be called"),
+    ("__import__('os').system('true')", "only direct calls"),
+    ("__class__", "not allowed"),
+    ("'abc'", "not a real number"),
+    ("(x, y)", "tuple"),
+    ("x < y", "comparison"),
+    ("9**9**9", "exponent"),
+    ("x // y", "operator FloorDiv"),
+    ("sqrt(-1)*x", "not a finite real"),
+    ("x/0", "division by zero"),
+    ("", "empty"),
+])
+def test_refused(text, fragment):
+    with pytest.raises(ParseError) as err:
+        parse_expr(text, SYMS)
+    assert fragment in str(err.value)
+
+
+def test_hostile_text_is_never_executed(tmp_path):
+    marker = tmp_path / "pwned"
+    payloads = [
+        f"__import__('os').system('touch {marker}')",
+        f"exp(__import__('os').system('touch {marker}'))",
+        f"[c for c in ().__class__.__base__.__subclasses__()]",
+        f"x + eval(\"__import__('os').system('touch {marker}')\")",
+    ]
+    for text in payloads:
+        with pytest.raises(ParseError):
+            parse_expr(text, SYMS)
+    # Negative control for the check itself: the marker *can* be created.
+    assert not marker.exists()
+    marker.touch()
+    assert marker.exists()
+
+
+@pytest.mark.parametrize("name", ["lambda", "class", "_x", "__x__", "1x", "x-y", "sqrt", "pi", "match"])
+def test_bad_symbol_names(name):
+    with pytest.raises(ParseError):
+        mg.Hamiltonian("p**2/2", q=[name], p=["p"])
+
+
+def test_names_that_collide_with_printer_and_python_names_work():
+    # e, E, I, N, S, beta, gamma, sum, np are fine as *symbols*: they are never
+    # interpreted by SymPy (no sympify) and are renamed in generated code.
+    names = ["E", "I", "N", "S", "beta", "gamma", "sum", "np", "e", "numpy", "math"]
+    text = " + ".join(f"{n}*q**2" for n in names) + " + p**2/2"
+    sys_ = mg.Hamiltonian(text, q=["q"], p=["p"], params={n: 1.0 for n in names})
+    assert len(sys_.params) == len(names)
+    assert sys_.H.free_symbols == set(sys_.q) | set(sys_.p) | set(sys_.params)
+
+
+def test_sympy_input_and_undeclared_symbols():
+    q, p, k, z = sp.symbols("q p k z")
+    sys_ = mg.Hamiltonian(p**2 / 2 + k * q**2 / 2, q=[q], p=[p], params={"k": 2.0})
+    assert all(s.is_real for s in sys_.H.free_symbols)
+    with pytest.raises(InputError, match="unknown symbol 'z'"):
+        mg.Hamiltonian(p**2 / 2 + z * q**2, q=[q], p=[p])
+
+
+@pytest.mark.parametrize("kwargs, fragment", [
+    (dict(H="p**2/2 + q**2", q=["q"], p=["p", "r"]), "each coordinate needs one momentum"),
+    (dict(H="p**2/2 + q**2", q=["q"], p=["q"]), "declared twice"),
+    (dict(H="q**2", q=["q"], p=["p"]), "does not depend on any momentum"),
+    (dict(H="p**2/2 + k*q**2", q=["q"], p=["p"], params={"k": float("nan")}), "finite"),
+    (dict(H="p**2/2 + k*q**2", q=["q"], p=["p"], params={"k": "1"}), "real number"),
+    (dict(H="p**2/2 + k*q**2", q=["q"], p=["p"]), "unknown symbol 'k'"),
+    (dict(H="p**2/2 + q**2", q="q", p=["p"]), "list of names"),
+    (dict(H="p**2/2 + q**2", q=[], p=[]), "at least one coordinate"),
+])
+def test_bad_hamiltonians(kwargs, fragment):
+    with pytest.raises(InputError, match=fragment):
+        mg.Hamiltonian(**kwargs)
