@@ -193,6 +193,31 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
 
 
 @_cache
+def constraint_jacobian(system: Hamiltonian) -> sp.Matrix:
+    """``G(q) = ∂g/∂q``, shape (m, d)."""
+    return sp.Matrix(list(system.constraints)).jacobian(sp.Matrix(system.q))
+
+
+@_cache
+def constraint_monitors(system: Hamiltonian) -> tuple[Invariant, ...]:
+    """The position constraints ``g_i(q)`` and the hidden velocity constraints ``(G M⁻¹ p)_i``.
+
+    Both vanish along the exact flow on ``T*Q``; they are monitored like invariants.
+    """
+    if not system.constraints:
+        return ()
+    sep = separable_split(system)
+    out = [Invariant(f"g{i + 1}", g, True, "position constraint g(q) = 0")
+           for i, g in enumerate(system.constraints)]
+    if sep is not None and sep.Minv is not None:
+        v = constraint_jacobian(system) * sep.Minv * sp.Matrix(system.p)
+        out += [Invariant(f"g{i + 1}_v", sp.expand(e), True, "velocity constraint G(q) M⁻¹ p = 0")
+                for i, e in enumerate(v)]
+    return tuple(out)
+
+
+@_cache
 def invariants(system: Hamiltonian) -> tuple[Invariant, ...]:
-    """All monitored invariants: H first, then the exact first integrals found."""
-    return (Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)
+    """All monitored quantities: H first, then exact first integrals, then constraints."""
+    return ((Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)
+            + constraint_monitors(system))

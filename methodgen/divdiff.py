@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from .special import atanhc, sinc, sinhc
+from .special import atanhc, sinc_u, sinhc
 
 __all__ = ["divided_difference"]
 
@@ -107,8 +107,8 @@ class _DD:
             ua, ub = self.at_a(u), self.at_b(u)
             m, half_delta = (ua + ub) / 2, (ub - ua) / 2
             factor = {
-                sp.sin: sp.cos(m) * sinc(half_delta),
-                sp.cos: -sp.sin(m) * sinc(half_delta),
+                sp.sin: sp.cos(m) * sinc_u(half_delta),
+                sp.cos: -sp.sin(m) * sinc_u(half_delta),
                 sp.sinh: sp.cosh(m) * sinhc(half_delta),
                 sp.cosh: sp.sinh(m) * sinhc(half_delta),
             }[f.func]
@@ -116,7 +116,7 @@ class _DD:
         if isinstance(f, sp.tan):
             u = f.args[0]
             ua, ub = self.at_a(u), self.at_b(u)
-            return sinc(ub - ua) / (sp.cos(ua) * sp.cos(ub)) * self.dd(u)
+            return sinc_u(ub - ua) / (sp.cos(ua) * sp.cos(ub)) * self.dd(u)
         if isinstance(f, sp.tanh):
             u = f.args[0]
             ua, ub = self.at_a(u), self.at_b(u)

@@ -138,6 +138,8 @@ def render(ir: ModuleIR) -> str:
         vector["guess"] = _vector_view(ir.vector["guess"], [("_out", (n,))], "_out")
         vector["res"] = _vector_view(ir.vector["res"], [("_R", (n,))], "_R")
         vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_J", (n, n))], "_R, _J")
+        if "scale" in ir.vector:
+            vector["scale"] = _vector_view(ir.vector["scale"], [("_out", (1,))], "_out[..., 0]")
     defaults = "{" + ", ".join(f"{k!r}: {v}" for k, v in zip(ir.param_names, ir.param_defaults)) + "}"
     clean = ir.__class__(**{**ir.__dict__, "source": _docsafe(ir.source),
                             "constraints": tuple(_docsafe(c) for c in ir.constraints)})

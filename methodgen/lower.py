@@ -72,6 +72,13 @@ class ScalarPrinter(PythonCodePrinter):
 class VectorPrinter(NumPyPrinter):
     """numpy arrays of any leading (batch) shape."""
 
+    def _print_Max(self, expr):
+        args = [self._print(a) for a in expr.args]
+        out = args[-1]
+        for a in reversed(args[:-1]):
+            out = f"numpy.maximum({a}, {out})"
+        return out
+
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
         if e == -1:
@@ -228,6 +235,9 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         vector["guess"] = _kernel(guess, (n,), vp, rename)
         vector["res"] = _kernel(res, (n,), vp, rename)
         vector["resjac"] = _kernel(res + jac, (n + n * n,), vp, rename)
+        if scheme.unknown_scale is not None:
+            scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
+            vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
     scalar["increment"] = _kernel(inc, (d2,), sp_, rename)
     vector["increment"] = _kernel(inc, (d2,), vp, rename)
     vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-__all__ = ["sinc", "sinhc", "atanhc", "dsinc", "dsinhc", "datanhc", "SPECIAL_FUNCTIONS", "to_elementary"]
+__all__ = ["sinc_u", "sinhc", "atanhc", "dsinc_u", "dsinhc", "datanhc", "SPECIAL_FUNCTIONS", "to_elementary"]
 
 
 class _RemovableFunction(sp.Function):
@@ -58,11 +58,11 @@ class _RemovableFunction(sp.Function):
         raise NotImplementedError
 
 
-class sinc(_RemovableFunction):
-    r"""``sin(x)/x`` (unnormalised), 1 at 0."""
+class sinc_u(_RemovableFunction):
+    r"""``sin(x)/x`` (the *unnormalised* sinc, unlike numpy.sinc), 1 at 0."""
 
     def fdiff(self, argindex=1):
-        return dsinc(self.args[0])
+        return dsinc_u(self.args[0])
 
     def as_quotient(self):
         x = self.args[0]
@@ -96,8 +96,8 @@ class _OddDerivative(_RemovableFunction):
     _even = "odd"
 
 
-class dsinc(_OddDerivative):
-    r"""Derivative of :class:`sinc`: ``(x cos x - sin x)/x**2``, 0 at 0."""
+class dsinc_u(_OddDerivative):
+    r"""Derivative of :class:`sinc_u`: ``(x cos x - sin x)/x**2``, 0 at 0."""
 
     def fdiff(self, argindex=1):
         x = self.args[0]
@@ -133,10 +133,10 @@ class datanhc(_OddDerivative):
 
 #: Name of the runtime helper each function prints as.
 SPECIAL_FUNCTIONS: dict[type, str] = {
-    sinc: "_sinc",
+    sinc_u: "_sinc",
     sinhc: "_sinhc",
     atanhc: "_atanhc",
-    dsinc: "_dsinc",
+    dsinc_u: "_dsinc",
     dsinhc: "_dsinhc",
     datanhc: "_datanhc",
 }

@@ -24,3 +24,9 @@ def special_helpers() -> dict:
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return {k: getattr(mod, k) for k in dir(mod) if k.startswith(("_f_", "_v_"))}
+
+
+def oracle_namespace() -> dict:
+    """Numerical implementations keyed by the SymPy function names, for lambdify oracles."""
+    helpers = special_helpers()
+    return {cls.__name__: helpers["_v" + name] for cls, name in SPECIAL_FUNCTIONS.items()}

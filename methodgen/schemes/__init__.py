@@ -11,12 +11,16 @@ from types import ModuleType
 
 from ..errors import InputError, MethodNotApplicable
 from ..problem import Hamiltonian
-from . import energy_momentum, midpoint
+from . import energy_momentum, kahan, midpoint, stormer_verlet, trapezoidal
 from .base import Scheme, Traits
+from .discrete_gradients import AVF, Gonzalez, ItohAbe
+from .rattle import Rattle, Shake
 
 __all__ = ["METHODS", "Scheme", "Traits", "discretize", "applicable_methods", "method_names"]
 
-METHODS: dict[str, ModuleType] = {m.NAME: m for m in (midpoint, energy_momentum)}
+METHODS: dict[str, ModuleType] = {m.NAME: m for m in (
+    midpoint, energy_momentum, trapezoidal, kahan, AVF, Gonzalez, ItohAbe, stormer_verlet,
+    Rattle, Shake)}
 
 
 def method_names() -> list[str]:
@@ -28,8 +32,16 @@ def applicable_methods(system: Hamiltonian) -> list[str]:
     return [name for name, m in METHODS.items() if m.applies(system) is None]
 
 
-def discretize(system: Hamiltonian, method: str) -> Scheme:
+def discretize(system: Hamiltonian, method: str, **options) -> Scheme:
     """Discretise ``system`` with ``method`` and return the symbolic :class:`Scheme`.
+
+    Parameters
+    ----------
+    system : Hamiltonian
+    method : str
+        One of :data:`METHODS` (``methodgen methods`` lists them).
+    **options
+        Method options, e.g. ``form="rk"`` for Kahan, ``nodes=`` for AVF quadrature.
 
     Raises
     ------
@@ -49,4 +61,9 @@ def discretize(system: Hamiltonian, method: str) -> Scheme:
         ok = applicable_methods(system)
         raise MethodNotApplicable(f"{reason}. Methods that apply to this system: "
                                   f"{', '.join(ok) if ok else '(none)'}")
-    return mod.build(system)
+    try:
+        return mod.build(system, **options)
+    except TypeError as exc:
+        if "unexpected keyword" in str(exc):
+            raise InputError(f"method {method!r} does not take options {sorted(options)}") from None
+        raise

@@ -112,6 +112,10 @@ class Scheme:
     discrete_gradient : sympy.Matrix or None, shape (2d, 1), in ``y0`` and ``y1`` symbols
     invariants : tuple of Invariant
     description : str
+    unknown_scale : sympy.Expr or None
+        A magnitude the unknowns are measured against in Newton's stopping
+        test, when ``|z|`` itself is not the right scale (RATTLE's scaled
+        multipliers: positions).  None: ``|z|``.
     """
 
     system: Hamiltonian
@@ -124,6 +128,7 @@ class Scheme:
     discrete_gradient: sp.Matrix | None = None
     invariants: tuple[Invariant, ...] = ()
     description: str = ""
+    unknown_scale: sp.Expr | None = None
     options: tuple[tuple[str, object], ...] = field(default=())
 
     h = STEP
@@ -202,7 +207,7 @@ def quadratic_invariants(system: Hamiltonian) -> tuple[str, ...]:
 
 
 def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple], sp.Matrix],
-                    traits: Traits, description: str) -> Scheme:
+                    traits: Traits, description: str, reduce: bool = True) -> Scheme:
     """Build the scheme ``y1 = y0 + h J ∇̄H(y0, y1)``.
 
     Parameters
@@ -227,7 +232,7 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     q0, p0 = sp.Matrix(system.q), sp.Matrix(system.p)
     p1s = set(y1[d:]) | set(system.p)
     reducible = (
-        sep is not None and sep.Minv is not None
+        reduce and sep is not None and sep.Minv is not None
         and not any(e.free_symbols & p1s for e in grad_bar[:d])
         and all(sp.simplify(grad_bar[d + i] - (sep.Minv * (p0 + sp.Matrix(y1[d:])))[i] / 2) == 0
                 for i in range(d))
@@ -257,6 +262,45 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
                   invariants=invariants(system), description=description)
+
+
+def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:
+    """Monitored invariants of the form ``qᵀ D p`` (angular momentum).
+
+    Symplectic partitioned RK methods such as Störmer–Verlet preserve exactly
+    these quadratic first integrals [HLW06, Thm IV.2.4].
+    """
+    out = []
+    for inv in invariants(system):
+        try:
+            poly = sp.Poly(inv.expr, *system.y)
+        except sp.PolynomialError:
+            continue
+        if poly.free_symbols_in_domain & set(system.y):
+            continue
+        d = system.dim
+        if all(sum(m[:d]) == 1 and sum(m[d:]) == 1 for m in poly.monoms()):
+            out.append(inv.name)
+    return tuple(out)
+
+
+def is_linear_field(system: Hamiltonian) -> bool:
+    """``f = J∇H`` is linear in y (H quadratic)."""
+    f = vector_field(system)
+    return all(sp.diff(fi, a, b) == 0 for fi in f for a in system.y for b in system.y)
+
+
+def is_quadratic_field(system: Hamiltonian) -> bool:
+    """``f = J∇H`` is a polynomial of degree ≤ 2 in y (H cubic), coefficients free of y."""
+    f = vector_field(system)
+    for fi in f:
+        try:
+            poly = sp.Poly(fi, *system.y)
+        except sp.PolynomialError:
+            return False
+        if poly.free_symbols_in_domain & set(system.y) or poly.total_degree() > 2:
+            return False
+    return True
 
 
 def midpoint_gradient(system: Hamiltonian) -> Callable:

@@ -1,0 +1,124 @@
+"""RATTLE and SHAKE for ``H = ½ pᵀM⁻¹p + U(q)`` with holonomic constraints ``g(q) = 0``.
+
+RATTLE (seed §1.3, Andersen 1983)::
+
+    p½ = p0 - h/2 (∇U(q0) + G(q0)ᵀ λ)
+    q1 = q0 + h M⁻¹ p½,                     g(q1) = 0
+    p1 = p½ - h/2 (∇U(q1) + G(q1)ᵀ μ),       G(q1) M⁻¹ p1 = 0
+
+Position stage: q1 is explicit in λ, so Newton runs on the m multipliers only,
+in the scaled form ``ν = h²λ/2``:
+
+    R(ν) = g(q0 + h M⁻¹ p0 - h²/2 M⁻¹∇U(q0) - M⁻¹ G(q0)ᵀ ν) = 0,
+
+whose Jacobian ``-G(q1) M⁻¹ G(q0)ᵀ`` is O(1) for every h (λ itself would be
+determined only to eps/h²).  Velocity stage: linear in μ, solved in closed form
+as the projection ``p1 = w - G1ᵀ (G1 M⁻¹ G1ᵀ)⁻¹ G1 M⁻¹ w`` with
+``w = p½ - h/2 ∇U(q1)``, derived symbolically.
+
+SHAKE (Ryckaert, Ciccotti & Berendsen 1977) in one-step form: the same
+position stage, and ``p1 = p½ - h/2 (∇U(q1) + G(q1)ᵀ λ)`` with the
+position-stage multiplier — the velocities are not projected onto the
+cotangent space, so ``G M⁻¹ p`` is only O(h²) small.  Its positions coincide with
+RATTLE's.
+
+References
+----------
+.. [1] H. C. Andersen, J. Comput. Phys. 52 (1983) 24-34.
+.. [2] J.-P. Ryckaert, G. Ciccotti, H. J. C. Berendsen, J. Comput. Phys. 23 (1977) 327-341.
+.. [3] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, §VII.1.
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from ..derive import constraint_jacobian, invariants, separable_split
+from ..problem import Hamiltonian
+from .base import STEP, Scheme, Traits
+
+
+def _applies(system: Hamiltonian, name: str) -> str | None:
+    if not system.constraints:
+        return f"{name} needs holonomic constraints g(q) = 0 (the system has none)"
+    sep = separable_split(system)
+    if sep is None or sep.Minv is None:
+        return f"{name} needs H = ½ pᵀ M⁻¹ p + U(q) with a constant mass matrix"
+    return None
+
+
+def _build(system: Hamiltonian, name: str, project: bool) -> Scheme:
+    sep = separable_split(system)
+    h = STEP
+    m = len(system.constraints)
+    q0 = sp.Matrix(system.q)
+    p0 = sp.Matrix(system.p)
+    Minv = sep.Minv
+    g = sp.Matrix(list(system.constraints))
+    G = constraint_jacobian(system)
+    gradU = sp.Matrix([sp.diff(sep.U, s) for s in system.q])
+    nu = tuple(sp.Symbol(f"_nu_{i + 1}", real=True) for i in range(m))
+    nuv = sp.Matrix(nu)
+    G0 = G
+    pred = q0 + h * Minv * p0 - h**2 / 2 * Minv * gradU          # unconstrained prediction
+    dq = pred - q0 - Minv * G0.T * nuv                             # Δq(ν)
+    q1 = q0 + dq
+    at1 = dict(zip(system.q, q1))
+    residual = g.xreplace(at1)
+    # Newton start: one linearised step, ν ≈ (G(q̃) M⁻¹ G0ᵀ)⁻¹ g(q̃).
+    at_pred = dict(zip(system.q, pred))
+    A0 = G.xreplace(at_pred) * Minv * G0.T
+    guess = A0.LUsolve(g.xreplace(at_pred)) if m <= 3 else sp.zeros(m, 1)
+    # λ = 2ν/h²; p½ = p0 - h/2 ∇U(q0) - (1/h) G0ᵀ ν   (since h/2 · 2ν/h² = ν/h)
+    phalf = p0 - h / 2 * gradU - G0.T * nuv / h
+    gradU1 = gradU.xreplace(at1)
+    G1 = G.xreplace(at1)
+    w = phalf - h / 2 * gradU1
+    if project:
+        A1 = G1 * Minv * G1.T
+        c = A1.LUsolve(G1 * Minv * w)
+        p1 = w - G1.T * c
+    else:
+        p1 = w - G1.T * nuv / h
+    dp = p1 - p0
+    scale = sp.Max(*[sp.Abs(s) for s in system.q]) if len(system.q) > 1 else sp.Abs(system.q[0])
+    traits = Traits(
+        order=2, symmetric=project, symplectic=project, energy_preserving=False,
+        preserved=tuple(inv.name for inv in invariants(system)
+                        if inv.name.startswith("g") and (project or not inv.name.endswith("_v"))),
+        solve="newton",
+        notes=(("Newton on the scaled multipliers ν = h²λ/2 only (q1 is explicit in λ); "
+                "velocity multipliers μ by a symbolic projection") if project else
+               "Newton on the scaled multipliers ν = h²λ/2; velocities not projected",))
+    return Scheme(system=system, method=name, traits=traits, unknowns=nu, residual=residual,
+                  guess=guess, increment=sp.Matrix(list(dq) + list(dp)),
+                  invariants=invariants(system), unknown_scale=scale,
+                  description=("RATTLE: position stage with multipliers λ (g(q1) = 0), velocity "
+                               "stage projected so that G(q1) M⁻¹ p1 = 0") if project else
+                  "SHAKE: RATTLE's position stage, velocities updated with the same multipliers")
+
+
+class Rattle:
+    NAME = "rattle"
+    SUMMARY = "RATTLE for holonomic constraints (symplectic on T*Q, symmetric, order 2)"
+
+    @staticmethod
+    def applies(system):
+        return _applies(system, "RATTLE")
+
+    @staticmethod
+    def build(system):
+        return _build(system, Rattle.NAME, project=True)
+
+
+class Shake:
+    NAME = "shake"
+    SUMMARY = "SHAKE (position constraints only; velocities not projected), for comparison"
+
+    @staticmethod
+    def applies(system):
+        return _applies(system, "SHAKE")
+
+    @staticmethod
+    def build(system):
+        return _build(system, Shake.NAME, project=False)

@@ -1,0 +1,46 @@
+"""Störmer–Verlet (velocity Verlet) for separable ``H = T(p) + U(q)``: explicit.
+
+    p½ = p0 - h/2 ∇U(q0),   q1 = q0 + h ∇T(p½),   p1 = p½ - h/2 ∇U(q1)
+
+Symmetric, symplectic, order 2; preserves first integrals of the form
+``qᵀ D p`` (angular momentum) exactly [HLW06, Thm IV.2.4].  The reference
+point for cost: no solve at all.
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from ..derive import invariants, separable_split
+from ..problem import Hamiltonian
+from .base import STEP, Scheme, Traits, bilinear_invariants
+
+NAME = "stormer-verlet"
+SUMMARY = "explicit Störmer–Verlet for separable H (symplectic, symmetric, order 2, no solve)"
+
+
+def applies(system: Hamiltonian) -> str | None:
+    if system.constraints:
+        return "Störmer–Verlet does not enforce constraints; use rattle or shake"
+    if separable_split(system) is None:
+        return "Störmer–Verlet needs a separable H = T(p) + U(q)"
+    return None
+
+
+def build(system: Hamiltonian) -> Scheme:
+    sep = separable_split(system)
+    h = STEP
+    q0, p0 = list(system.q), list(system.p)
+    gradU = sp.Matrix([sp.diff(sep.U, s) for s in q0])
+    gradT = sp.Matrix([sp.diff(sep.T, s) for s in p0])
+    phalf = sp.Matrix(p0) - h / 2 * gradU
+    dq = h * gradT.xreplace(dict(zip(p0, phalf)))
+    q1 = sp.Matrix(q0) + dq
+    dp = -h / 2 * gradU - h / 2 * gradU.xreplace(dict(zip(q0, q1)))
+    preserved = bilinear_invariants(system)
+    traits = Traits(order=2, symmetric=True, symplectic=True, energy_preserving=False,
+                    preserved=preserved, solve="explicit")
+    return Scheme(system=system, method=NAME, traits=traits, unknowns=(), residual=sp.zeros(0, 1),
+                  guess=sp.zeros(0, 1), increment=sp.Matrix(list(dq) + list(dp)),
+                  invariants=invariants(system),
+                  description="p½ = p0 - h/2 ∇U(q0), q1 = q0 + h ∇T(p½), p1 = p½ - h/2 ∇U(q1)")
