@@ -134,6 +134,10 @@ def render(ir: ModuleIR) -> str:
         "invariants": _vector_view(ir.vector["invariants"],
                                    [("_out", (len(ir.invariant_names),))], "_out"),
     }
+    if ir.n_constraints:
+        m, d = ir.n_constraints, ir.dim
+        vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")
+        vector["minv"] = _vector_view(ir.vector["minv"], [("_out", (d, d))], "_out")
     if n:
         vector["guess"] = _vector_view(ir.vector["guess"], [("_out", (n,))], "_out")
         vector["res"] = _vector_view(ir.vector["res"], [("_R", (n,))], "_R")

@@ -173,6 +173,10 @@ class ModuleIR:
         return len(self.unknown_names)
 
     @property
+    def n_constraints(self) -> int:
+        return len(self.constraints)
+
+    @property
     def unknown_vars(self) -> tuple[str, ...]:
         # Unknowns are internal symbols (leading underscore): already safe.
         return self.unknown_names
@@ -242,6 +246,16 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     vector["increment"] = _kernel(inc, (d2,), vp, rename)
     vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
+    n_cons = len(system.constraints)
+    if n_cons:
+        # Constraint machinery only where there are constraints: g, G = ∂g/∂q and M⁻¹
+        # for checking and projecting initial values onto T*Q.
+        from .derive import constraint_jacobian, separable_split
+        G = constraint_jacobian(system)
+        Minv = separable_split(system).Minv
+        vector["constraints"] = _kernel(list(system.constraints) + list(G), (n_cons + n_cons * system.dim,),
+                                        vp, rename)
+        vector["minv"] = _kernel(list(Minv), (system.dim * system.dim,), vp, rename)
 
     all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
     return ModuleIR(

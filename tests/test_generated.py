@@ -76,6 +76,8 @@ def test_batch_equals_single_trajectories(scene, method, modules):
     _, mod = modules(sc.system, method)
     rng = np.random.default_rng(3)
     Y0 = np.array(sc.y0) * (1 + 0.05 * rng.standard_normal((5, len(sc.y0))))
+    if sc.system.constraints:
+        Y0 = mod.project(Y0)
     batch = mod.integrate(Y0, 0.01, 50)
     assert batch.shape == (51, 5, len(sc.y0))
     for i in range(5):

@@ -194,8 +194,15 @@ class ItohAbe:
                 out.append(divided_difference(H.xreplace(fixed), s, y0[i], y1[i]))
             return sp.Matrix(out)
 
-        traits = Traits(order=1, symmetric=False, symplectic=False, energy_preserving=True,
-                        preserved=("H",), solve="newton", discrete_gradient=True,
-                        notes=("coordinate-wise divided differences, cancelled symbolically",))
+        grad = gradient(system)
+        # When every ∂H/∂y_i depends on y_i only, each component is the divided
+        # difference of its own one-variable term: symmetric (it equals AVF), order 2.
+        decoupled = all(g.free_symbols & set(ys) <= {ys[i]} for i, g in enumerate(grad))
+        notes = ("coordinate-wise divided differences, cancelled symbolically",)
+        if decoupled:
+            notes += ("H is a sum of one-coordinate terms: the method is symmetric (equal to AVF), order 2",)
+        traits = Traits(order=2 if decoupled else 1, symmetric=decoupled, symplectic=False,
+                        energy_preserving=True, preserved=("H",), solve="newton",
+                        discrete_gradient=True, notes=notes)
         return gradient_scheme(system, ItohAbe.NAME, dg, traits,
                                "y1 = y0 + h J ∇̄H, ∇̄H_i = (H(y1_1..i, y0_i+1..) - H(y1_1..i-1, y0_i..))/(y1_i - y0_i)")
