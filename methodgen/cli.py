@@ -218,6 +218,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
 
+    # --- verify: registered by methodgen.verify_cli (owned by the verification layer) ---
+    from .verify_cli import add_parser as add_verify_parser
+    add_verify_parser(sub)
+    # --- end verify ---
+
     p = sub.add_parser("generate", help="(re)generate the modules of the built-in scenes into generated/")
     p.add_argument("scenes", nargs="*", help="scene names (default: all built-in scenes)")
     p.add_argument("--check", action="store_true", help="only check that the files are in sync; exit 1 if not")
