@@ -1,0 +1,378 @@
+"""The reduction engine: prove an identity exactly, refute it, or check it numerically.
+
+:func:`certify` takes a claim and an expression (or a list/matrix of
+expressions) that must vanish identically and returns a
+:class:`~methodgen.verify.report.Certificate`:
+
+1. If the expression contains no floating-point number, the cheapest exact
+   reductions are tried in order — ``cancel`` (rational functions), ``expand``,
+   radical elimination followed by polynomial reduction (``sqrt`` of a
+   polynomial replaced by a symbol ``t`` with ``t² = base``), a trigonometric
+   reduction (half angles, ``expand_trig``, ``sin² + cos² = 1``) and, last and
+   only for small expressions, ``simplify``.  The first that reaches exactly 0
+   names the certificate's ``method``; the status is ``"proved"``.
+2. Otherwise exact rational points are tried (preferring points where every
+   square root is rational, e.g. Pythagorean quadruples for Kepler) and the
+   first where the expression is nonzero is the counterexample; the status is
+   ``"refuted"``.
+3. Otherwise — and always when the expression carries floating-point
+   coefficients (Gauss–Legendre nodes) — the expression is evaluated with
+   50-digit arithmetic at random rational points; the status is
+   ``"numerical"`` with the tolerance, the points and whether they passed.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from fractions import Fraction
+from math import gcd, isqrt
+
+import sympy as sp
+
+from ..special import _RemovableFunction, to_elementary
+from .report import NUMERICAL, PROVED, REFUTED, Certificate
+
+__all__ = ["certify", "reduce_to_zero", "find_counterexample", "numerical_check", "Domain",
+           "fmt_point"]
+
+#: Expressions larger than this (count_ops) are never handed to ``simplify``.
+SIMPLIFY_LIMIT = 400
+#: Digits of the high-precision evaluations.
+DIGITS = 50
+
+
+class Domain:
+    """Where sample points are drawn: which symbols are positive, small, or near another.
+
+    Parameters
+    ----------
+    positive : iterable of Symbol
+        Sampled in [1/2, 2] (masses, lengths, the step size...).
+    near : dict Symbol -> Symbol
+        ``y1 -> y0``: sampled as ``y0 + δ`` with a small rational δ (numerical
+        checks of schemes whose formulas are only accurate for small steps).
+    small : iterable of Symbol
+        Sampled in [1/20, 1/4] (the step size h).
+    """
+
+    def __init__(self, positive=(), near=None, small=()):
+        self.positive = set(positive)
+        self.near = dict(near or {})
+        self.small = set(small)
+
+    def sample(self, symbols, rng: random.Random, integer: bool = False, spread: int = 6) -> dict:
+        point = {}
+        ordered = sorted(symbols, key=lambda s: (s in self.near, s.name))
+        for s in ordered:
+            if s in self.small:
+                point[s] = sp.Rational(rng.randint(1, 5), 20)
+            elif s in self.positive:
+                point[s] = sp.Rational(rng.randint(2, 8), 4)
+            elif s in self.near and self.near[s] in point:
+                point[s] = point[self.near[s]] + sp.Rational(rng.randint(-10, 10), 100)
+            elif integer:
+                point[s] = sp.Integer(rng.randint(-spread, spread))
+            else:
+                point[s] = sp.Rational(rng.randint(-4 * spread, 4 * spread), rng.choice((2, 3, 4, 5)))
+        return point
+
+
+def fmt_point(point: dict) -> dict:
+    """A JSON-friendly ``{name: "p/q"}`` form of a sample point."""
+    return {str(k): str(v) for k, v in sorted(point.items(), key=lambda kv: str(kv[0]))}
+
+
+def _flatten(expr) -> list[sp.Expr]:
+    if isinstance(expr, (sp.MatrixBase, list, tuple)):
+        return [sp.sympify(e) for e in (expr if not isinstance(expr, sp.MatrixBase) else list(expr))]
+    return [sp.sympify(expr)]
+
+
+def _generic_branch(e: sp.Expr) -> sp.Expr:
+    """Replace each Piecewise by its first branch (the generic case, e.g. |Δ|² > 0)."""
+    return e.replace(lambda x: isinstance(x, sp.Piecewise), lambda x: x.args[0].expr)
+
+
+def _radical_reduce(e: sp.Expr) -> bool:
+    """Prove ``e == 0`` by replacing ``base**(1/q)`` with ``t`` and reducing mod ``t**q - base``."""
+    pows = [p for p in e.atoms(sp.Pow) if p.exp.is_Rational and not p.exp.is_Integer]
+    if not pows:
+        return False
+    den: dict[sp.Expr, int] = {}
+    for p in pows:
+        q = int(p.exp.q)
+        den[p.base] = q * den.get(p.base, 1) // gcd(q, den.get(p.base, 1))
+    ts = {b: sp.Dummy("t") for b in den}
+    repl = {p: ts[p.base] ** int(p.exp * den[p.base]) for p in pows}
+    e2 = e.xreplace(repl)
+    if any(p.exp.is_Rational and not p.exp.is_Integer for p in e2.atoms(sp.Pow)):
+        return False  # nested radicals: not handled here
+    num = sp.expand(sp.numer(sp.together(e2)))
+    for b, t in ts.items():
+        if num == 0:
+            return True
+        if not num.has(t):
+            continue
+        rel = sp.Poly(t ** den[b] - b, t)
+        num = sp.Poly(num, t).rem(rel).as_expr()
+        num = sp.expand(num)
+    return num == 0
+
+
+def _trig_reduce(e: sp.Expr) -> bool:
+    """Prove ``e == 0`` for polynomials in sin/cos of linear combinations of symbols."""
+    e = e.rewrite(sp.sin, sp.cos, sp.tan) if e.has(sp.tan) else e
+    e = e.replace(lambda x: isinstance(x, sp.tan), lambda x: sp.sin(x.args[0]) / sp.cos(x.args[0]))
+    trig = [a for a in e.atoms(sp.sin, sp.cos)]
+    if not trig:
+        return False
+    syms = set().union(*(a.args[0].free_symbols for a in trig))
+    scale = 1
+    for a in trig:
+        try:
+            poly = sp.Poly(a.args[0], *syms)
+        except sp.PolynomialError:
+            return False
+        if poly.total_degree() > 1:
+            return False
+        for c in poly.coeffs():
+            if not c.is_Rational:
+                return False
+            scale = scale * int(c.q) // gcd(scale, int(c.q))
+    half = {x: sp.Dummy(x.name) for x in syms}
+    e2 = sp.expand_trig(e.xreplace({x: scale * half[x] for x in syms}))
+    S = {x: sp.Dummy("S") for x in syms}
+    C = {x: sp.Dummy("C") for x in syms}
+    e3 = e2.xreplace({sp.sin(half[x]): S[x] for x in syms}).xreplace({sp.cos(half[x]): C[x] for x in syms})
+    if e3.atoms(sp.sin, sp.cos):
+        return False
+    num = sp.expand(sp.numer(sp.together(e3)))
+    for x in syms:
+        if num == 0:
+            break
+        if num.has(C[x]):
+            num = sp.expand(sp.Poly(num, C[x]).rem(sp.Poly(C[x] ** 2 + S[x] ** 2 - 1, C[x])).as_expr())
+    return num == 0
+
+
+def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True) -> str | None:
+    """Try to reduce ``e`` to exactly 0; return the name of the reduction that did, or None.
+
+    The cheap reductions come first; ``simplify`` (slow, and unpredictable on
+    large expressions) only when ``allow_simplify`` and the expression is small.
+    """
+    if e == 0:
+        return "trivial"
+    notes = []
+    if e.has(sp.Piecewise):
+        e = _generic_branch(e)
+        notes.append("generic Piecewise branch")
+    if e.atoms(_RemovableFunction):
+        e = to_elementary(e)
+        notes.append("to_elementary")
+    pre = " + ".join(notes) + " + " if notes else ""
+    if sp.cancel(sp.together(e)) == 0:
+        return pre + "cancel"
+    ex = sp.expand(e)
+    if ex == 0:
+        return pre + "expand"
+    if _radical_reduce(e):
+        return pre + "radical elimination + polynomial reduction"
+    if _trig_reduce(e):
+        return pre + "half-angle expand_trig + reduction mod sin²+cos²=1"
+    if e.has(sp.exp, sp.sinh, sp.cosh, sp.tanh, sp.atanh, sp.log):
+        r = sp.cancel(sp.expand(e.rewrite(sp.exp)))
+        if r == 0:
+            return pre + "rewrite(exp) + cancel"
+    if allow_simplify and sp.count_ops(e) <= SIMPLIFY_LIMIT and sp.simplify(e) == 0:
+        return pre + "simplify"
+    return None
+
+
+def _value(e: sp.Expr, point: dict):
+    """Exact value at a rational point (None if undefined), and whether it is rational."""
+    try:
+        v = e.xreplace(point)
+        v = to_elementary(v) if v.atoms(_RemovableFunction) else v
+        v = sp.nsimplify(v) if v.has(sp.Float) else v
+    except (ZeroDivisionError, TypeError):
+        return None, False
+    if v.has(sp.zoo, sp.nan, sp.oo, -sp.oo) or v.free_symbols:
+        return None, False
+    return v, v.is_Rational
+
+
+def _radicands(exprs) -> list[sp.Expr]:
+    out = set()
+    for e in exprs:
+        for p in e.atoms(sp.Pow):
+            if p.exp.is_Rational and p.exp.q == 2:
+                out.add(p.base)
+    return list(out)
+
+
+def _is_square(v) -> bool:
+    if not v.is_Rational or v < 0:
+        return False
+    n, d = int(v.p), int(v.q)
+    return isqrt(n) ** 2 == n and isqrt(d) ** 2 == d
+
+
+def find_counterexample(exprs, domain: Domain, seed: int = 1, tries: int = 60):
+    """An exact rational point where some expression is nonzero, or None.
+
+    Returns
+    -------
+    (point, index, value, exact) or None
+        ``exact`` is True when the value is a rational number; otherwise its
+        nonzero-ness was certified by a 50-digit evaluation.
+    """
+    exprs = _flatten(exprs)
+    syms = set().union(*(e.free_symbols for e in exprs))
+    rng = random.Random(seed)
+    rad = _radicands(exprs)
+    points = []
+    if rad:
+        # Prefer points where every square root is rational, so evaluation stays exact.
+        exact_domain = Domain(domain.positive, None, domain.small)
+        for _ in range(1500):
+            pt = exact_domain.sample(syms, rng, integer=True)
+            if all(_is_square(r.xreplace(pt)) for r in rad):
+                points.append(pt)
+                if len(points) >= tries // 2:
+                    break
+    # Counterexamples need no small steps: ignore "near" so values are not tiny.
+    wide = Domain(domain.positive, None, domain.small)
+    points += [wide.sample(syms, rng) for _ in range(tries - len(points))]
+    for pt in points:
+        for i, e in enumerate(exprs):
+            v, exact = _value(e, pt)
+            if v is None:
+                continue
+            if exact:
+                if v != 0:
+                    return pt, i, v, True
+            else:
+                num = sp.N(v, DIGITS)
+                if num.is_number and abs(num) > sp.Float(10) ** (-(DIGITS - 10)):
+                    return pt, i, num, False
+    return None
+
+
+def numerical_check(exprs, domain: Domain, tol: float, n: int = 5, seed: int = 7):
+    """Evaluate at ``n`` random rational points with 50-digit arithmetic.
+
+    Returns
+    -------
+    (passed, max_abs, points)
+    """
+    exprs = _flatten(exprs)
+    syms = set().union(*(e.free_symbols for e in exprs))
+    rng = random.Random(seed)
+    worst, pts, got = 0.0, [], 0
+    for _ in range(20 * n):
+        if got >= n:
+            break
+        pt = domain.sample(syms, rng)
+        vals = []
+        for e in exprs:
+            v = e.xreplace(pt)
+            v = to_elementary(v) if v.atoms(_RemovableFunction) else v
+            v = sp.N(v, DIGITS)
+            if not v.is_number or v.has(sp.zoo, sp.nan):
+                vals = None
+                break
+            vals.append(abs(complex(v)))
+        if vals is None:
+            continue
+        got += 1
+        pts.append(fmt_point(pt))
+        worst = max([worst] + vals)
+    return (got > 0 and worst <= tol), worst, pts
+
+
+def _show(exprs) -> tuple[str, str]:
+    if len(exprs) == 1:
+        e = exprs[0]
+        return str(e), sp.latex(e)
+    return str(list(exprs)), sp.latex(sp.Matrix(exprs))
+
+
+def certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
+            shown=None, tol: float = 1e-12, details: dict | None = None) -> Certificate:
+    """Decide whether ``expr`` (scalar, list or Matrix) vanishes identically.
+
+    Parameters
+    ----------
+    claim : str
+        The claim in words.
+    expr : sympy.Expr or list or Matrix
+        Must be identically 0 for the claim to hold.
+    domain : Domain, optional
+        How to draw sample points (counterexamples, numerical checks).
+    ref : str
+        Source of the claim (exercise, section, paper).
+    shown : sympy.Expr, optional
+        A more readable form of the expression for the certificate (defaults to ``expr``).
+    tol : float
+        Absolute tolerance of the numerical fallback when ``expr`` has floats.
+    details : dict, optional
+        Extra details recorded in the certificate.
+    """
+    t0 = time.perf_counter()
+    domain = domain or Domain()
+    exprs = _flatten(expr)
+    text, tex = _show(_flatten(shown) if shown is not None else exprs)
+    det = dict(details or {})
+    if any(e.has(sp.Float) for e in exprs):
+        # Floating-point coefficients (quadrature nodes): an identity cannot be proved.
+        passed, worst, pts = numerical_check(exprs, domain, tol)
+        det.update({"passed": passed, "tolerance": tol, "max_abs_value": worst,
+                    "sample_points": pts, "digits": DIGITS,
+                    "why_numerical": "the expression has floating-point coefficients"})
+        return Certificate(claim, NUMERICAL, text, tex, "50-digit evaluation at rational points",
+                           time.perf_counter() - t0, ref, det)
+    methods = []
+    failing = []
+    for e in exprs:
+        m = reduce_to_zero(e, allow_simplify=False)
+        if m is None:
+            failing.append(e)
+        elif m not in methods:
+            methods.append(m)
+    # A false identity is refuted at a random point much faster than simplify
+    # gives up, so look for a counterexample before the last-resort simplify.
+    ce = find_counterexample(failing, domain) if failing else None
+    if ce is None and failing:
+        still = []
+        for e in failing:
+            m = "simplify" if (sp.count_ops(e) <= SIMPLIFY_LIMIT and sp.simplify(e) == 0) else None
+            if m is None:
+                still.append(e)
+            elif m not in methods:
+                methods.append(m)
+        failing = still
+    if not failing:
+        return Certificate(claim, PROVED, text, tex, ", ".join(methods) or "trivial",
+                           time.perf_counter() - t0, ref, det)
+    if ce is not None:
+        pt, i, v, exact = ce
+        det.update({"counterexample": fmt_point(pt), "value": str(v),
+                    "evaluation": "exact (rational)" if exact else
+                    f"exact point; nonzero certified by {DIGITS}-digit evaluation"})
+        return Certificate(claim, REFUTED, text, tex, "counterexample at a rational point",
+                           time.perf_counter() - t0, ref, det)
+    passed, worst, pts = numerical_check(failing, domain, 1e-40)
+    det.update({"passed": passed, "tolerance": 1e-40, "max_abs_value": worst, "sample_points": pts,
+                "digits": DIGITS, "inconclusive": "symbolic reduction did not reach 0 and no "
+                "counterexample was found; checked numerically only"})
+    return Certificate(claim, NUMERICAL, text, tex, "50-digit evaluation (symbolic inconclusive)",
+                       time.perf_counter() - t0, ref, det)
+
+
+def numerical_certificate(claim: str, ref: str, method: str, passed: bool, seconds: float,
+                          expression: str = "", **details) -> Certificate:
+    """A certificate for a property checked numerically (not an identity)."""
+    details["passed"] = passed
+    return Certificate(claim, NUMERICAL, expression, "", method, seconds, ref, details)

@@ -1,0 +1,168 @@
+"""Certificates and the verification report (plain data plus renderers).
+
+A :class:`Certificate` records one claim: what was claimed, the expression that
+was reduced, the verdict, how it was reached and how long it took.  A
+:class:`Report` is the list of certificates for one scheme; it renders as a
+dictionary (JSON), Markdown and LaTeX so it can stand next to a proof.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+__all__ = ["Certificate", "Report", "PROVED", "REFUTED", "NUMERICAL", "STATUSES"]
+
+PROVED = "proved"
+REFUTED = "refuted"
+NUMERICAL = "numerical"
+STATUSES = (PROVED, REFUTED, NUMERICAL)
+
+
+@dataclass
+class Certificate:
+    """The verdict on one claim.
+
+    Attributes
+    ----------
+    claim : str
+        The claim in words.
+    status : str
+        ``"proved"`` (an identity reduced to exactly 0, no floating point),
+        ``"refuted"`` (a counterexample point where it is nonzero) or
+        ``"numerical"`` (checked at sample points with a tolerance; never a proof).
+    expression : str
+        The expression that was reduced (or checked), as text.
+    latex : str
+        The same expression in LaTeX.
+    method : str
+        The reduction that succeeded (``"cancel"``, ``"expand"``, ``"polynomial
+        reduction"``...) or how the numerical check was made.
+    seconds : float
+        Wall time spent on this certificate.
+    ref : str
+        Where the claim comes from (exercise / section / paper).
+    details : dict
+        Counterexample, tolerance, sample points, notes; JSON-serialisable.
+    """
+
+    claim: str
+    status: str
+    expression: str = ""
+    latex: str = ""
+    method: str = ""
+    seconds: float = 0.0
+    ref: str = ""
+    details: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+
+    @property
+    def passed(self) -> bool:
+        """False for a refutation or a numerical check that failed its tolerance."""
+        if self.status == REFUTED:
+            return False
+        return bool(self.details.get("passed", True))
+
+    def to_dict(self) -> dict:
+        return {"claim": self.claim, "status": self.status, "seconds": round(self.seconds, 4),
+                "method": self.method, "ref": self.ref, "expression": self.expression,
+                "latex": self.latex, "details": self.details}
+
+
+def _md_escape(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _tex_escape(text: str) -> str:
+    out = text
+    for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("$", r"\$"),
+                 ("#", r"\#"), ("_", r"\_"), ("{", r"\{"), ("}", r"\}")):
+        out = out.replace(a, b)
+    return out
+
+
+@dataclass
+class Report:
+    """All certificates for one scheme (or one system).
+
+    Attributes
+    ----------
+    title : str
+    certificates : list of Certificate
+    """
+
+    title: str
+    certificates: list[Certificate] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """False iff some applicable claim was refuted."""
+        return not any(c.status == REFUTED for c in self.certificates)
+
+    @property
+    def all_passed(self) -> bool:
+        """Like :attr:`ok`, but a failed numerical check also counts as a failure."""
+        return all(c.passed for c in self.certificates)
+
+    @property
+    def seconds(self) -> float:
+        return sum(c.seconds for c in self.certificates)
+
+    def __getitem__(self, i):
+        return self.certificates[i]
+
+    def __len__(self):
+        return len(self.certificates)
+
+    def find(self, text: str) -> list[Certificate]:
+        """Certificates whose claim contains ``text`` (case-insensitive)."""
+        return [c for c in self.certificates if text.lower() in c.claim.lower()]
+
+    def to_dict(self) -> dict:
+        return {"ok": self.ok, "title": self.title, "seconds": round(self.seconds, 3),
+                "certificates": [c.to_dict() for c in self.certificates]}
+
+    def to_json(self, **kwargs) -> str:
+        return json.dumps(self.to_dict(), **kwargs)
+
+    def markdown(self) -> str:
+        """A Markdown section: a summary table, then one paragraph per certificate."""
+        lines = [f"### Verification: {_md_escape(self.title)}", "",
+                 f"Overall: **{'ok' if self.ok else 'REFUTED CLAIMS'}** "
+                 f"({len(self.certificates)} claims, {self.seconds:.2f} s)", "",
+                 "| # | claim | status | method | s |", "|---|---|---|---|---|"]
+        for i, c in enumerate(self.certificates, 1):
+            lines.append(f"| {i} | {_md_escape(c.claim)} | **{c.status}** | {_md_escape(c.method)} "
+                         f"| {c.seconds:.2f} |")
+        lines.append("")
+        for i, c in enumerate(self.certificates, 1):
+            lines.append(f"{i}. *{_md_escape(c.claim)}* ({c.ref}) — **{c.status}** by {c.method}.")
+            if c.latex:
+                lines.append(f"   Reduced: $${c.latex}$$")
+            for k, v in c.details.items():
+                lines.append(f"   - {k}: {_md_escape(str(v))}")
+        return "\n".join(lines) + "\n"
+
+    def latex(self) -> str:
+        """A LaTeX fragment (``description`` list) for a course handout."""
+        out = [rf"\subsection*{{Verification: {_tex_escape(self.title)}}}", r"\begin{description}"]
+        for c in self.certificates:
+            out.append(rf"\item[{_tex_escape(c.status)}] {_tex_escape(c.claim)} "
+                       rf"({_tex_escape(c.ref)}; {_tex_escape(c.method)}, {c.seconds:.2f}\,s)")
+            if c.latex:
+                out.append(rf"\[ {c.latex} \]")
+            for k, v in c.details.items():
+                out.append(rf"\\ \emph{{{_tex_escape(k)}}}: {_tex_escape(str(v))}")
+        out.append(r"\end{description}")
+        return "\n".join(out) + "\n"
+
+    def __str__(self) -> str:
+        rows = [f"{self.title}: {'ok' if self.ok else 'REFUTED'}"]
+        for c in self.certificates:
+            rows.append(f"  [{c.status:>9}] {c.claim}  ({c.method}, {c.seconds:.2f} s)")
+            if c.status == REFUTED and "counterexample" in c.details:
+                rows.append(f"              counterexample: {c.details['counterexample']}")
+        return "\n".join(rows)
