@@ -23,6 +23,7 @@ from .build import build, generated_dir, scene_module_path
 from .emit import emit_source, file_status, module_filename, signature, write_atomic
 from .errors import InputError, MethodgenError
 from .scene import load_scene, scene_names
+from .runio import ChunkWriter
 from .schemes import METHODS, discretize
 
 EXIT_INPUT = 2
@@ -62,9 +63,65 @@ def _step(text: str) -> float:
 
 # --- run -----------------------------------------------------------------------
 
+class RunFailure(Exception):
+    """A run stopped early; carries the report so far and the saved file."""
+
+    def __init__(self, exc: BaseException, report: dict, saved: Path | None, code: int):
+        super().__init__(str(exc))
+        self.exc, self.report, self.saved, self.code = exc, report, saved, code
+
+
+def _invariant_stats(module, traj, acc: dict | None) -> dict:
+    """Update running max errors of every monitored invariant with ``traj`` (rows of states)."""
+    inv = module.invariants(traj)
+    acc = {} if acc is None else acc
+    for name in module.INVARIANT_NAMES:
+        vals = inv[name]
+        if name not in acc:
+            acc[name] = {"initial": float(vals[0]), "max_abs_error": 0.0}
+        entry = acc[name]
+        if len(vals):
+            entry["max_abs_error"] = max(entry["max_abs_error"], float(np.max(np.abs(vals - entry["initial"]))))
+            entry["final"] = float(vals[-1])
+    return acc
+
+
+def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done) -> dict:
+    report_inv = {}
+    for name, v in (inv_acc or {}).items():
+        init, abs_err = v["initial"], v["max_abs_error"]
+        rel = abs_err / abs(init) if init != 0 else (0.0 if abs_err == 0 else math.inf)
+        report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": abs_err,
+                            "max_rel_error": _finite_or_none(rel)}
+    return {
+        "scene": scene.name,
+        "method": method,
+        "h": h,
+        "steps": steps,
+        "steps_done": steps_done,
+        "t_final": h * steps_done,
+        "y0": list(scene.y0),
+        "y_final": [float(v) for v in y_final],
+        "state_names": list(module.STATE_NAMES),
+        "invariants": report_inv,
+        "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
+                   "max_iterations": int(its.max()) if its.size else 0},
+        "seconds": seconds,
+        "us_per_step": seconds / steps_done * 1e6 if steps_done else 0.0,
+        "module": str(getattr(module, "__file__", "")),
+    }
+
+
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
-              steps: int | None = None) -> dict:
-    """Run a scene and return the report dictionary (the ``--json`` object)."""
+              steps: int | None = None, save: str | None = None, chunk: int | None = None,
+              interrupted_path: str | None = None) -> dict:
+    """Run a scene and return the report dictionary (the ``--json`` object).
+
+    With ``save`` the trajectory is written to an ``.npz`` in chunks of
+    ``chunk`` steps (memory stays bounded).  If the run is interrupted (Ctrl-C)
+    or fails numerically, the states computed so far are saved — to ``save`` or
+    to ``interrupted_path`` — and :class:`RunFailure` is raised.
+    """
     scene = load_scene(scene_name)
     method = method or scene.method
     if method not in METHODS:
@@ -72,37 +129,69 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     h = scene.h if h is None else h
     steps = scene.steps if steps is None else steps
     module = build(scene.system, method, path=scene_module_path(scene, method))
-    y0 = np.array(scene.y0)
-    info: dict = {}
-    t0 = time.perf_counter()
-    traj = module.integrate(y0, h, steps, info=info)
-    seconds = time.perf_counter() - t0
-    inv = module.invariants(traj)
-    report_inv = {}
-    for name in module.INVARIANT_NAMES:
-        vals = inv[name]
-        init = float(vals[0])
-        abs_err = float(np.max(np.abs(vals - init))) if len(vals) else 0.0
-        rel = abs_err / abs(init) if init != 0 else (0.0 if abs_err == 0 else math.inf)
-        report_inv[name] = {"initial": init, "final": float(vals[-1]), "max_abs_error": abs_err,
-                            "max_rel_error": _finite_or_none(rel)}
-    its = info.get("newton_iterations", np.zeros(0))
-    return {
-        "scene": scene.name,
-        "method": method,
-        "h": h,
-        "steps": steps,
-        "t_final": h * steps,
-        "y0": list(scene.y0),
-        "y_final": [float(v) for v in traj[-1]],
-        "state_names": list(module.STATE_NAMES),
-        "invariants": report_inv,
-        "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
-                   "max_iterations": int(its.max()) if its.size else 0},
-        "seconds": seconds,
-        "us_per_step": seconds / steps * 1e6 if steps else 0.0,
-        "module": str(getattr(module, "__file__", "")),
-    }
+    y = np.array(scene.y0)
+    chunk = steps if not chunk else chunk
+    writer = None
+    meta = dict(scene=scene.name, method=method, h=h, state_names=list(module.STATE_NAMES))
+    kept: list[np.ndarray] = []
+    inv_acc = None
+    its_all: list[np.ndarray] = []
+    done = 0
+    seconds = 0.0
+    first = True
+    try:
+        if save:
+            writer = ChunkWriter(save)
+        while first or done < steps:
+            n = min(chunk, steps - done)
+            info: dict = {}
+            t0 = time.perf_counter()
+            try:
+                part = module.integrate(y, h, n, info=info)
+            finally:
+                seconds += time.perf_counter() - t0
+            rows = part if first else part[1:]
+            inv_acc = _invariant_stats(module, part, inv_acc)
+            its_all.append(info.get("newton_iterations", np.zeros(0)))
+            if writer is not None:
+                writer.append(rows)
+            elif save is None:
+                kept.append(rows)
+            y = part[-1]
+            done += n
+            first = False
+    except BaseException as exc:
+        partial = getattr(exc, "trajectory", None)
+        numeric = type(exc).__name__ in ("ConvergenceError", "NonFiniteError", "ResolutionError")
+        if not (numeric or isinstance(exc, KeyboardInterrupt)):
+            if writer is not None:
+                writer.abort()
+            raise
+        if partial is not None and len(partial):
+            rows = partial if first else partial[1:]
+            done += len(partial) - 1
+            inv_acc = _invariant_stats(module, partial, inv_acc)
+            y = partial[-1]
+        else:
+            rows = np.zeros((0,) + y.shape)
+        target = writer
+        if target is None and (interrupted_path or isinstance(exc, KeyboardInterrupt)):
+            target = ChunkWriter(interrupted_path or f"{scene.name}_{method}_partial.npz".replace("-", "_"))
+            for k in kept:
+                target.append(k)
+        saved = None
+        if target is not None:
+            if len(rows):
+                target.append(rows)
+            saved = target.close(**meta, steps_done=done, complete=False, reason=type(exc).__name__)
+        its = np.concatenate(its_all) if its_all else np.zeros(0)
+        rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
+        raise RunFailure(exc, rep, saved, 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL) from None
+    its = np.concatenate(its_all) if its_all else np.zeros(0)
+    rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
+    if writer is not None:
+        rep["saved"] = str(writer.close(**meta, steps_done=done, complete=True, reason="complete"))
+    return rep
 
 
 def _print_run(rep: dict) -> None:
@@ -122,11 +211,22 @@ def _print_run(rep: dict) -> None:
 
 
 def cmd_run(args) -> int:
-    rep = run_scene(args.scene, args.method, args.h, args.steps)
+    try:
+        rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk)
+    except RunFailure as fail:
+        what = "interrupted" if fail.code == 130 else "stopped"
+        where = f"; saved {fail.report['steps_done'] + 1} states to {fail.saved}" if fail.saved else ""
+        print(f"methodgen: {what} at step {fail.report['steps_done']}: {fail.exc}{where}", file=sys.stderr)
+        if args.json:
+            print(json.dumps({**fail.report, "error": str(fail.exc),
+                              "saved": str(fail.saved) if fail.saved else None}))
+        return fail.code
     if args.json:
         print(json.dumps(rep))
     else:
         _print_run(rep)
+        if "saved" in rep:
+            print(f"trajectory saved to {rep['saved']}")
     return 0
 
 
@@ -215,6 +315,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", help="method (default: the scene's first method)")
     p.add_argument("--h", type=_step, help="step size (default: the scene's)")
     p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
+    p.add_argument("--save", metavar="FILE.npz", help="write the trajectory to an .npz (in chunks)")
+    p.add_argument("--chunk", type=_positive_int, metavar="N",
+                   help="with --save: steps per chunk (memory stays bounded; default: one chunk)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
 
@@ -248,8 +351,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"methodgen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
     except (RuntimeError, FloatingPointError) as exc:
-        # ConvergenceError / NonFiniteError of generated modules.
-        if type(exc).__name__ in ("ConvergenceError", "NonFiniteError"):
+        # ConvergenceError / NonFiniteError / ResolutionError of generated modules.
+        if type(exc).__name__ in ("ConvergenceError", "NonFiniteError", "ResolutionError"):
             print(f"methodgen: error: {exc}", file=sys.stderr)
             return EXIT_NUMERICAL
         raise

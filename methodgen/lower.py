@@ -163,6 +163,7 @@ class ModuleIR:
     vector: dict
     helpers: tuple[str, ...]
     signature: str
+    resolution: str | None = None
 
     @property
     def dim(self) -> int:
@@ -281,4 +282,5 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         vector=vector,
         helpers=_helpers(all_exprs),
         signature=signature,
+        resolution=scheme.resolution,
     )

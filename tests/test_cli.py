@@ -67,7 +67,7 @@ def test_numerical_failure_exits_3_with_step(tmp_path):
                  'y0 = [0.05, 0.0, 0.0, 0.1]\n')
     res = run("run", str(f))
     assert res.returncode == 3
-    assert "step" in res.stderr and "smaller step size" in res.stderr and "Traceback" not in res.stderr
+    assert "at step 0" in res.stderr and "use h <=" in res.stderr and "Traceback" not in res.stderr
 
 
 def test_listings():

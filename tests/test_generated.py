@@ -157,13 +157,17 @@ def test_newton_failure_raises_with_step_and_keeps_the_trajectory(modules, keple
     # A tight orbit close to the singularity with a step far too large for it.
     y0 = np.array([0.05, 0, 0, 0, 0.1, 0])
     with pytest.raises(mod.ConvergenceError) as err:
-        mod.integrate(y0, 0.5, 50)
+        mod.integrate(y0, 0.5, 50, check_resolution=False)
     e = err.value
     assert "step" in str(e) and "smaller step size" in str(e)
     assert e.trajectory is not None and e.trajectory.shape[0] == e.step + 1
     assert e.step >= 1 and np.all(np.isfinite(e.trajectory))
     # The same start with a reasonable step size integrates fine (the failure is the step size).
-    assert np.all(np.isfinite(mod.integrate(y0, 0.001, 50)))
+    assert np.all(np.isfinite(mod.integrate(y0, 0.001, 20)))
+    # With the resolution guard on (the default) the step size is refused before Newton fails.
+    with pytest.raises(mod.ResolutionError) as err:
+        mod.integrate(y0, 0.5, 50)
+    assert err.value.step == 0 and err.value.resolution > mod.MAX_RESOLUTION and "use h <=" in str(err.value)
 
 
 def test_out_array_and_info(modules, kepler):

@@ -112,6 +112,11 @@ class Scheme:
     discrete_gradient : sympy.Matrix or None, shape (2d, 1), in ``y0`` and ``y1`` symbols
     invariants : tuple of Invariant
     description : str
+    resolution : str or None
+        How the Newton Jacobian measures the local time scale: ``"full"`` when
+        ``J ≈ I - (h/2) f'`` (so ``hω ≈ 2‖J - I‖``), ``"reduced"`` when
+        ``J ≈ I + (h²/4) M⁻¹∇²U`` (so ``hω ≈ 2‖J - I‖^½``), None when not
+        available.  Used by the generated step-size resolution guard.
     unknown_scale : sympy.Expr or None
         A magnitude the unknowns are measured against in Newton's stopping
         test, when ``|z|`` itself is not the right scale (RATTLE's scaled
@@ -129,6 +134,7 @@ class Scheme:
     invariants: tuple[Invariant, ...] = ()
     description: str = ""
     unknown_scale: sp.Expr | None = None
+    resolution: str | None = None
     options: tuple[tuple[str, object], ...] = field(default=())
 
     h = STEP
@@ -248,6 +254,7 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
         guess = h * sep.Minv * (p0 - h / 2 * gradU0)
         notes = ("momenta eliminated (separable H with quadratic kinetic energy): "
                  "Newton on Δq only",)
+        resolution = "reduced"
     else:
         z = tuple(increment_symbol(s) for s in y0)
         zv = sp.Matrix(z)
@@ -258,10 +265,15 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
         increment = zv
         guess = h * vector_field(system)
         notes = ()
+        resolution = "full"
+    if is_linear_field(system):
+        # Linear f: the symmetric methods here are exact up to a phase error for
+        # every h (Figure 1 of the notes uses h·ω ≈ 5 on purpose): no guard.
+        resolution = None
     traits = Traits(**{**traits.__dict__, "notes": traits.notes + notes})
     return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
-                  invariants=invariants(system), description=description)
+                  invariants=invariants(system), description=description, resolution=resolution)
 
 
 def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:

@@ -65,7 +65,8 @@ def build(system: Hamiltonian, form: str | None = None) -> Scheme:
                                "one linear solve per step",))
         return Scheme(system=system, method=NAME, traits=traits, unknowns=z, residual=residual,
                       guess=b, increment=sp.Matrix(z), invariants=invariants(system),
-                      description="y1 = y0 + h (I - h/2 f'(y0))^-1 f(y0)")
+                      description="y1 = y0 + h (I - h/2 f'(y0))^-1 f(y0)",
+                      resolution=None if linear else "full")
     grad = gradient(system)
 
     def dg(y0, y1):

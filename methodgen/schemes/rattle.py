@@ -44,7 +44,23 @@ def _applies(system: Hamiltonian, name: str) -> str | None:
     sep = separable_split(system)
     if sep is None or sep.Minv is None:
         return f"{name} needs H = ½ pᵀ M⁻¹ p + U(q) with a constant mass matrix"
+    if _generically_dependent(system):
+        return (f"the constraints of this system are dependent (G(q) = ∂g/∂q has rank < "
+                f"{len(system.constraints)} at generic points); remove the redundant ones")
     return None
+
+
+def _generically_dependent(system: Hamiltonian) -> bool:
+    """Rank of G at a few fixed rational points (exact arithmetic) below m at all of them."""
+    G = constraint_jacobian(system)
+    m = len(system.constraints)
+    pts = [[sp.Rational(2 * i + 3, 7 + k) for i in range(system.dim)] for k in range(3)]
+    par = {s: sp.Rational(5 + i, 4) for i, s in enumerate(system.params)}
+    for pt in pts:
+        Gp = G.xreplace({**dict(zip(system.q, pt)), **par})
+        if Gp.rank() == m:
+            return False
+    return True
 
 
 def _build(system: Hamiltonian, name: str, project: bool) -> Scheme:
