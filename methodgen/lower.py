@@ -53,7 +53,8 @@ def sanitize_names(names: list[str]) -> dict[str, str]:
 
 def _special_printer(prefix: str):
     def method(self, expr):
-        return f"{prefix}{SPECIAL_FUNCTIONS[type(expr)][1:]}({self._print(expr.args[0])})"
+        args = ", ".join(self._print(a) for a in expr.args)
+        return f"{prefix}{SPECIAL_FUNCTIONS[type(expr)][1:]}({args})"
     return method
 
 

@@ -60,7 +60,7 @@ def check_name(name: object, what: str = "symbol") -> str:
     """
     if not isinstance(name, str):
         raise ParseError(f"{what} name must be a string, got {type(name).__name__} {name!r}")
-    if not _NAME_RE.match(name):
+    if not _NAME_RE.fullmatch(name):
         raise ParseError(
             f"invalid {what} name {name!r}: a name starts with a letter and contains only "
             "letters, digits and underscores (no leading underscore)"

@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import sympy as sp
 
-__all__ = ["sinc_u", "sinhc", "atanhc", "dsinc_u", "dsinhc", "datanhc", "SPECIAL_FUNCTIONS", "to_elementary"]
+__all__ = ["sinc_u", "sinhc", "atanhc", "dsinc_u", "dsinhc", "datanhc", "safe_div", "SPECIAL_FUNCTIONS",
+           "to_elementary"]
 
 
 class _RemovableFunction(sp.Function):
@@ -131,6 +132,36 @@ class datanhc(_OddDerivative):
         return (x / (1 - x**2) - sp.atanh(x)) / x**2
 
 
+class safe_div(sp.Function):
+    r"""``n/d`` where ``d != 0`` and 0 where ``d = 0``.
+
+    For quotients whose limit at the removable point is 0 (Gonzalez'
+    correction ``N/|Δ|²`` with ``N = O(|Δ|³)``).  A Function rather than a
+    Piecewise so that common-subexpression elimination cannot hoist the
+    division out of the guard; its derivatives are guarded the same way.
+    """
+
+    nargs = 2
+
+    @classmethod
+    def eval(cls, n, d):
+        if n.is_zero:
+            return sp.S.Zero
+        if d.is_number and not d.is_zero:
+            return n / d
+        return None
+
+    def fdiff(self, argindex=1):
+        n, d = self.args
+        if argindex == 1:
+            return safe_div(sp.S.One, d)
+        return -safe_div(n, d**2)
+
+    def as_quotient(self):
+        n, d = self.args
+        return n / d
+
+
 #: Name of the runtime helper each function prints as.
 SPECIAL_FUNCTIONS: dict[type, str] = {
     sinc_u: "_sinc",
@@ -139,6 +170,7 @@ SPECIAL_FUNCTIONS: dict[type, str] = {
     dsinc_u: "_dsinc",
     dsinhc: "_dsinhc",
     datanhc: "_datanhc",
+    safe_div: "_sdiv",
 }
 
 
@@ -148,4 +180,4 @@ def to_elementary(expr: sp.Expr) -> sp.Expr:
     The result is equal to ``expr`` wherever the quotients are defined; the
     verification layer uses it to reduce identities with ordinary SymPy.
     """
-    return expr.replace(lambda e: isinstance(e, _RemovableFunction), lambda e: e.as_quotient())
+    return expr.replace(lambda e: isinstance(e, (_RemovableFunction, safe_div)), lambda e: e.as_quotient())

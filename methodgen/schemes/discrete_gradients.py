@@ -33,6 +33,7 @@ import sympy as sp
 
 from ..derive import gradient
 from ..divdiff import divided_difference
+from ..special import safe_div
 from ..problem import Hamiltonian
 from .base import Scheme, Traits, gradient_scheme
 
@@ -155,7 +156,7 @@ class Gonzalez:
             how = ("numerator as Σ (∇̄H_Itoh-Abe - ∇H(ȳ))_i Δ_i with cancelled divided differences: "
                    "no catastrophic cancellation")
         D2 = sum(dl**2 for dl in dels)
-        corr = sp.Piecewise((N / D2, D2 > 0), (0, True))
+        corr = safe_div(N, D2)
         dg_md = sp.Matrix([grad_m[i] + corr * dels[i] for i in range(n)])
 
         def dg(y0, y1):
