@@ -163,7 +163,7 @@ def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True) -> str | None:
     large expressions) only when ``allow_simplify`` and the expression is small.
     """
     if e == 0:
-        return "trivial"
+        return "automatic canonicalisation (0 as built)"
     notes = []
     if e.has(sp.Piecewise):
         e = _generic_branch(e)
@@ -354,7 +354,7 @@ def certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
                 methods.append(m)
         failing = still
     if not failing:
-        return Certificate(claim, PROVED, text, tex, ", ".join(methods) or "trivial",
+        return Certificate(claim, PROVED, text, tex, ", ".join(methods) or "automatic canonicalisation (0 as built)",
                            time.perf_counter() - t0, ref, det)
     if ce is not None:
         pt, i, v, exact = ce
