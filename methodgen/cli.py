@@ -326,6 +326,11 @@ def make_parser() -> argparse.ArgumentParser:
     add_verify_parser(sub)
     # --- end verify ---
 
+    # --- figures: registered by methodgen.figures_cli (owned by the plotting layer) ---
+    from .figures_cli import add_parser as add_figures_parser
+    add_figures_parser(sub)
+    # --- end figures ---
+
     p = sub.add_parser("generate", help="(re)generate the modules of the built-in scenes into generated/")
     p.add_argument("scenes", nargs="*", help="scene names (default: all built-in scenes)")
     p.add_argument("--check", action="store_true", help="only check that the files are in sync; exit 1 if not")
