@@ -165,6 +165,7 @@ class ModuleIR:
     helpers: tuple[str, ...]
     signature: str
     resolution: str | None = None
+    fixed_point: bool = False
 
     @property
     def dim(self) -> int:
@@ -238,6 +239,7 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     if n:
         scalar["guess"] = _kernel(guess, (n,), sp_, rename)
         scalar["resjac"] = _kernel(res + jac, (n + n * n,), sp_, rename)
+        scalar["res"] = _kernel(res, (n,), sp_, rename)
         vector["guess"] = _kernel(guess, (n,), vp, rename)
         vector["res"] = _kernel(res, (n,), vp, rename)
         vector["resjac"] = _kernel(res + jac, (n + n * n,), vp, rename)
@@ -284,4 +286,5 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         helpers=_helpers(all_exprs),
         signature=signature,
         resolution=scheme.resolution,
+        fixed_point=scheme.fixed_point,
     )

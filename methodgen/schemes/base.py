@@ -112,6 +112,9 @@ class Scheme:
     discrete_gradient : sympy.Matrix or None, shape (2d, 1), in ``y0`` and ``y1`` symbols
     invariants : tuple of Invariant
     description : str
+    fixed_point : bool
+        The residual has the form ``R(z) = z - F(z)``, so the fixed-point
+        iteration ``z ← F(z)`` is available as a solver variant.
     resolution : str or None
         How the Newton Jacobian measures the local time scale: ``"full"`` when
         ``J ≈ I - (h/2) f'`` (so ``hω ≈ 2‖J - I‖``), ``"reduced"`` when
@@ -135,6 +138,7 @@ class Scheme:
     description: str = ""
     unknown_scale: sp.Expr | None = None
     resolution: str | None = None
+    fixed_point: bool = False
     options: tuple[tuple[str, object], ...] = field(default=())
 
     h = STEP
@@ -273,7 +277,8 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     traits = Traits(**{**traits.__dict__, "notes": traits.notes + notes})
     return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
-                  invariants=invariants(system), description=description, resolution=resolution)
+                  invariants=invariants(system), description=description, resolution=resolution,
+                  fixed_point=True)
 
 
 def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:
