@@ -279,6 +279,90 @@ def cmd_generate(args) -> int:
     return 1 if problems else 0
 
 
+# --- bench ----------------------------------------------------------------------------
+
+def _fmt(x, spec=".2e"):
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def _print_bench(rep: dict) -> None:
+    wp = rep.get("work_precision")
+    if wp:
+        print(f"work-precision on {wp['scene']}, t = 0 .. {wp['T']:g}; reference: {wp['reference']}")
+        print(f"{'method':<28} {'h / tol':>9} {'steps':>7} {'CPU s':>9} {'error':>10} {'energy err':>10} "
+              f"{'inv/constr':>10} {'Newton':>6}")
+        for r in wp["rows"]:
+            if "failed" in r:
+                print(f"{r['method']:<28} {r.get('h', 0):9.3g}  failed: {r['failed'][:60]}")
+                continue
+            par = r.get("h", r.get("tol"))
+            others = [v for k, v in r["invariant_errors"].items() if k != "H"]
+            if "constraint_error" in r:
+                others.append(r["constraint_error"])
+            print(f"{r['method']:<28} {par:9.3g} {r['steps']:7d} {r['seconds']:9.4f} {_fmt(r['error']):>10} "
+                  f"{_fmt(r['energy_error']):>10} {_fmt(max(others) if others else None):>10} "
+                  f"{_fmt(r.get('newton_mean'), '.2f'):>6}")
+    sv = rep.get("solvers")
+    if sv:
+        print(f"\nnonlinear solvers on {sv['scene']} (h = {sv['h']:g}, {sv['steps']} steps)")
+        print(f"{'method':<18} {'solver':<12} {'iterations':>10} {'µs/step':>9} {'energy err':>10}")
+        for r in sv["rows"]:
+            if "failed" in r:
+                print(f"{r['method']:<18} {r['solver']:<12} failed: {r['failed'][:70]}")
+            else:
+                print(f"{r['method']:<18} {r['solver']:<12} {r['mean_iterations']:10.2f} {r['us_per_step']:9.1f} "
+                      f"{_fmt(r['max_energy_error']):>10}")
+    lr = rep.get("long")
+    if lr:
+        print(f"\nlong run on {lr['scene']}: {lr['steps']} steps of h = {lr['h']:g} (t = 0 .. {lr['T']:g})")
+        print(f"{'method':<28} {'CPU s':>9} {'max energy err':>14} {'growth exponent':>16}")
+        for r in lr["rows"]:
+            print(f"{r['method']:<28} {r['seconds']:9.2f} {_fmt(r['max_energy_error']):>14} "
+                  f"{_fmt(r['growth_exponent'], '.2f'):>16}")
+    br = rep.get("brouwer")
+    if br:
+        print(f"\nBrouwer's law: harmonic oscillator, midpoint, h = {br['h']:g}, {br['ensemble']} random "
+              f"phases, {br['steps']} steps")
+        for r in br["rows"]:
+            print(f"  {r['stepper']:<42} RMS energy error slope {r['slope']:.2f} "
+                  f"(final {r['rms_energy_error'][-1]:.2e}, {r['seconds']:.1f} s)")
+
+
+def cmd_bench(args) -> int:
+    from . import bench
+
+    scene = load_scene(args.scene)
+    methods = args.methods or list(scene.methods)
+    for m in methods:
+        if m not in METHODS:
+            raise InputError(f"unknown method {m!r}; known methods: {', '.join(METHODS)}")
+    progress = not args.json
+    rep: dict = {"scene": scene.name, "quick": bool(args.quick)}
+    if not args.only_extras:
+        rep["work_precision"] = bench.work_precision(scene, methods, quick=args.quick, progress=progress)
+        rep["solvers"] = bench.solver_variants(scene, methods, steps=300 if args.quick else 2000)
+    if args.long:
+        rep["long"] = bench.long_run(scene, methods, steps=args.long_steps or (20_000 if args.quick else 1_000_000),
+                                     progress=progress)
+    if args.brouwer:
+        rep["brouwer"] = bench.brouwer(ensemble=args.ensemble,
+                                       steps=args.brouwer_steps or (10_000 if args.quick else 100_000),
+                                       progress=progress)
+    if args.plot:
+        if "work_precision" not in rep:
+            raise InputError("--plot draws the work-precision diagram; drop --only-extras")
+        from .plots import plot_work_precision
+        rep["plot"] = str(plot_work_precision(rep["work_precision"]["rows"], args.plot,
+                                              title=f"{scene.name}: work-precision"))
+    if args.json:
+        print(json.dumps(rep, default=float))
+    else:
+        _print_bench(rep)
+        if "plot" in rep:
+            print(f"work-precision diagram written to {rep['plot']}")
+    return 0
+
+
 # --- listings ---------------------------------------------------------------------
 
 def cmd_scenes(args) -> int:
@@ -330,6 +414,23 @@ def make_parser() -> argparse.ArgumentParser:
     from .figures_cli import add_parser as add_figures_parser
     add_figures_parser(sub)
     # --- end figures ---
+
+    p = sub.add_parser("bench", help="measure speed against accuracy: work-precision vs scipy, "
+                                     "solver variants, long runs, Brouwer's law")
+    p.add_argument("scene", help="built-in scene name or path to a scene TOML file")
+    p.add_argument("--methods", nargs="+", metavar="M", help="methods (default: the scene's)")
+    p.add_argument("--quick", action="store_true", help="a small configuration (seconds)")
+    p.add_argument("--long", action="store_true", help="also the long run (energy-error envelope)")
+    p.add_argument("--long-steps", type=_positive_int, metavar="N", help="steps of the long run (default 10^6)")
+    p.add_argument("--brouwer", action="store_true",
+                   help="also the Brouwer experiment (harmonic oscillator ensemble, midpoint)")
+    p.add_argument("--brouwer-steps", type=_positive_int, metavar="N", help="steps (default 10^5)")
+    p.add_argument("--ensemble", type=_positive_int, default=100, help="ensemble size (default 100)")
+    p.add_argument("--only-extras", action="store_true",
+                   help="skip the work-precision and solver tables (run only --long/--brouwer)")
+    p.add_argument("--plot", metavar="FILE", help="write the work-precision diagram")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("generate", help="(re)generate the modules of the built-in scenes into generated/")
     p.add_argument("scenes", nargs="*", help="scene names (default: all built-in scenes)")

@@ -1,0 +1,423 @@
+"""Measuring the speed/accuracy trade: work-precision, long runs, Brouwer's law, solvers.
+
+Everything here *measures*; nothing is asserted about time.  All rows of one
+report come from one run on one machine.
+
+* :func:`work_precision` — every method of a scene over a step-size ladder,
+  next to the peers a Python user would pick instead: ``scipy.integrate.solve_ivp``
+  (RK45, DOP853, Radau) over a tolerance ladder, and the same scheme solved with
+  ``scipy.optimize.fsolve`` on a numpy residual (``lambdify`` of the scheme's
+  equations: what one writes from the lecture notes without methodgen).  CPU
+  time, global error at the final time against a reference, max energy error
+  and max error of every monitored invariant/constraint.
+* :func:`long_run` — the energy-error envelope over 10⁶ steps against DOP853 at
+  a tolerance of similar cost, with the fitted growth exponent.
+* :func:`brouwer` — RMS energy error over an ensemble of random phases of the
+  harmonic oscillator (midpoint, h = 0.01): slope ≈ 0.5 with round-off
+  stopping + compensated summation, ≈ 1 with a plain tolerance stop.
+* :func:`solver_variants` — Newton, simplified Newton, fixed point: iterations
+  and µs per step.
+
+References: the reference solution is exact where known (linear vector
+fields: ``expm``; circular Kepler orbits: a rotation), otherwise DOP853 at
+``rtol = 1e-13, atol = 1e-15`` (constrained scenes: on the index-1 ODE with the
+multipliers eliminated).
+
+.. [1] E. Hairer, R. I. McLachlan, A. Razakarivony, "Achieving Brouwer's law with
+   implicit Runge-Kutta methods", BIT 48 (2008) 231-243.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import sympy as sp
+
+from .build import build, scene_module_path
+from .derive import constraint_jacobian, gradient, separable_split, vector_field
+from .scene import Scene
+from .schemes import discretize
+from .schemes.base import is_linear_field
+
+__all__ = ["Reference", "reference", "work_precision", "long_run", "brouwer", "solver_variants",
+           "ode_rhs"]
+
+TOLERANCES = [10.0 ** -k for k in range(3, 14)]
+QUICK_TOLERANCES = [1e-3, 1e-6, 1e-9]
+
+
+def _cpu() -> float:
+    return time.process_time()
+
+
+def _progress(iterable, enabled: bool, desc: str, total: int | None = None):
+    """tqdm when enabled, installed, and stderr is a terminal; the plain iterable otherwise."""
+    if not enabled or not sys.stderr.isatty():
+        return iterable
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return iterable
+    return tqdm(iterable, desc=desc, total=total, leave=False)
+
+
+# --- the ODE a peer integrates -------------------------------------------------------
+
+def ode_rhs(system):
+    """``(f, jac)`` numpy callables of the ODE y' = f(y) that peers integrate.
+
+    Unconstrained: ``f = J∇H``.  Constrained (``H = ½pᵀM⁻¹p + U``): the index-1
+    formulation ``q' = M⁻¹p``, ``p' = -∇U - Gᵀλ`` with
+    ``λ = (G M⁻¹ Gᵀ)⁻¹ (q'ᵀ ∇²g q' - G M⁻¹ ∇U)`` from ``d²g/dt² = 0``.
+    """
+    ys = list(system.y)
+    pv = [system.param_values[k] for k in system.param_names]
+    subs = dict(zip(system.params, pv))
+    if not system.constraints:
+        f = vector_field(system).xreplace(subs)
+    else:
+        sep = separable_split(system)
+        Minv = sep.Minv.xreplace(subs)
+        q, p = sp.Matrix(system.q), sp.Matrix(system.p)
+        G = constraint_jacobian(system).xreplace(subs)
+        gradU = sp.Matrix([sp.diff(sep.U, s) for s in system.q]).xreplace(subs)
+        qdot = Minv * p
+        curv = sp.Matrix([(qdot.T * sp.hessian(g.xreplace(subs), system.q) * qdot)[0, 0]
+                          for g in system.constraints])
+        lam = sp.symbols(f"_lam0:{len(system.constraints)}")
+        lamv = sp.Matrix(lam)
+        A = G * Minv * G.T
+        # Solve numerically per call (A is small) instead of inverting symbolically.
+        fA = sp.lambdify([ys], A, "numpy")
+        fb = sp.lambdify([ys], curv - G * Minv * gradU, "numpy")
+        fG = sp.lambdify([ys], G, "numpy")
+        fgu = sp.lambdify([ys], gradU, "numpy")
+        fM = np.array(Minv, dtype=float)
+        d = system.dim
+
+        def rhs(t, y):
+            lamv_ = np.linalg.solve(np.array(fA(y), dtype=float), np.array(fb(y), dtype=float).ravel())
+            pdot = -np.array(fgu(y), dtype=float).ravel() - np.array(fG(y), dtype=float).T @ lamv_
+            return np.concatenate([fM @ y[d:], pdot])
+
+        return rhs, None
+    fl = sp.lambdify([ys], list(f), "numpy")
+    fj = sp.lambdify([ys], f.jacobian(sp.Matrix(ys)), "numpy")
+    return (lambda t, y: np.array(fl(y), dtype=float)), (lambda t, y: np.array(fj(y), dtype=float))
+
+
+# --- references -------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Reference:
+    """The reference solution at the final time and how it was obtained."""
+
+    y: np.ndarray
+    kind: str
+
+
+def reference(system, y0: np.ndarray, T: float) -> Reference:
+    """Exact final state where known, else DOP853 at rtol 1e-13 (documented in ``kind``)."""
+    from scipy.integrate import solve_ivp
+    from scipy.linalg import expm
+
+    y0 = np.asarray(y0, dtype=float)
+    if not system.constraints and is_linear_field(system):
+        subs = {s: sp.Float(system.param_values[s.name]) for s in system.params}
+        A = np.array(vector_field(system).jacobian(sp.Matrix(system.y)).xreplace(subs), dtype=float)
+        return Reference(expm(A * T) @ y0, "exact (matrix exponential, linear vector field)")
+    circ = _circular_kepler(system, y0, T)
+    if circ is not None:
+        return Reference(circ, "exact (circular Kepler orbit)")
+    rhs, jac = ode_rhs(system)
+    sol = solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-15)
+    return Reference(sol.y[:, -1], "DOP853 at rtol=1e-13, atol=1e-15")
+
+
+def _circular_kepler(system, y0, T):
+    """Exact solution if the system is Kepler-like (radial 1/r) and y0 is on a circular orbit."""
+    from .derive import radial_profile
+    sep = separable_split(system)
+    rad = radial_profile(system)
+    if system.constraints or sep is None or sep.Minv is None or rad is None or system.dim < 2:
+        return None
+    s, V = rad
+    subs = {p: sp.Float(system.param_values[p.name]) for p in system.params}
+    k_coef = sp.sympify(sp.simplify(-V * sp.sqrt(s)).xreplace(subs))
+    if k_coef.free_symbols:
+        return None
+    m_inv = sp.Matrix(sep.Minv).xreplace(subs).applyfunc(sp.sympify)
+    if not (m_inv - m_inv[0, 0] * sp.eye(system.dim)).is_zero_matrix:
+        return None
+    k, minv = float(k_coef), float(m_inv[0, 0])
+    d = system.dim
+    q, p = y0[:d], y0[d:]
+    r = np.linalg.norm(q)
+    v = p * minv
+    if abs(q @ v) > 1e-14 * r * np.linalg.norm(v) or abs((v @ v) - k * minv / r) > 1e-14 * (v @ v):
+        return None
+    w = np.linalg.norm(v) / r
+    e1, e2 = q / r, v / np.linalg.norm(v)
+    qt = r * (math.cos(w * T) * e1 + math.sin(w * T) * e2)
+    vt = r * w * (-math.sin(w * T) * e1 + math.cos(w * T) * e2)
+    return np.concatenate([qt, vt / minv])
+
+
+# --- measuring one trajectory -----------------------------------------------------------
+
+def _errors(module, traj, y_ref):
+    """Global error at the end, max energy error, max error of each monitored quantity."""
+    inv = module.invariants(traj)
+    out = {"error": float(np.max(np.abs(traj[-1] - y_ref)))}
+    out["invariant_errors"] = {name: float(np.max(np.abs(v - v[0]))) for name, v in inv.items()}
+    out["energy_error"] = out["invariant_errors"].get("H", float("nan"))
+    if hasattr(module, "constraint_residuals"):
+        g, gv = module.constraint_residuals(traj)
+        out["constraint_error"] = float(max(np.max(np.abs(g)), np.max(np.abs(gv))))
+    return out
+
+
+def _generated_row(scene, method, module, y0, h, steps, ref):
+    info = {}
+    t0 = _cpu()
+    traj = module.integrate(y0, h, steps, info=info, check_resolution=False)
+    sec = _cpu() - t0
+    its = info["newton_iterations"]
+    return {"method": method, "kind": "methodgen", "h": h, "steps": steps, "seconds": sec,
+            "us_per_step": sec / steps * 1e6, "newton_mean": float(its.mean()) if its.size else 0.0,
+            **_errors(module, traj, ref.y)}
+
+
+def _fsolve_row(scene, method, scheme, module, y0, h, steps, ref):
+    """The same scheme as a numpy residual (lambdify) solved with scipy.optimize.fsolve."""
+    from scipy.optimize import fsolve
+
+    sy = scheme.system
+    pv = [sy.param_values[k] for k in sy.param_names]
+    z = list(scheme.unknowns)
+    args = z + list(sy.y) + [scheme.h] + list(sy.params)
+    res = sp.lambdify(args, list(scheme.residual), "numpy")
+    inc = sp.lambdify(args, list(scheme.increment), "numpy")
+    guess = sp.lambdify(list(sy.y) + [scheme.h] + list(sy.params), list(scheme.guess), "numpy")
+    traj = np.empty((steps + 1, len(y0)))
+    traj[0] = y = np.array(y0, dtype=float)
+    t0 = _cpu()
+    for n in range(steps):
+        if z:
+            zz = fsolve(lambda zz: res(*zz, *y, h, *pv), guess(*y, h, *pv))
+        else:
+            zz = []
+        y = y + np.array(inc(*zz, *y, h, *pv), dtype=float)
+        traj[n + 1] = y
+    sec = _cpu() - t0
+    return {"method": f"{method} (fsolve)", "kind": "fsolve", "h": h, "steps": steps, "seconds": sec,
+            "us_per_step": sec / steps * 1e6, **_errors(module, traj, ref.y)}
+
+
+def _ivp_row(system, module, solver, tol, y0, T, ref, rhs, jac):
+    from scipy.integrate import solve_ivp
+
+    kw = {"jac": jac} if (solver == "Radau" and jac is not None) else {}
+    t0 = _cpu()
+    sol = solve_ivp(rhs, (0.0, T), y0, method=solver, rtol=tol, atol=tol * 1e-2, **kw)
+    sec = _cpu() - t0
+    traj = sol.y.T
+    return {"method": f"scipy {solver}", "kind": "scipy", "tol": tol, "steps": int(sol.t.size - 1),
+            "nfev": int(sol.nfev), "seconds": sec, "success": bool(sol.success),
+            **_errors(module, traj, ref.y)}
+
+
+def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float | None = None,
+                   progress: bool = False) -> dict:
+    """Work-precision data for ``scene``: methodgen methods, fsolve and solve_ivp peers.
+
+    Returns a dict with ``scene``, ``T``, ``reference`` and ``rows`` (one dict
+    per run: method, kind, h or tol, seconds (CPU), error, energy_error,
+    invariant_errors, …).
+    """
+    methods = list(methods or scene.methods)
+    T = T if T is not None else (2.0 if quick else 20.0)
+    y0 = np.array(scene.y0)
+    ref = reference(scene.system, y0, T)
+    hs = [0.1, 0.05, 0.025] if quick else [0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625]
+    hs = [h for h in hs if h <= T]
+    rows = []
+    jobs = [(m, h) for m in methods for h in hs]
+    for method, h in _progress(jobs, progress, "methodgen"):
+        module = build(scene.system, method, path=scene_module_path(scene, method))
+        steps = int(round(T / h))
+        try:
+            rows.append(_generated_row(scene, method, module, y0, T / steps, steps, ref))
+        except (RuntimeError, FloatingPointError) as exc:
+            rows.append({"method": method, "kind": "methodgen", "h": h, "failed": str(exc)})
+    # The fsolve peer on the scene's first implicit method, two step sizes (it is slow).
+    first = next((m for m in methods if m != "stormer-verlet"), None)
+    if first is not None:
+        scheme = discretize(scene.system, first)
+        module = build(scene.system, first, path=scene_module_path(scene, first))
+        for h in hs[:2] if quick else hs[:3]:
+            steps = int(round(T / h))
+            rows.append(_fsolve_row(scene, first, scheme, module, y0, T / steps, steps, ref))
+    rhs, jac = ode_rhs(scene.system)
+    module = build(scene.system, methods[0], path=scene_module_path(scene, methods[0]))
+    tols = QUICK_TOLERANCES if quick else TOLERANCES
+    for solver, tol in _progress([(s, t) for s in ("RK45", "DOP853", "Radau") for t in tols],
+                                 progress, "scipy"):
+        rows.append(_ivp_row(scene.system, module, solver, tol, y0, T, ref, rhs, jac))
+    return {"scene": scene.name, "T": T, "reference": ref.kind, "rows": rows}
+
+
+# --- long runs --------------------------------------------------------------------------
+
+def _envelope(t, err, windows=40):
+    """Max |error| in log-spaced time windows: (t_window_end, max_err)."""
+    edges = np.unique(np.geomspace(max(t[1], 1e-300), t[-1], windows + 1))
+    te, me = [], []
+    lo = 0.0
+    for hi in edges:
+        sel = (t > lo) & (t <= hi)
+        if np.any(sel):
+            te.append(float(hi))
+            me.append(float(np.max(err[sel])))
+        lo = hi
+    return np.array(te), np.array(me)
+
+
+def growth_exponent(t, err) -> float:
+    """Slope of log(envelope) against log(t) over the second half of the windows."""
+    te, me = _envelope(np.asarray(t), np.asarray(err))
+    keep = me > 0
+    te, me = te[keep], me[keep]
+    half = len(te) // 2
+    if len(te) - half < 3:
+        return float("nan")
+    return float(np.polyfit(np.log(te[half:]), np.log(me[half:]), 1)[0])
+
+
+def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | None = None,
+             progress: bool = False) -> dict:
+    """Energy-error envelope of the geometric methods and of DOP853 at a similar cost."""
+    from scipy.integrate import solve_ivp
+
+    methods = list(methods or scene.methods)
+    h = h or scene.h
+    y0 = np.array(scene.y0)
+    T = h * steps
+    out = {"scene": scene.name, "steps": steps, "h": h, "T": T, "rows": []}
+    costs = []
+    H0 = None
+    for method in methods:
+        module = build(scene.system, method, path=scene_module_path(scene, method))
+        t0 = _cpu()
+        err_parts, times = [], []
+        done = 0
+        for part in _progress(module.iterate(y0, h, steps, chunk=100_000), progress, method,
+                              total=math.ceil(steps / 100_000)):
+            H = module.hamiltonian(part)
+            if H0 is None:
+                H0 = float(H[0])
+            err_parts.append(np.abs(H - H0))
+            times.append(h * (done + np.arange(len(part))))
+            done += len(part) - (1 if done == 0 else 0)
+        sec = _cpu() - t0
+        costs.append(sec)
+        t = np.concatenate(times)
+        e = np.concatenate(err_parts)
+        te, me = _envelope(t, e)
+        out["rows"].append({"method": method, "seconds": sec, "max_energy_error": float(e.max()),
+                            "growth_exponent": growth_exponent(t, e),
+                            "envelope": {"t": te.tolist(), "max_error": me.tolist()}})
+    # DOP853 at the tolerance whose cost is closest to the geometric methods' (measured on
+    # a short interval and extrapolated linearly in time).
+    rhs, _ = ode_rhs(scene.system)
+    module = build(scene.system, methods[0], path=scene_module_path(scene, methods[0]))
+    target = float(np.median(costs))
+    probe_T = min(T, max(10.0, T / 100))
+    best = None
+    for tol in TOLERANCES:
+        t0 = _cpu()
+        solve_ivp(rhs, (0, probe_T), y0, method="DOP853", rtol=tol, atol=tol * 1e-2)
+        est = (_cpu() - t0) * T / probe_T
+        if best is None or abs(math.log(max(est, 1e-9) / target)) < abs(math.log(max(best[1], 1e-9) / target)):
+            best = (tol, est)
+    tol = best[0]
+    t0 = _cpu()
+    sol = solve_ivp(rhs, (0, T), y0, method="DOP853", rtol=tol, atol=tol * 1e-2)
+    sec = _cpu() - t0
+    H = module.hamiltonian(sol.y.T)
+    e = np.abs(H - H[0])
+    te, me = _envelope(sol.t, e)
+    out["rows"].append({"method": f"scipy DOP853 (rtol={tol:g})", "seconds": sec,
+                        "max_energy_error": float(e.max()), "growth_exponent": growth_exponent(sol.t, e),
+                        "envelope": {"t": te.tolist(), "max_error": me.tolist()}})
+    return out
+
+
+# --- Brouwer's law ------------------------------------------------------------------------
+
+def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed: int = 0,
+            progress: bool = False) -> dict:
+    """RMS energy error over random phases of the harmonic oscillator, midpoint rule.
+
+    Two steppers from the same generated module: round-off stopping with
+    compensated summation (the default), and a plain ``tol = 1e-12`` stop
+    without compensation.  Returns the RMS error curves and their fitted
+    log-log slopes (≈ 0.5 for Brouwer's law, ≈ 1 for linear growth).
+    """
+    from .scene import load_scene
+    scene = load_scene("harmonic")
+    module = build(scene.system, "midpoint", path=scene_module_path(scene, "midpoint"))
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0, 2 * np.pi, ensemble)
+    Y0 = np.stack([np.cos(phase), np.sin(phase)], axis=1)
+    H0 = module.hamiltonian(Y0)
+    out = {"ensemble": ensemble, "steps": steps, "h": h, "rows": []}
+    record = np.unique(np.geomspace(10, steps, 40).astype(int))
+    for label, kw in (("round-off stop + compensated summation", {}),
+                      ("tol=1e-12 stop, plain summation", {"tol": 1e-12, "compensated": False})):
+        t0 = _cpu()
+        Y = Y0.copy()
+        done = 0
+        rms = []
+        for target in _progress(record, progress, label):
+            Y = module.integrate(Y, h, int(target - done), **kw)[-1] if target > done else Y
+            done = target
+            rms.append(float(np.sqrt(np.mean((module.hamiltonian(Y) - H0) ** 2))))
+        sec = _cpu() - t0
+        t = record * h
+        rms = np.array(rms)
+        keep = (rms > 0) & (t >= t[-1] / 100)
+        slope = float(np.polyfit(np.log(t[keep]), np.log(rms[keep]), 1)[0]) if keep.sum() >= 3 else float("nan")
+        out["rows"].append({"stepper": label, "seconds": sec, "slope": slope, "t": t.tolist(),
+                            "rms_energy_error": rms.tolist()})
+    return out
+
+
+# --- solver variants -------------------------------------------------------------------------
+
+def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
+    """Iterations and µs per step of each nonlinear solver, per implicit method."""
+    methods = list(methods or scene.methods)
+    y0 = np.array(scene.y0)
+    rows = []
+    for method in methods:
+        module = build(scene.system, method, path=scene_module_path(scene, method))
+        for solver in module.SOLVERS:
+            info = {}
+            t0 = time.perf_counter()
+            try:
+                traj = module.integrate(y0, scene.h, steps, solver=solver, info=info)
+            except (RuntimeError, FloatingPointError) as exc:
+                rows.append({"method": method, "solver": solver, "failed": str(exc)})
+                continue
+            sec = time.perf_counter() - t0
+            H = module.hamiltonian(traj)
+            rows.append({"method": method, "solver": solver,
+                         "mean_iterations": float(info["newton_iterations"].mean()),
+                         "us_per_step": sec / steps * 1e6,
+                         "max_energy_error": float(np.max(np.abs(H - H[0])))})
+    return {"scene": scene.name, "steps": steps, "h": scene.h, "rows": rows}

@@ -1,0 +1,82 @@
+"""methodgen bench: structure of the output and the physics it shows (never timings)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from methodgen import bench
+
+
+@pytest.fixture(scope="module")
+def harmonic_quick():
+    res = subprocess.run([sys.executable, "-m", "methodgen", "bench", "harmonic", "--quick", "--json"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)
+
+
+def test_bench_json_structure(harmonic_quick):
+    rep = harmonic_quick
+    wp = rep["work_precision"]
+    assert wp["reference"].startswith("exact")
+    kinds = {r["kind"] for r in wp["rows"]}
+    assert kinds == {"methodgen", "fsolve", "scipy"}
+    assert {r["method"] for r in wp["rows"] if r["kind"] == "scipy"} == {"scipy RK45", "scipy DOP853", "scipy Radau"}
+    for r in wp["rows"]:
+        for key in ("seconds", "error", "energy_error", "invariant_errors"):
+            assert key in r
+    assert {r["solver"] for r in rep["solvers"]["rows"]} == {"newton", "simplified", "fixed-point"}
+
+
+def test_bench_rows_show_second_order_and_exact_energy(harmonic_quick):
+    rows = [r for r in harmonic_quick["work_precision"]["rows"] if r["method"] == "midpoint"]
+    hs = np.array([r["h"] for r in rows])
+    errs = np.array([r["error"] for r in rows])
+    slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert 1.8 < slope < 2.2
+    assert max(r["energy_error"] for r in rows) < 1e-14      # quadratic H: midpoint preserves it
+    rk45 = [r for r in harmonic_quick["work_precision"]["rows"] if r["method"] == "scipy RK45"]
+    assert max(r["energy_error"] for r in rk45) > 1e-10       # ... a non-geometric peer does not
+
+
+def test_geometric_energy_error_is_bounded_where_dop853_drifts():
+    sc = mg.load_scene("kepler")
+    rep = bench.long_run(sc, ["energy-momentum"], steps=20_000)
+    em, dop = rep["rows"]
+    assert dop["method"].startswith("scipy DOP853")
+    assert em["max_energy_error"] < 1e-13
+    assert dop["max_energy_error"] > 10 * em["max_energy_error"]
+    assert dop["growth_exponent"] > 0.4          # drifting
+    assert em["growth_exponent"] < dop["growth_exponent"]
+
+
+def test_growth_exponent_fit():
+    t = np.linspace(0.01, 1000, 100_000)
+    assert bench.growth_exponent(t, 1e-12 * t) == pytest.approx(1.0, abs=0.05)
+    assert bench.growth_exponent(t, 1e-12 * np.sqrt(t)) == pytest.approx(0.5, abs=0.05)
+    assert abs(bench.growth_exponent(t, 1e-15 * (2 + np.sin(t)))) < 0.1
+
+
+def test_brouwer_stepper_beats_plain_tolerance_stop():
+    rep = bench.brouwer(ensemble=100, steps=20_000)
+    good, plain = rep["rows"]
+    assert good["rms_energy_error"][-1] < plain["rms_energy_error"][-1]
+    assert good["slope"] < plain["slope"]
+
+
+def test_reference_is_exact_where_known():
+    harm = mg.load_scene("harmonic")
+    ref = bench.reference(harm.system, np.array([1.0, 0.0]), 2.0)
+    assert ref.kind.startswith("exact") and np.allclose(ref.y, [np.cos(2.0), -np.sin(2.0)], atol=1e-14)
+    circ = mg.load_scene("kepler").system
+    ref = bench.reference(circ, np.array([1.0, 0, 0, 0, 1.0, 0]), np.pi)
+    assert ref.kind == "exact (circular Kepler orbit)"
+    assert np.allclose(ref.y, [-1.0, 0, 0, 0, -1.0, 0], atol=1e-14)
+    ecc = bench.reference(circ, np.array([0.4, 0, 0, 0, 1.6, 1.2]), 1.0)
+    assert ecc.kind.startswith("DOP853")
