@@ -20,8 +20,8 @@ import numpy as np
 
 from .errors import InputError, MethodgenError
 
-__all__ = ["PlotUnavailable", "FORMATS", "plot_figure1", "plot_figure2", "write_figures",
-           "plot_run", "plot_work_precision", "default_pairs"]
+__all__ = ["PlotUnavailable", "FORMATS", "check_available", "plot_figure1", "plot_figure2", "write_figures",
+           "plot_run", "plot_scene", "plot_work_precision", "default_pairs"]
 
 FORMATS = ("png", "svg", "pdf")
 DPI = 100
@@ -44,6 +44,15 @@ def _figure(figsize):
     fig = Figure(figsize=figsize, dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
+
+
+def check_available() -> None:
+    """Raise :class:`PlotUnavailable` (with the install hint) unless matplotlib can be imported.
+
+    Call it before a long computation whose result is to be plotted, so a
+    missing extra is reported at once rather than after the run.
+    """
+    _figure((1, 1))
 
 
 def _format_of(path: Path, fmt: str | None) -> str:
@@ -218,7 +227,7 @@ def write_figures(out, fmt: str = "png", *, fig1: dict | None = None, fig2: dict
     fmt = fmt.lower()
     if fmt not in FORMATS:
         raise InputError(f"unsupported format {fmt!r}; use one of {', '.join(FORMATS)}")
-    _figure((1, 1))  # fail early, before the computation, if matplotlib is missing
+    check_available()  # fail early, before the computation
     out = Path(out)
     d1 = figures.figure1_data(**(fig1 or {}))
     c1 = figures.figure1_checks(d1)
@@ -337,6 +346,35 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
         ax.set_axis_off()
     fig.suptitle(f"{scene_name} — {method}, h = {h:g}, {len(traj) - 1} steps", fontsize=10)
     return _save(fig, path, fmt)
+
+
+def plot_scene(scene_name: str, path, *, method: str | None = None, h: float | None = None,
+               steps: int | None = None, traj=None, pairs=None, fmt: str | None = None) -> Path:
+    """:func:`plot_run` for a scene (built-in name or TOML path), integrating it unless ``traj`` is given.
+
+    Parameters
+    ----------
+    scene_name : str
+    path : path-like
+    method, h, steps : optional
+        Default: the scene's.
+    traj : ndarray, optional
+        An existing trajectory of this scene/method/h (then nothing is integrated).
+    """
+    from .build import build, scene_module_path
+    from .scene import load_scene
+
+    check_available()
+    scene = load_scene(scene_name)
+    method = method or scene.method
+    h = scene.h if h is None else h
+    steps = scene.steps if steps is None else steps
+    module = build(scene.system, method, path=scene_module_path(scene, method))
+    if traj is None:
+        traj = module.integrate(np.array(scene.y0), h, steps)
+    res = module.constraint_residuals(traj) if hasattr(module, "constraint_residuals") else None
+    return plot_run(module, traj, path, scene_name=scene.name, method=method, h=h,
+                    constraint_residuals=res, pairs=pairs, fmt=fmt)
 
 
 def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = None) -> Path:

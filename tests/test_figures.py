@@ -214,6 +214,15 @@ def test_plot_run_constrained_and_unconstrained(tmp_path):
         plot_run(mod, traj, tmp_path / "x.jpg", scene_name="x", method="x", h=1.0)
 
 
+def test_plot_scene(tmp_path):
+    from methodgen.plots import plot_scene
+
+    out = plot_scene("pendulum", tmp_path / "p.png", steps=30)  # constrained: residual panel
+    assert png_size(out) == (1200, 750)  # (x, y), (x, px), (y, py) on top, two panels below
+    out = plot_scene("linear", tmp_path / "l.svg", method="kahan", h=0.25, steps=10)
+    assert out.read_bytes()[:5] == b"<?xml"
+
+
 def test_plot_work_precision(tmp_path):
     from methodgen.plots import plot_work_precision
 
