@@ -383,23 +383,34 @@ def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = 
     Parameters
     ----------
     rows : iterable of dict
-        Keys ``method``, ``seconds``, ``error`` (optional ``h``, used to label points).
-        Rows with non-positive or non-finite values are left out (not drawable on log axes).
+        Keys ``method``, ``seconds``, ``error``.  Rows without ``seconds`` or
+        ``error`` (failed runs) and rows with non-positive or non-finite values
+        (not drawable on log axes) are left out.
     path : path-like
     """
     groups: dict[str, list] = {}
+    kinds: dict[str, str] = {}
     for r in rows:
+        if r.get("seconds") is None or r.get("error") is None:  # a failed run (bench: "failed" rows)
+            continue
         s, e = float(r["seconds"]), float(r["error"])
         if np.isfinite(s) and np.isfinite(e) and s > 0 and e > 0:
-            groups.setdefault(str(r["method"]), []).append((s, e, r.get("h")))
+            groups.setdefault(str(r["method"]), []).append((s, e))
+            kinds[str(r["method"])] = str(r.get("kind", "methodgen"))
     if not groups:
         raise InputError("no drawable rows (need positive, finite seconds and error)")
     fig = _figure((8, 6))
     ax = fig.subplots()
-    for m, pts in groups.items():
+    # Distinct colours: the fixed method colours first, then unused tab10 colours;
+    # reference solvers (scipy, fsolve: bench's "kind") dashed with other markers.
+    spare = [c for c in (f"tab:{n}" for n in ("blue", "purple", "brown", "pink", "gray", "olive", "cyan"))
+             if c not in _METHOD_COLORS.values()]
+    for k, (m, pts) in enumerate(groups.items()):
         pts.sort(key=lambda x: x[0])
         s, e = np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
-        ax.plot(s, e, "o-", lw=1, ms=4, label=m, color=_METHOD_COLORS.get(m))
+        color = _METHOD_COLORS.get(m) or spare[k % len(spare)]
+        ref = kinds[m] != "methodgen" or m.startswith("scipy")
+        ax.plot(s, e, "^--" if ref else "o-", lw=1, ms=4, label=m, color=color)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time [s]")

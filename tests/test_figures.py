@@ -229,6 +229,8 @@ def test_plot_work_precision(tmp_path):
     rows = [{"method": m, "seconds": s * k, "error": e / k ** 2}
             for m, s, e in (("midpoint", 1e-3, 1e-2), ("kahan", 5e-4, 3e-2)) for k in (1, 2, 4, 8)]
     rows.append({"method": "kahan", "seconds": 1.0, "error": 0.0})  # not drawable on log axes: skipped
+    rows.append({"method": "kahan", "h": 0.1, "failed": "ConvergenceError"})  # bench's failed rows
+    rows.append({"method": "kahan", "seconds": 1.0, "error": None})
     assert png_size(plot_work_precision(rows, tmp_path / "wp.png")) == (800, 600)
     with pytest.raises(InputError):
         plot_work_precision([{"method": "m", "seconds": 0.0, "error": 1.0}], tmp_path / "wp2.png")
