@@ -287,6 +287,7 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
         ``path``; the image is ``4·ncols × 7.5`` inches at 100 dpi, ``ncols`` =
         max(number of pairs, number of error panels).
     """
+    _format_of(Path(path), fmt)  # bad input fails before any drawing
     traj = np.asarray(traj, dtype=float)
     if traj.ndim != 2 or len(traj) < 1:
         raise InputError("plot_run needs a trajectory of shape (steps+1, 2d)")

@@ -190,7 +190,7 @@ def test_figure1_renders_svg_pdf(tmp_path, fmt, magic):
         assert plot_figure1(data, tmp_path / "g.svg").read_bytes() == f.read_bytes()
 
 
-def test_plot_run_constrained_and_unconstrained(tmp_path):
+def test_plot_run(tmp_path):
     from methodgen.build import build, scene_module_path
     from methodgen.plots import plot_run
     from methodgen.scene import load_scene
@@ -200,27 +200,17 @@ def test_plot_run_constrained_and_unconstrained(tmp_path):
     traj = mod.integrate(np.array(s.y0), 0.5, 200)
     out = plot_run(mod, traj, tmp_path / "hh.png", scene_name=s.name, method="kahan", h=0.5)
     assert png_size(out) == (400, 750)  # one phase portrait, one error panel
-
-    s = load_scene("double-pendulum")
-    mod = build(s.system, s.method, path=scene_module_path(s, s.method))
-    traj = mod.integrate(np.array(s.y0), s.h, 50)
-    out = plot_run(mod, traj, tmp_path / "dp.png", scene_name=s.name, method=s.method, h=s.h,
-                   constraint_residuals=mod.constraint_residuals(traj))
-    assert png_size(out) == (1200, 750)  # three coordinate pairs
-
     with pytest.raises(InputError, match="unknown coordinate"):
-        plot_run(mod, traj, tmp_path / "x.png", scene_name="x", method="x", h=1.0, pairs=[("nope", 0)])
+        plot_run(mod, traj, tmp_path / "x.png", scene_name="x", method="x", h=1.0, pairs=[("nope", "p")])
     with pytest.raises(InputError, match="format"):
         plot_run(mod, traj, tmp_path / "x.jpg", scene_name="x", method="x", h=1.0)
 
 
-def test_plot_scene(tmp_path):
+def test_plot_scene_constrained(tmp_path):
     from methodgen.plots import plot_scene
 
-    out = plot_scene("pendulum", tmp_path / "p.png", steps=30)  # constrained: residual panel
-    assert png_size(out) == (1200, 750)  # (x, y), (x, px), (y, py) on top, two panels below
-    out = plot_scene("linear", tmp_path / "l.svg", method="kahan", h=0.25, steps=10)
-    assert out.read_bytes()[:5] == b"<?xml"
+    out = plot_scene("double-pendulum", tmp_path / "dp.png", steps=30)  # with the residual panel
+    assert png_size(out) == (1200, 750)  # (x1, y1), (x1, p1x), (y1, p1y) on top, two panels below
 
 
 def test_plot_work_precision(tmp_path):
