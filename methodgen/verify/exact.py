@@ -31,6 +31,11 @@ from math import gcd, isqrt
 import sympy as sp
 
 from ..special import _RemovableFunction, to_elementary
+
+try:  # guarded quotient n/d (0 where d = 0), used by newer Gonzalez forms
+    from ..special import safe_div
+except ImportError:  # pragma: no cover - older special.py
+    safe_div = None
 from .report import NUMERICAL, PROVED, REFUTED, Certificate
 
 __all__ = ["certify", "reduce_to_zero", "find_counterexample", "numerical_check", "Domain",
@@ -90,8 +95,23 @@ def _flatten(expr) -> list[sp.Expr]:
 
 
 def _generic_branch(e: sp.Expr) -> sp.Expr:
-    """Replace each Piecewise by its first branch (the generic case, e.g. |Δ|² > 0)."""
-    return e.replace(lambda x: isinstance(x, sp.Piecewise), lambda x: x.args[0].expr)
+    """Replace each Piecewise by its first branch and ``safe_div(n, d)`` by ``n/d``.
+
+    That is the generic case (e.g. |Δ|² > 0); the other branch applies only on
+    the removable point itself, where the callers' identities hold trivially.
+    """
+    e = e.replace(lambda x: isinstance(x, sp.Piecewise), lambda x: x.args[0].expr)
+    if safe_div is not None:
+        e = e.replace(lambda x: isinstance(x, safe_div), lambda x: x.args[0] / x.args[1])
+    return e
+
+
+def guarded(e: sp.Expr) -> sp.Expr:
+    """``safe_div(n, d)`` as ``Piecewise((n/d, d != 0), (0, True))`` (for numerical evaluation)."""
+    if safe_div is None or not e.has(safe_div):
+        return e
+    return e.replace(lambda x: isinstance(x, safe_div),
+                     lambda x: sp.Piecewise((x.args[0] / x.args[1], sp.Ne(x.args[1], 0)), (0, True)))
 
 
 def _radical_reduce(e: sp.Expr) -> bool:
@@ -165,7 +185,7 @@ def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True) -> str | None:
     if e == 0:
         return "automatic canonicalisation (0 as built)"
     notes = []
-    if e.has(sp.Piecewise):
+    if e.has(sp.Piecewise) or (safe_div is not None and e.has(safe_div)):
         e = _generic_branch(e)
         notes.append("generic Piecewise branch")
     if e.atoms(_RemovableFunction):
@@ -193,7 +213,7 @@ def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True) -> str | None:
 def _value(e: sp.Expr, point: dict):
     """Exact value at a rational point (None if undefined), and whether it is rational."""
     try:
-        v = e.xreplace(point)
+        v = guarded(e).xreplace(point)
         v = to_elementary(v) if v.atoms(_RemovableFunction) else v
         v = sp.nsimplify(v) if v.has(sp.Float) else v
     except (ZeroDivisionError, TypeError):
@@ -277,7 +297,7 @@ def numerical_check(exprs, domain: Domain, tol: float, n: int = 5, seed: int = 7
         pt = domain.sample(syms, rng)
         vals = []
         for e in exprs:
-            v = e.xreplace(pt)
+            v = guarded(e).xreplace(pt)
             v = to_elementary(v) if v.atoms(_RemovableFunction) else v
             v = sp.N(v, DIGITS)
             if not v.is_number or v.has(sp.zoo, sp.nan):
@@ -347,7 +367,8 @@ def certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
     if ce is None and failing:
         still = []
         for e in failing:
-            m = "simplify" if (sp.count_ops(e) <= SIMPLIFY_LIMIT and sp.simplify(e) == 0) else None
+            g = to_elementary(_generic_branch(e))
+            m = "simplify" if (sp.count_ops(g) <= SIMPLIFY_LIMIT and sp.simplify(g) == 0) else None
             if m is None:
                 still.append(e)
             elif m not in methods:

@@ -15,6 +15,7 @@ import mpmath as mp
 import sympy as sp
 
 from ..special import to_elementary
+from .exact import guarded
 
 __all__ = ["Stepper", "DPS", "param_point"]
 
@@ -43,7 +44,7 @@ class Stepper:
         sub = {**param_point(system), scheme.h: h}
         z = list(scheme.unknowns)
         y = list(system.y)
-        prep = lambda M: [to_elementary(e.xreplace(sub)) for e in M]
+        prep = lambda M: [to_elementary(guarded(e.xreplace(sub))) for e in M]
         self.n = len(z)
         self.inc = sp.lambdify([z, y], prep(scheme.increment), modules="mpmath")
         if self.n:
