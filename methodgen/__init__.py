@@ -11,6 +11,7 @@ Hamiltonian(H, q, p, params=None, constraints=(), name=None)
 discretize(system, method) -> Scheme
 generate(scheme, path=None) -> module
 build(system, method, path=None) -> module      (reuses an up-to-date file without deriving)
+verify(scheme) -> Report                        (exact certificates of the method's claims)
 load_scene(name_or_path) -> Scene
 methods() / scenes()
 """
@@ -23,10 +24,11 @@ from .problem import Hamiltonian
 from .schemes import Scheme, Traits, applicable_methods, discretize, method_names
 from .build import build
 from .scene import Scene, load_scene, scene_names
+from .verify import verify
 
 __all__ = [
     "__version__", "Hamiltonian", "discretize", "generate", "build", "Scheme", "Traits",
-    "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
+    "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods", "verify",
     "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
     "GenerationError",
 ]

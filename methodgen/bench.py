@@ -365,7 +365,8 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
 
     Two steppers from the same generated module: round-off stopping with
     compensated summation (the default), and a plain ``tol = 1e-12`` stop
-    without compensation.  Returns the RMS error curves and their fitted
+    without compensation.  The energy is that of the exact numerical state
+    (including the carried compensation), evaluated in extended precision.  Returns the RMS error curves and their fitted
     log-log slopes (≈ 0.5 for Brouwer's law, ≈ 1 for linear growth).
     """
     from .scene import load_scene
@@ -374,19 +375,28 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
     rng = np.random.default_rng(seed)
     phase = rng.uniform(0, 2 * np.pi, ensemble)
     Y0 = np.stack([np.cos(phase), np.sin(phase)], axis=1)
-    H0 = module.hamiltonian(Y0)
+
+    def energy(Y, comp):
+        # H = (q² + p²)/2 of the exact numerical state Y + comp, in extended precision:
+        # a double-precision evaluation would put a floor of ~eps·H under the measurement.
+        Z = Y.astype(np.longdouble) + comp.astype(np.longdouble)
+        return (Z[:, 0] ** 2 + Z[:, 1] ** 2) / 2
+
+    H0 = energy(Y0, np.zeros_like(Y0))
     out = {"ensemble": ensemble, "steps": steps, "h": h, "rows": []}
     record = np.unique(np.geomspace(10, steps, 40).astype(int))
     for label, kw in (("round-off stop + compensated summation", {}),
                       ("tol=1e-12 stop, plain summation", {"tol": 1e-12, "compensated": False})):
         t0 = _cpu()
         Y = Y0.copy()
+        info = {"compensation": np.zeros_like(Y0)}
         done = 0
         rms = []
         for target in _progress(record, progress, label):
-            Y = module.integrate(Y, h, int(target - done), **kw)[-1] if target > done else Y
+            if target > done:
+                Y = module.integrate(Y, h, int(target - done), info=info, **kw)[-1]
             done = target
-            rms.append(float(np.sqrt(np.mean((module.hamiltonian(Y) - H0) ** 2))))
+            rms.append(float(np.sqrt(np.mean((energy(Y, info["compensation"]) - H0) ** 2))))
         sec = _cpu() - t0
         t = record * h
         rms = np.array(rms)
@@ -421,3 +431,73 @@ def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
                          "us_per_step": sec / steps * 1e6,
                          "max_energy_error": float(np.max(np.abs(H - H[0])))})
     return {"scene": scene.name, "steps": steps, "h": scene.h, "rows": rows}
+
+
+# --- generation cost ----------------------------------------------------------------------
+
+def nbody_system(n_bodies: int, G: float = 1.0):
+    """N bodies in 3D with pairwise gravity, unit masses: ``H = Σ|p_b|²/(2m_b) - Σ G m_a m_b / r_ab``."""
+    from .problem import Hamiltonian
+
+    q, p = [], []
+    for b in range(n_bodies):
+        q += [f"x{b}", f"y{b}", f"z{b}"]
+        p += [f"px{b}", f"py{b}", f"pz{b}"]
+    T = " + ".join(f"(px{b}**2 + py{b}**2 + pz{b}**2)/(2*m{b})" for b in range(n_bodies))
+    U = " - ".join(f"G*m{a}*m{b}/sqrt((x{a} - x{b})**2 + (y{a} - y{b})**2 + (z{a} - z{b})**2)"
+                   for a in range(n_bodies) for b in range(a + 1, n_bodies))
+    params = {"G": G, **{f"m{b}": 1.0 for b in range(n_bodies)}}
+    return Hamiltonian(f"{T} - {U}", q=q, p=p, params=params, name=f"nbody{n_bodies}")
+
+
+def nbody_initial(n_bodies: int) -> np.ndarray:
+    """Bodies on a circle (radius 1) in the xy plane, tangential velocities, slightly perturbed."""
+    ang = 2 * np.pi * np.arange(n_bodies) / n_bodies
+    q = np.stack([np.cos(ang), np.sin(ang), 0.05 * np.sin(3 * ang)], axis=1)
+    v = 0.5 * np.stack([-np.sin(ang), np.cos(ang), np.zeros(n_bodies)], axis=1)
+    v -= v.mean(axis=0)
+    return np.concatenate([q.ravel(), v.ravel()])
+
+
+def generation_cost(bodies=(2, 3, 4, 5, 6, 7, 8), methods=("energy-momentum", "midpoint"), *,
+                    directory=None, steps: int = 200, verify: bool = False, progress: bool = False) -> dict:
+    """Derive / (verify) / lower+emit time, file size and µs per step for the N-body family."""
+    import tempfile
+    from pathlib import Path
+
+    from .emit import emit_source, load_module, signature, write_atomic
+
+    directory = Path(directory or tempfile.mkdtemp(prefix="methodgen-nbody-"))
+    rows = []
+    for n in _progress(list(bodies), progress, "N-body"):
+        system = nbody_system(n)
+        for method in methods:
+            t0 = time.perf_counter()
+            scheme = discretize(system, method)
+            _ = scheme.jacobian
+            t_derive = time.perf_counter() - t0
+            t_verify = None
+            if verify:
+                from .verify import verify as run_verify
+                t0 = time.perf_counter()
+                run_verify(scheme)
+                t_verify = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            src = emit_source(scheme, signature(system, method))
+            path = directory / f"nbody{n}_{method.replace('-', '_')}.py"
+            write_atomic(path, src)
+            t_emit = time.perf_counter() - t0
+            module = load_module(path)
+            y0 = nbody_initial(n)
+            # A speed measurement: the guard is off (close encounters of the bodies
+            # would stop the run; the energy error is reported, not judged).
+            module.integrate(y0, 0.01, 2, check_resolution=False)
+            t0 = time.perf_counter()
+            traj = module.integrate(y0, 0.01, steps, check_resolution=False)
+            us = (time.perf_counter() - t0) / steps * 1e6
+            H = module.hamiltonian(traj)
+            rows.append({"bodies": n, "method": method, "derive_s": t_derive, "verify_s": t_verify,
+                         "emit_s": t_emit, "total_s": t_derive + (t_verify or 0.0) + t_emit,
+                         "file_kb": path.stat().st_size / 1024, "us_per_step": us,
+                         "energy_error": float(np.max(np.abs(H - H[0])))})
+    return {"rows": rows, "directory": str(directory)}

@@ -185,10 +185,25 @@ class ModuleIR:
         return self.unknown_names
 
 
+def _cse(exprs: tuple) -> tuple:
+    """CSE of a tuple of expressions, memoised: the scalar and the vector flavour of a
+    kernel print the same reduced expressions, so eliminate once."""
+    key = exprs
+    hit = _CSE_CACHE.get(key)
+    if hit is None:
+        hit = sp.cse(list(exprs), symbols=sp.numbered_symbols("_c"),
+                     order="canonical")
+        _CSE_CACHE.clear()  # keep only the latest kernel (they come in scalar/vector pairs)
+        _CSE_CACHE[key] = hit
+    return hit
+
+
+_CSE_CACHE: dict = {}
+
+
 def _kernel(exprs: list[sp.Expr], shape: tuple[int, ...], printer, rename: dict) -> Kernel:
-    exprs = [sp.sympify(e).xreplace(rename) for e in exprs]
-    temps, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("_c"), optimizations="basic",
-                            order="canonical")
+    exprs = tuple(sp.sympify(e).xreplace(rename) for e in exprs)
+    temps, reduced = _cse(exprs)
     tcode = tuple((str(s), printer.doprint(e)) for s, e in temps)
     outputs = []
     for flat, e in enumerate(reduced):
@@ -238,11 +253,11 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     vector = {}
     if n:
         scalar["guess"] = _kernel(guess, (n,), sp_, rename)
-        scalar["resjac"] = _kernel(res + jac, (n + n * n,), sp_, rename)
-        scalar["res"] = _kernel(res, (n,), sp_, rename)
         vector["guess"] = _kernel(guess, (n,), vp, rename)
-        vector["res"] = _kernel(res, (n,), vp, rename)
+        scalar["resjac"] = _kernel(res + jac, (n + n * n,), sp_, rename)
         vector["resjac"] = _kernel(res + jac, (n + n * n,), vp, rename)
+        scalar["res"] = _kernel(res, (n,), sp_, rename)
+        vector["res"] = _kernel(res, (n,), vp, rename)
         if scheme.unknown_scale is not None:
             scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
             vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)

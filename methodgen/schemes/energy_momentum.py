@@ -16,28 +16,118 @@ radial potential ``U(q) = V(s)``, ``s = |q|²``, we have ``∇U = 2V'(s) q`` and
 
 where ``V[s0, s1]`` is the divided difference of V, computed in cancelled form
 by :func:`methodgen.divdiff.divided_difference` (for Kepler
-``k / (r0 r1 (r0 + r1))``: no difference quotient left at all).  In one degree
-of freedom ``κ U'(q̄) = U[q0, q1]`` for any U.  Other potentials have a genuine
-(not removable) singularity of κ, and the method is refused for them.
+``k / (r0 r1 (r0 + r1))``: no difference quotient left at all).
+
+The same construction applies term by term to potentials that are sums
+``U = Σ_t U_t`` (the energy–momentum schemes of LaBudde & Greenspan and Simo
+& Tarnow for N-body problems): the sum of discrete gradients of the terms is a
+discrete gradient of U.  Each additive term is treated by the first rule that
+fits:
+
+1. it depends on one coordinate: ``U_t[q0_i, q1_i]`` in that coordinate (in
+   one degree of freedom this is exactly κ U'(q̄));
+2. it is ``V(E(q))`` with E a quadratic form without linear part (``|q|²``,
+   ``|q_a - q_b|²``, …): ``V[E0, E1] ∇E(q̄)`` — for ``E = |q|²`` the formula
+   above; pair potentials keep total linear and angular momentum;
+3. it is a polynomial: its average-vector-field integral, exactly.
+
+Potentials with other terms have a genuine (not removable) singularity of κ
+and the method is refused for them.
 
 References
 ----------
 .. [1] J. C. Simo, N. Tarnow, K. K. Wong, Comput. Methods Appl. Mech. Eng. 100
    (1992) 63-116.
-.. [2] E. Celledoni, lecture notes (shared/seed), Exercise 1.1.
+.. [2] R. A. LaBudde, D. Greenspan, J. Comput. Phys. 15 (1974) 134-167.
+.. [3] E. Celledoni, lecture notes (shared/seed), Exercise 1.1.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import sympy as sp
 
-from ..derive import angular_momenta, radial_profile, separable_split
+from ..derive import angular_momenta, separable_split
 from ..divdiff import divided_difference
 from ..problem import Hamiltonian
 from .base import Scheme, Traits, gradient_scheme
 
 NAME = "energy-momentum"
 SUMMARY = "Exercise 1.1 discrete gradient: preserves H and, for U = V(|q|), q × p"
+
+
+@dataclass(frozen=True)
+class _Term:
+    kind: str            # "coordinate", "quadratic-form", "polynomial"
+    expr: sp.Expr
+    var: sp.Symbol | None = None
+    E: sp.Expr | None = None
+    V: sp.Expr | None = None
+    s: sp.Symbol | None = None
+
+
+def _quadratic_form(expr: sp.Expr, q) -> bool:
+    """A homogeneous quadratic polynomial in q (no linear or constant part)."""
+    try:
+        poly = sp.Poly(expr, *q)
+    except sp.PolynomialError:
+        return False
+    if poly.free_symbols_in_domain & set(q):
+        return False
+    return all(sum(m) == 2 for m in poly.monoms())
+
+
+def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr] | None:
+    """Find ``(E, s, V)`` with ``term = V(E(q))``, E a quadratic form in q."""
+    qs = [v for v in q if v in term.free_symbols]
+    candidates = [e for e in sp.preorder_traversal(term)
+                  if isinstance(e, sp.Add) and set(qs) <= e.free_symbols and _quadratic_form(e, q)]
+    if _quadratic_form(term, q):
+        candidates.insert(0, term)
+    s = sp.Symbol("_s", positive=True)
+    for E in candidates:
+        poly = sp.Poly(E, *q)
+        for v in qs:
+            c = poly.coeff_monomial(v**2)
+            if c.is_positive:
+                line = {w: sp.S.Zero for w in q}
+                line[v] = sp.sqrt(s / c)
+                V = term.xreplace(line)
+                if V.has(sp.zoo, sp.nan, sp.oo) or (V.free_symbols & set(q)):
+                    continue
+                if sp.simplify(term - V.xreplace({s: E})) == 0:
+                    return E, s, V
+                break
+    return None
+
+
+def decompose(system: Hamiltonian) -> tuple[_Term, ...] | None:
+    """Split U into additive terms the method can treat (None if some term cannot be)."""
+    sep = separable_split(system)
+    q = list(system.q)
+    terms = []
+    for t in sp.Add.make_args(sep.U):
+        fq = t.free_symbols & set(q)
+        if not fq:
+            continue
+        if len(fq) == 1:
+            terms.append(_Term("coordinate", t, var=next(iter(fq))))
+            continue
+        found = _as_function_of_form(t, q)
+        if found is not None:
+            E, s, V = found
+            terms.append(_Term("quadratic-form", t, E=E, V=V, s=s))
+            continue
+        try:
+            poly = sp.Poly(t, *q)
+            if not (poly.free_symbols_in_domain & set(q)):
+                terms.append(_Term("polynomial", t))
+                continue
+        except sp.PolynomialError:
+            pass
+        return None
+    return tuple(terms)
 
 
 def applies(system: Hamiltonian) -> str | None:
@@ -48,36 +138,59 @@ def applies(system: Hamiltonian) -> str | None:
         return "energy-momentum needs a separable H = T(p) + U(q)"
     if not sep.quadratic_kinetic:
         return "energy-momentum needs a quadratic kinetic energy T = ½ pᵀ M⁻¹ p with constant M"
-    if system.dim > 1 and radial_profile(system) is None:
-        return ("energy-momentum needs U(q) = V(|q|) (or one degree of freedom): for other "
-                "potentials κ has non-removable singularities")
+    if decompose(system) is None:
+        return ("energy-momentum needs U(q) = V(|q|) (or a sum of terms of one coordinate, of a "
+                "quadratic form such as |q_a - q_b|², or polynomials): for other potentials κ has "
+                "non-removable singularities")
     return None
+
+
+def _term_dg(term: _Term, q, q0, q1) -> list[sp.Expr]:
+    """Discrete gradient of one additive term, as a list over the coordinates."""
+    sub0, sub1 = dict(zip(q, q0)), dict(zip(q, q1))
+    if term.kind == "coordinate":
+        i = q.index(term.var)
+        out = [sp.S.Zero] * len(q)
+        out[i] = divided_difference(term.expr, term.var, q0[i], q1[i])
+        return out
+    if term.kind == "quadratic-form":
+        E0, E1 = term.E.xreplace(sub0), term.E.xreplace(sub1)
+        Vdd = divided_difference(term.V, term.s, E0, E1)
+        mid = {v: (a + b) / 2 for v, a, b in zip(q, q0, q1)}
+        return [Vdd * sp.diff(term.E, v).xreplace(mid) for v in q]
+    sigma = sp.Symbol("_sigma", real=True)
+    path = {v: a + sigma * (b - a) for v, a, b in zip(q, q0, q1)}
+    return [sp.integrate(sp.expand(sp.diff(term.expr, v).xreplace(path)), (sigma, 0, 1)) for v in q]
 
 
 def build(system: Hamiltonian) -> Scheme:
     sep = separable_split(system)
     d = system.dim
-    radial = radial_profile(system)
+    q = list(system.q)
+    terms = decompose(system)
 
     def dg(y0, y1):
-        q0, q1 = sp.Matrix(y0[:d]), sp.Matrix(y1[:d])
+        q0, q1 = list(y0[:d]), list(y1[:d])
         p0, p1 = sp.Matrix(y0[d:]), sp.Matrix(y1[d:])
-        if radial is not None:
-            s, V = radial
-            s0 = sum(v**2 for v in q0)
-            s1 = sum(v**2 for v in q1)
-            Vdd = divided_difference(V, s, s0, s1)
-            Gq = Vdd * (q0 + q1)
-        else:
-            Gq = sp.Matrix([divided_difference(sep.U, y0[0], q0[0], q1[0])])
+        Gq = [sp.S.Zero] * d
+        for term in terms:
+            Gq = [a + b for a, b in zip(Gq, _term_dg(term, q, q0, q1))]
         Gp = sep.Minv * (p0 + p1) / 2
-        return sp.Matrix(list(Gq) + list(Gp))
+        return sp.Matrix(Gq + list(Gp))
 
-    momenta = tuple(inv.name for inv in angular_momenta(system)) if (radial and sep.isotropic) else ()
-    form = ("κ∇U(q̄) = V[s0, s1](q0 + q1), V[·,·] the cancelled divided difference of V in s = |q|²"
-            if radial is not None else "κU'(q̄) = U[q0, q1], the cancelled divided difference of U")
+    kinds = sorted({t.kind for t in terms})
+    rotational = all(t.kind == "quadratic-form" for t in terms) and sep.isotropic
+    momenta = tuple(inv.name for inv in angular_momenta(system)) if rotational else ()
+    notes = []
+    if "quadratic-form" in kinds:
+        notes.append("κ∇U(q̄) = Σ V[E0, E1] ∇E(q̄) over terms V(E) with E a quadratic form "
+                     "(|q|² for a radial U: V[s0, s1](q0 + q1)); V[·,·] cancelled divided differences")
+    if "coordinate" in kinds:
+        notes.append("one-coordinate terms: U[q0, q1], the cancelled divided difference (κU'(q̄) in 1 DOF)")
+    if "polynomial" in kinds:
+        notes.append("polynomial coupling terms: exact average-vector-field integral")
     traits = Traits(order=2, symmetric=True, symplectic=False, energy_preserving=True,
                     preserved=("H",) + momenta, solve="newton", discrete_gradient=True,
-                    notes=(form,))
+                    notes=tuple(notes))
     return gradient_scheme(system, NAME, dg, traits,
                            "y1 = y0 + h J [κ∇U(q̄); M⁻¹(p0 + p1)/2]")
