@@ -114,14 +114,18 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
 
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
-              interrupted_path: str | None = None) -> dict:
+              interrupted_path: str | None = None, plot: str | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
     ``chunk`` steps (memory stays bounded).  If the run is interrupted (Ctrl-C)
     or fails numerically, the states computed so far are saved — to ``save`` or
-    to ``interrupted_path`` — and :class:`RunFailure` is raised.
+    to ``interrupted_path`` — and :class:`RunFailure` is raised.  With ``plot``
+    the run is drawn (phase portrait, invariant errors, constraint residuals).
     """
+    if plot:
+        from .plots import check_available
+        check_available()  # a missing matplotlib is reported before the run, not after
     scene = load_scene(scene_name)
     method = method or scene.method
     if method not in METHODS:
@@ -191,6 +195,16 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
     if writer is not None:
         rep["saved"] = str(writer.close(**meta, steps_done=done, complete=True, reason="complete"))
+    if plot:
+        from .plots import plot_run
+        if writer is not None:
+            from .runio import load_trajectory
+            traj, _ = load_trajectory(rep["saved"])
+        else:
+            traj = np.concatenate(kept)
+        cons = module.constraint_residuals(traj) if hasattr(module, "constraint_residuals") else None
+        rep["plot"] = str(plot_run(module, traj, plot, scene_name=scene.name, method=method, h=h,
+                                   constraint_residuals=cons))
     return rep
 
 
@@ -212,7 +226,8 @@ def _print_run(rep: dict) -> None:
 
 def cmd_run(args) -> int:
     try:
-        rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk)
+        rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,
+                        plot=args.plot)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         where = f"; saved {fail.report['steps_done'] + 1} states to {fail.saved}" if fail.saved else ""
@@ -227,6 +242,8 @@ def cmd_run(args) -> int:
         _print_run(rep)
         if "saved" in rep:
             print(f"trajectory saved to {rep['saved']}")
+        if "plot" in rep:
+            print(f"plot written to {rep['plot']}")
     return 0
 
 
@@ -399,6 +416,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", help="method (default: the scene's first method)")
     p.add_argument("--h", type=_step, help="step size (default: the scene's)")
     p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
+    p.add_argument("--plot", metavar="FILE", help="draw phase portrait, invariant errors (log scale) and "
+                                                  "constraint residuals to FILE (.png/.svg/.pdf; needs methodgen[plot])")
     p.add_argument("--save", metavar="FILE.npz", help="write the trajectory to an .npz (in chunks)")
     p.add_argument("--chunk", type=_positive_int, metavar="N",
                    help="with --save: steps per chunk (memory stays bounded; default: one chunk)")
