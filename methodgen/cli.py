@@ -434,6 +434,11 @@ def make_parser() -> argparse.ArgumentParser:
     add_figures_parser(sub)
     # --- end figures ---
 
+    # --- sweep: registered by methodgen.sweep_cli (owned by the sweep layer) ---
+    from .sweep_cli import add_parser as add_sweep_parser
+    add_sweep_parser(sub)
+    # --- end sweep ---
+
     p = sub.add_parser("bench", help="measure speed against accuracy: work-precision vs scipy, "
                                      "solver variants, long runs, Brouwer's law")
     p.add_argument("scene", help="built-in scene name or path to a scene TOML file")
