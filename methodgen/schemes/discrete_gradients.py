@@ -54,6 +54,20 @@ def _is_polynomial(expr: sp.Expr, syms) -> bool:
     return not (poly.free_symbols_in_domain & set(syms))
 
 
+def itoh_abe_components(H: sp.Expr, ys, y0, y1) -> list[sp.Expr]:
+    """Itoh–Abe discrete-gradient components, each a cancelled divided difference.
+
+    ``∇̄H_i = (H(y1_1..y1_i, y0_i+1..) - H(y1_1..y1_i-1, y0_i..)) / (y1_i - y0_i)``: H with the
+    coordinates before i at y1, after i at y0, and coordinate i free, divided-differenced
+    in that coordinate.  The components telescope: ``Σ ∇̄H_i (y1_i - y0_i) = H(y1) - H(y0)``.
+    """
+    out = []
+    for i, s in enumerate(ys):
+        fixed = {ys[j]: (y1[j] if j < i else y0[j]) for j in range(len(ys)) if j != i}
+        out.append(divided_difference(H.xreplace(fixed), s, y0[i], y1[i]))
+    return out
+
+
 # --- AVF ------------------------------------------------------------------------
 
 class AVF:
@@ -148,10 +162,7 @@ class Gonzalez:
             # cancellation; the correction N/|Δ|² · Δ is accurate to round-off).
             y0s = [m - dl / 2 for m, dl in zip(mids, dels)]
             y1s = [m + dl / 2 for m, dl in zip(mids, dels)]
-            ia = []
-            for i, s_ in enumerate(ys):
-                fixed = {ys[j]: (y1s[j] if j < i else y0s[j]) for j in range(n) if j != i}
-                ia.append(divided_difference(H.xreplace(fixed), s_, y0s[i], y1s[i]))
+            ia = itoh_abe_components(H, ys, y0s, y1s)
             N = sum((ia[i] - grad_m[i]) * dels[i] for i in range(n))
             how = ("numerator as Σ (∇̄H_Itoh-Abe - ∇H(ȳ))_i Δ_i with cancelled divided differences: "
                    "no catastrophic cancellation")
@@ -188,12 +199,7 @@ class ItohAbe:
         H = system.H
 
         def dg(y0, y1):
-            out = []
-            for i, s in enumerate(ys):
-                # H with coordinates < i at y1, > i at y0, and coordinate i free.
-                fixed = {ys[j]: (y1[j] if j < i else y0[j]) for j in range(len(ys)) if j != i}
-                out.append(divided_difference(H.xreplace(fixed), s, y0[i], y1[i]))
-            return sp.Matrix(out)
+            return sp.Matrix(itoh_abe_components(H, ys, y0, y1))
 
         grad = gradient(system)
         # When every ∂H/∂y_i depends on y_i only, each component is the divided
