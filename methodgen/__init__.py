@@ -9,20 +9,19 @@ Public API
 ----------
 Hamiltonian(H, q, p, params=None, constraints=(), name=None)
 discretize(system, method) -> Scheme
-generate(scheme, path=None) -> module
-build(system, method, path=None) -> module      (reuses an up-to-date file without deriving)
+generate(scheme, path=None, backend="numpy") -> module   (backend="numba": compiled loop)
+build(system, method, path=None, backend="numpy") -> module  (reuses an up-to-date file without deriving)
 verify(scheme) -> Report                        (exact certificates of the method's claims)
 load_scene(name_or_path) -> Scene
 methods() / scenes()
 """
 
 from ._version import __version__
-from .emit import generate
 from .errors import (GenerationError, InputError, MethodgenError, MethodNotApplicable,
                      ParseError, SceneError)
 from .problem import Hamiltonian
 from .schemes import Scheme, Traits, applicable_methods, discretize, method_names
-from .build import build
+from .build import build, generate
 from .scene import Scene, load_scene, scene_names
 from .verify import verify
 

@@ -13,11 +13,12 @@ import warnings
 from pathlib import Path
 from types import ModuleType
 
-from .emit import cache_dir, emit_source, file_status, load_module, module_filename, signature, write_atomic
+from .emit import (cache_dir, emit_source, file_status, load_module, module_filename, resolve_backend,
+                   signature, write_atomic)
 from .problem import Hamiltonian
 from .schemes import discretize
 
-__all__ = ["build", "generated_dir", "scene_module_path"]
+__all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path"]
 
 
 def generated_dir() -> Path | None:
@@ -38,6 +39,41 @@ def scene_module_path(scene, method: str) -> Path:
     return cache_dir() / module_filename(f"{scene.name}_{sig[:12]}", method)
 
 
+def default_path(system: Hamiltonian, method: str) -> Path:
+    """Where a module goes when no path is given.
+
+    The checkout's ``generated/`` for the system of a built-in scene (same name,
+    same fingerprint), otherwise the per-user cache under a name with the signature.
+    """
+    from .scene import load_scene, scene_names
+
+    gen = generated_dir()
+    if gen is not None and system.name in scene_names():
+        scene = load_scene(system.name)
+        if scene.system.fingerprint() == system.fingerprint():
+            return gen / module_filename(scene.name, method)
+    sig = signature(system, method)
+    return cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method)
+
+
+def generate(scheme, path=None) -> ModuleType:
+    """Emit ``scheme`` as a numpy module, write it, import it and return the module.
+
+    Parameters
+    ----------
+    scheme : Scheme
+        From :func:`methodgen.discretize`.
+    path : path-like, optional
+        File to write.  Default: ``generated/`` for a built-in scene's system in a
+        source checkout, otherwise the per-user cache (``$METHODGEN_CACHE`` or
+        ``~/.cache/methodgen``) under a name that includes the signature.  A file that
+        is already up to date (same signature, intact content) is not rewritten.
+    """
+    from .emit import generate as emit_generate
+
+    return emit_generate(scheme, default_path(scheme.system, scheme.method) if path is None else path)
+
+
 def build(system: Hamiltonian, method: str, path=None) -> ModuleType:
     """Return the generated module for ``system`` and ``method``, generating it only if needed.
 
@@ -49,9 +85,7 @@ def build(system: Hamiltonian, method: str, path=None) -> ModuleType:
         Target file; default: the per-user cache, named by the signature.
     """
     sig = signature(system, method)
-    if path is None:
-        path = cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method)
-    path = Path(path)
+    path = default_path(system, method) if path is None else Path(path)
     status = file_status(path, sig)
     if status == "ok":
         return load_module(path)
@@ -59,5 +93,5 @@ def build(system: Hamiltonian, method: str, path=None) -> ModuleType:
         warnings.warn(f"generated module {path} does not match its content hash (edited or "
                       "truncated); regenerating it", RuntimeWarning, stacklevel=2)
     scheme = discretize(system, method)
-    write_atomic(path, emit_source(scheme, sig))
+    write_atomic(path, emit_source(scheme, sig, backend=backend))
     return load_module(path)

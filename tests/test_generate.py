@@ -101,10 +101,17 @@ def test_build_reuses_an_up_to_date_file_without_deriving(tmp_path, kepler, monk
         mg.build(other, "energy-momentum", path)
 
 
-def test_generate_default_path_is_the_user_cache(tmp_path, monkeypatch, harmonic):
+def test_generate_default_paths(tmp_path, monkeypatch, harmonic):
     monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
-    mod = mg.generate(mg.discretize(harmonic, "midpoint"))
+    own = mg.Hamiltonian("p**2/2 + q**4/4", q=["q"], p=["p"], name="quartic")
+    mod = mg.generate(mg.discretize(own, "midpoint"))
     assert Path(mod.__file__).parent == tmp_path / "cache"
+    # A built-in scene's system goes to the checkout's generated/ (same bytes: in sync).
+    mod = mg.generate(mg.discretize(harmonic, "midpoint"))
+    assert Path(mod.__file__) == ROOT / "generated" / "harmonic_midpoint.py"
+    # ... but the same name with a different H is not the built-in scene.
+    fake = mg.Hamiltonian("p**2/2 + 2*q**2", q=["q"], p=["p"], name="harmonic")
+    assert Path(mg.generate(mg.discretize(fake, "midpoint")).__file__).parent == tmp_path / "cache"
 
 
 def test_two_processes_generating_at_once_leave_one_valid_file(tmp_path):
