@@ -29,35 +29,41 @@ def generated_dir() -> Path | None:
     return None
 
 
-def scene_module_path(scene, method: str) -> Path:
-    """Where the module of ``scene`` × ``method`` lives: ``generated/`` for built-ins in a checkout, else the cache."""
-    fname = module_filename(scene.name, method)
+def scene_module_path(scene, method: str, backend: str = "numpy") -> Path:
+    """Where the module of ``scene`` × ``method`` lives: ``generated/`` for built-ins in a checkout, else the cache.
+
+    ``generated/`` holds numpy modules only (they are committed and sync-checked):
+    modules of other backends always live in the cache.
+    """
+    fname = module_filename(scene.name, method, backend)
     gen = generated_dir()
-    if scene.builtin and gen is not None:
+    if scene.builtin and gen is not None and backend == "numpy":
         return gen / fname
-    sig = signature(scene.system, method)
-    return cache_dir() / module_filename(f"{scene.name}_{sig[:12]}", method)
+    sig = signature(scene.system, method, backend)
+    return cache_dir() / module_filename(f"{scene.name}_{sig[:12]}", method, backend)
 
 
-def default_path(system: Hamiltonian, method: str) -> Path:
+def default_path(system: Hamiltonian, method: str, backend: str = "numpy") -> Path:
     """Where a module goes when no path is given.
 
     The checkout's ``generated/`` for the system of a built-in scene (same name,
     same fingerprint), otherwise the per-user cache under a name with the signature.
+    Modules of backends other than numpy always go to the cache (``generated/``
+    holds the committed numpy modules only).
     """
     from .scene import load_scene, scene_names
 
     gen = generated_dir()
-    if gen is not None and system.name in scene_names():
+    if gen is not None and backend == "numpy" and system.name in scene_names():
         scene = load_scene(system.name)
         if scene.system.fingerprint() == system.fingerprint():
             return gen / module_filename(scene.name, method)
-    sig = signature(system, method)
-    return cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method)
+    sig = signature(system, method, backend)
+    return cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method, backend)
 
 
-def generate(scheme, path=None) -> ModuleType:
-    """Emit ``scheme`` as a numpy module, write it, import it and return the module.
+def generate(scheme, path=None, backend: str = "numpy") -> ModuleType:
+    """Emit ``scheme`` as a solver module, write it, import it and return the module.
 
     Parameters
     ----------
@@ -68,13 +74,20 @@ def generate(scheme, path=None) -> ModuleType:
         source checkout, otherwise the per-user cache (``$METHODGEN_CACHE`` or
         ``~/.cache/methodgen``) under a name that includes the signature.  A file that
         is already up to date (same signature, intact content) is not rewritten.
+    backend : {"numpy", "numba"}
+        ``"numba"``: kernels, Newton's method and the integration loop compiled
+        with ``numba.njit(cache=True)`` (same interface, same results to
+        round-off).  Without numba installed: a RuntimeWarning and the numpy module.
     """
     from .emit import generate as emit_generate
 
-    return emit_generate(scheme, default_path(scheme.system, scheme.method) if path is None else path)
+    backend = resolve_backend(backend)
+    if path is None:
+        path = default_path(scheme.system, scheme.method, backend)
+    return emit_generate(scheme, path, backend)
 
 
-def build(system: Hamiltonian, method: str, path=None) -> ModuleType:
+def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy") -> ModuleType:
     """Return the generated module for ``system`` and ``method``, generating it only if needed.
 
     Parameters
@@ -83,9 +96,13 @@ def build(system: Hamiltonian, method: str, path=None) -> ModuleType:
     method : str
     path : path-like, optional
         Target file; default: the per-user cache, named by the signature.
+    backend : {"numpy", "numba"}
+        See :func:`generate`; without numba installed, ``"numba"`` warns
+        (RuntimeWarning) and builds the numpy module.
     """
-    sig = signature(system, method)
-    path = default_path(system, method) if path is None else Path(path)
+    backend = resolve_backend(backend)
+    sig = signature(system, method, backend)
+    path = default_path(system, method, backend) if path is None else Path(path)
     status = file_status(path, sig)
     if status == "ok":
         return load_module(path)

@@ -21,6 +21,7 @@ import os
 import re
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 from types import ModuleType
 
@@ -28,11 +29,18 @@ import jinja2
 import sympy
 
 from ._version import __version__
-from .errors import GenerationError
+from .errors import GenerationError, InputError
 from .lower import Kernel, ModuleIR, lower
 
 __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
-           "load_module", "generate", "module_filename", "cache_dir"]
+           "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available",
+           "resolve_backend"]
+
+#: Code generation backends: plain numpy, or numba-compiled kernels and integration loop.
+BACKENDS = ("numpy", "numba")
+# Top-level template of each backend; numba templates are named numba_*.j2 so
+# that the numpy template hash (and with it every numpy signature) ignores them.
+_TEMPLATES = {"numpy": "module.py.j2", "numba": "numba_module.py.j2"}
 
 HEADER_SIGNATURE = "# signature: "
 HEADER_CONTENT = "# content-sha256: "
@@ -47,27 +55,74 @@ def template_dir() -> Path:
     raise GenerationError(f"methodgen templates not found next to {here}; the installation is incomplete")
 
 
-def template_hash() -> str:
-    """SHA-256 over the names and bytes of all templates (sorted)."""
+def template_hash(backend: str = "numpy") -> str:
+    """SHA-256 over the names and bytes of the templates a backend renders from (sorted).
+
+    The numpy backend hashes every template except ``numba_*.j2`` (it never
+    reads them, and its signatures must not change when they do); the numba
+    backend hashes all of them (its templates import the numpy kernel macros).
+    """
+    _check_backend(backend)
     h = hashlib.sha256()
     for path in sorted(template_dir().glob("*.j2")):
+        if backend == "numpy" and path.name.startswith("numba_"):
+            continue
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
 
-def signature(system, method: str) -> str:
+def signature(system, method: str, backend: str = "numpy") -> str:
     """Hash of everything a generated module depends on.
 
-    Computed from the system's fingerprint, the method name, and the versions
-    of methodgen, SymPy and the templates — no derivation needed, so a cached
-    module can be reused without re-deriving the scheme.
+    Computed from the system's fingerprint, the method name, the backend and
+    the versions of methodgen, SymPy and the templates — no derivation needed,
+    so a cached module can be reused without re-deriving the scheme.  The
+    backend enters the hash only when it is not ``"numpy"``: numpy signatures
+    stay what they were before there was a choice (committed modules remain in
+    sync), and a numpy and a numba module never share a signature.
     """
-    parts = [system.fingerprint(), method, __version__, sympy.__version__, template_hash()]
+    parts = [system.fingerprint(), method, __version__, sympy.__version__, template_hash(backend)]
+    if backend != "numpy":
+        parts.append(f"backend={backend}")
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 
-def module_filename(system_name: str, method: str) -> str:
-    return f"{system_name}_{method}".replace("-", "_") + ".py"
+def module_filename(system_name: str, method: str, backend: str = "numpy") -> str:
+    """File name of a generated module; non-numpy backends get a ``_<backend>`` suffix."""
+    _check_backend(backend)
+    suffix = "" if backend == "numpy" else f"_{backend}"
+    return f"{system_name}_{method}".replace("-", "_") + suffix + ".py"
+
+
+def _check_backend(backend: str) -> None:
+    if backend not in BACKENDS:
+        raise InputError(f"unknown backend {backend!r}; backends are {', '.join(BACKENDS)}")
+
+
+def numba_available() -> bool:
+    """True when numba can be imported (the ``methodgen[fast]`` extra)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def resolve_backend(backend: str, stacklevel: int = 3) -> str:
+    """Validate ``backend``; ``"numba"`` without numba installed falls back to ``"numpy"`` with a warning.
+
+    Raises
+    ------
+    InputError
+        For a name not in :data:`BACKENDS`.
+    """
+    _check_backend(backend)
+    if backend == "numba" and not numba_available():
+        warnings.warn('numba is not installed, so the numpy backend is used instead; install it with '
+                      'pip install "methodgen[fast]" for the compiled backend', RuntimeWarning,
+                      stacklevel=stacklevel)
+        return "numpy"
+    return backend
 
 
 def cache_dir() -> Path:
@@ -125,8 +180,10 @@ def _docsafe(text: str) -> str:
     return " ".join(text.replace("\\", " ").replace('"""', "'''").split())
 
 
-def render(ir: ModuleIR) -> str:
-    """Render the module source for ``ir`` (deterministic)."""
+def render(ir: ModuleIR, backend: str = "numpy") -> str:
+    """Render the module source for ``ir`` with the templates of ``backend`` (deterministic)."""
+    _check_backend(backend)
+    template = _TEMPLATES[backend]
     n, d2 = ir.n_unknowns, 2 * ir.dim
     vector = {
         "increment": _vector_view(ir.vector["increment"], [("_out", (d2,))], "_out"),
@@ -148,14 +205,14 @@ def render(ir: ModuleIR) -> str:
     clean = ir.__class__(**{**ir.__dict__, "source": _docsafe(ir.source),
                             "constraints": tuple(_docsafe(c) for c in ir.constraints)})
     header = [
-        f"Generated by methodgen {__version__} from templates/module.py.j2 -- do not edit.",
+        f"Generated by methodgen {__version__} from templates/{template} -- do not edit.",
         f"system: {ir.system_name}; method: {ir.method}",
         f"H = {clean.source}",
-        f"methodgen {__version__}; sympy {sympy.__version__}; templates sha256 {template_hash()[:16]}",
+        f"methodgen {__version__}; sympy {sympy.__version__}; templates sha256 {template_hash(backend)[:16]}",
         HEADER_SIGNATURE[2:] + ir.signature,
     ]
     body_env = _environment()
-    text = body_env.get_template("module.py.j2").render(
+    text = body_env.get_template(template).render(
         ir=clean, vector=vector, header=header, defaults_text=defaults,
         traits_text=repr(ir.traits))
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
@@ -234,8 +291,8 @@ def load_module(path: Path) -> ModuleType:
     return module
 
 
-def generate(scheme, path: str | os.PathLike | None = None) -> ModuleType:
-    """Emit ``scheme`` as a numpy module, write it, import it and return the module.
+def generate(scheme, path: str | os.PathLike | None = None, backend: str = "numpy") -> ModuleType:
+    """Emit ``scheme`` as a solver module, write it, import it and return the module.
 
     Parameters
     ----------
@@ -245,24 +302,31 @@ def generate(scheme, path: str | os.PathLike | None = None) -> ModuleType:
         File to write.  Default: the per-user cache (:func:`cache_dir`), under a
         name that includes the signature.  A file that is already up to date
         (same signature, intact content) is not rewritten.
+    backend : {"numpy", "numba"}
+        ``"numba"`` compiles kernels, Newton's method and the integration loop
+        with ``numba.njit(cache=True)`` (same interface and results to
+        round-off).  Without numba installed a RuntimeWarning is issued and the
+        numpy module is returned.
 
     Returns
     -------
     module
         The imported generated module.
     """
-    sig = signature(scheme.system, scheme.method)
+    backend = resolve_backend(backend)
+    sig = signature(scheme.system, scheme.method, backend)
     name = scheme.system.name or "system"
     if path is None:
-        path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.method)
+        path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.method, backend)
     path = Path(path)
     if file_status(path, sig) != "ok":
-        write_atomic(path, emit_source(scheme, sig, path.stem))
+        write_atomic(path, emit_source(scheme, sig, path.stem, backend))
     return load_module(path)
 
 
-def emit_source(scheme, sig: str | None = None, module_name: str | None = None) -> str:
-    """The full source text of the generated module for ``scheme``."""
-    sig = sig or signature(scheme.system, scheme.method)
-    name = module_name or module_filename(scheme.system.name or "system", scheme.method)[:-3]
-    return render(lower(scheme, sig, name))
+def emit_source(scheme, sig: str | None = None, module_name: str | None = None,
+                backend: str = "numpy") -> str:
+    """The full source text of the generated module for ``scheme`` (no fallback: any backend renders)."""
+    sig = sig or signature(scheme.system, scheme.method, backend)
+    name = module_name or module_filename(scheme.system.name or "system", scheme.method, backend)[:-3]
+    return render(lower(scheme, sig, name), backend)
