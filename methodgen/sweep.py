@@ -14,7 +14,7 @@ validated key by key, never evaluated)::
     count = 100                 # perturbed copies of the scene's y0 (0 or 1: y0 itself)
     spread = 1e-3               # standard deviation of the Gaussian perturbation (absolute)
     seed = 0
-    batch = 50                  # trajectories per task (default 100)
+    batch = 250                 # trajectories per task (default 500)
 
 The tasks are the cartesian product method × h × parameter values × batches
 of initial conditions.  Each task loads the generated module (shipped as
@@ -66,7 +66,7 @@ __all__ = ["SpecError", "EngineError", "SweepSpec", "Task", "load_spec", "parse_
 CHUNK_VALUES = 1 << 22
 
 #: Trajectories per task when ``[initial].batch`` is not given.
-DEFAULT_BATCH = 100
+DEFAULT_BATCH = 500
 
 _NUMERICAL = ("ConvergenceError", "NonFiniteError", "ResolutionError")
 
@@ -407,14 +407,15 @@ def plan_sweep(spec: SweepSpec) -> Plan:
 
     scene = spec.scene
     modules: dict[str, ModuleSource] = {}
+    built = {}
     for method in spec.methods:
-        module = build(scene.system, method, path=scene_module_path(scene, method))
+        module = built[method] = build(scene.system, method, path=scene_module_path(scene, method))
         path = Path(module.__file__)
         modules[method] = ModuleSource(method=method, signature=module.SIGNATURE, path=str(path),
                                        filename=f"{path.stem}_{module.SIGNATURE[:12]}.py",
                                        source=path.read_text(encoding="utf-8"))
     Y = initial_states(spec)
-    batches = [Y[i:i + spec.batch] for i in range(0, len(Y), spec.batch)]
+    projector = built[spec.methods[0]] if scene.system.constraints else None
     with_reference = spec.count <= 1
     names = [k for k, _ in spec.params]
     defaults = dict(scene.system.param_values)
@@ -430,16 +431,33 @@ def plan_sweep(spec: SweepSpec) -> Plan:
             T = h * steps
         full = {**defaults, **dict(zip(names, values))}
         params = tuple((k, full[k]) for k in scene.system.param_names)
+        Yp = Y if projector is None else _project(projector, Y, full, names, values)
         ref_key = None
         if with_reference:
             ref_key = "ref " + " ".join(f"{k}={_fmt_value(v)}" for k, v in params) + f" T={_fmt_value(T)}"
-            refs.setdefault(ref_key, RefJob(ref_key, spec.scene_text, params, tuple(scene.y0), T))
+            refs.setdefault(ref_key, RefJob(ref_key, spec.scene_text, params, tuple(map(float, Yp[0])), T))
+        batches = [Yp[i:i + spec.batch] for i in range(0, len(Yp), spec.batch)]
         label = " ".join([method, f"h={_fmt_value(h)}"] + [f"{k}={_fmt_value(v)}" for k, v in zip(names, values)])
         for b, y0 in enumerate(batches):
             tasks.append(Task(key=(method, h, *values, b), name=f"{label} batch={b}", method=method, h=h,
                               h_used=h_used, steps=steps, params=params, swept=tuple(names), batch=b,
                               y0=y0, check_resolution=spec.check_resolution, ref=ref_key))
     return Plan(spec=spec, tasks=tasks, modules=modules, refs=refs)
+
+
+def _project(module, Y: np.ndarray, params: dict, names, values) -> np.ndarray:
+    """Initial states projected onto the constraint manifold of ``params``.
+
+    Perturbed states, and y0 itself under other parameter values (another
+    pendulum length), are off the manifold, where the constrained methods
+    refuse to start.  Projecting once here gives every method the same states.
+    """
+    try:
+        return module.project(Y, params)
+    except ValueError as exc:
+        where = ", ".join(f"{k} = {v!r}" for k, v in zip(names, values)) or "the scene's parameters"
+        raise SpecError(f"the initial states cannot be projected onto the constraint manifold "
+                        f"({where}): {exc}") from None
 
 
 # --- worker side: these functions run wherever the engine puts them ------------------------
@@ -547,21 +565,16 @@ def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
     numerical = tuple(getattr(module, n) for n in _NUMERICAL)
     Y = np.array(task.y0, dtype=float)
     status, error = "ok", None
-    if hasattr(module, "project"):
-        # Perturbed states, or y0 under other parameter values (a different L), are off
-        # the constraint manifold; the constrained methods need them on it.
-        try:
-            Y = module.project(Y, params)
-        except ValueError as exc:
-            status, error = "numerical-error", f"projection of the initial states: {exc}"
-    Y0 = Y.copy()
     n_traj, dim = Y.shape
     chunk = max(1, min(task.steps, CHUNK_VALUES // (n_traj * dim)))
-    stats = _Stats(module, params, Y0) if status == "ok" else None
+    stats = _Stats(module, params, Y)
     iters: list[np.ndarray] = []
     info: dict = {}
     done = 0
     cpu = 0.0
+    # One trajectory goes through the module's scalar path: the batched path has a fixed
+    # cost per step (~0.5-1 ms) that only pays off from a few hundred trajectories.
+    single = n_traj == 1
     while status == "ok" and done < task.steps:
         n = min(chunk, task.steps - done)
         # thread_time: the CPU of this task alone, also on a threaded worker running others.
@@ -569,18 +582,20 @@ def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
         try:
             # info carries the compensated-summation remainder from chunk to chunk, so
             # chunking does not change the result.
-            part = module.integrate(Y, task.h_used, n, params, info=info,
+            part = module.integrate(Y[0] if single else Y, task.h_used, n, params, info=info,
                                     check_resolution=task.check_resolution)
         except numerical as exc:
             cpu += time.thread_time() - t0
             partial = getattr(exc, "trajectory", None)
             if partial is not None and len(partial):
+                partial = np.asarray(partial).reshape(len(partial), n_traj, dim)
                 stats.update(partial)
                 done += len(partial) - 1
                 Y = partial[-1]
             status, error = "numerical-error", f"{type(exc).__name__}: {exc}"
             break
         cpu += time.thread_time() - t0
+        part = part.reshape(n + 1, n_traj, dim)
         stats.update(part[1:])
         iters.append(np.asarray(info.get("newton_iterations", np.zeros(0))))
         Y = part[-1]
@@ -590,6 +605,8 @@ def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
     if ref is not None and status == "ok":
         final_error = float(np.max(np.abs(Y - np.asarray(ref["y"]))))
     swept = set(task.swept)
+    # A run that failed before its first step measured nothing: null, not a perfect 0.
+    measured = done > 0 or task.steps == 0
     return {
         "task": task.name,
         "status": status,
@@ -604,9 +621,9 @@ def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
         "batch": task.batch,
         "trajectories": n_traj,
         "trajectory_steps": n_traj * done,
-        "energy_error": _finite(stats.max.get("H")) if stats else None,
-        "invariant_errors": {k: _finite(v) for k, v in stats.max.items()} if stats else {},
-        "constraint_error": _finite(stats.constraint) if stats else None,
+        "energy_error": _finite(stats.max.get("H")) if measured else None,
+        "invariant_errors": {k: _finite(v) if measured else None for k, v in stats.max.items()},
+        "constraint_error": _finite(stats.constraint) if measured else None,
         "final_error": _finite(final_error),
         "reference": ref["kind"] if ref is not None else None,
         "newton_mean": float(its.mean()) if its.size else None,

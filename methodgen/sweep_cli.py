@@ -1,8 +1,99 @@
-"""``methodgen sweep SPEC [--scheduler ADDRESS] [--workers N]`` (placeholder until the sweep layer lands)."""
+"""``methodgen sweep SPEC [--scheduler ADDRESS | --workers N] [--json] [--csv FILE] [--retries K]``.
+
+Runs a parameter sweep (:mod:`methodgen.sweep`): in-process by default, on a
+local Dask cluster with ``--workers N``, on a running Dask cluster with
+``--scheduler ADDRESS``.  ``--json`` prints exactly one JSON object on stdout;
+``--csv FILE`` also writes the rows as CSV.  Exit status: 0 when every task
+produced a result (a numerical error such as a non-converging Newton iteration
+*is* a result), 1 when some task failed even after ``--retries`` re-runs, 2 for
+bad input (spec, options, dask not installed, scheduler unreachable).
+"""
 
 from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _count(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {v}")
+        return v
+    return parse
+
+
+def _fmt(x, spec: str = ".2e") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def _print_report(rep: dict) -> None:
+    """The human-readable table (one line per task) and a summary line."""
+    params = list(rep["spec"]["params"])
+    head = f"{'method':<18} {'h':>9} " + "".join(f"{p:>9} " for p in params)
+    head += f"{'batch':>5} {'traj':>5} {'status':<15} {'energy err':>10} {'inv err':>10} {'final err':>10} " \
+            f"{'Newton':>6} {'CPU s':>8}"
+    print(f"sweep of {rep['scene']}: {rep['tasks']} tasks")
+    print(head)
+    for r in rep["rows"]:
+        others = [v for k, v in r["invariant_errors"].items() if k != "H" and v is not None]
+        if r["constraint_error"] is not None:
+            others.append(r["constraint_error"])
+        line = f"{r['method']:<18} {r['h']:9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
+        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {_fmt(r['energy_error']):>10} " \
+                f"{_fmt(max(others) if others else None):>10} {_fmt(r['final_error']):>10} " \
+                f"{_fmt(r['newton_mean'], '.2f'):>6} {_fmt(r['cpu_seconds'], '.3f'):>8}"
+        print(line)
+        if r["error"]:
+            print(f"{'':<18} {r['error'][:200]}")
+    eng = rep["engine"]
+    where = "in-process" if eng["kind"] == "in-process" else f"{eng['kind']} ({eng['workers']} workers)"
+    rate = rep["trajectory_steps_per_second"]
+    print(f"{rep['ok']} ok, {rep['numerical_errors']} numerical errors, {rep['failed']} failed; "
+          f"{rep['trajectory_steps']} trajectory-steps in {rep['wall_seconds']:.2f} s wall "
+          f"({_fmt(rate, '.3g')} steps/s, {rep['cpu_seconds']:.2f} CPU s) {where}")
+
+
+def cmd_sweep(args) -> int:
+    """Run the sweep of ``args.spec``; return the exit status."""
+    # Imported here: the other commands do not need the sweep layer.
+    from .emit import write_atomic
+    from .sweep import run_sweep, rows_to_csv
+
+    rep = run_sweep(args.spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
+                    progress=not args.json)
+    if args.csv:
+        write_atomic(args.csv, rows_to_csv(rep))
+    if args.json:
+        print(json.dumps(rep, allow_nan=False))
+    else:
+        _print_report(rep)
+        if args.csv:
+            print(f"rows written to {args.csv}")
+    if rep["failed"]:
+        print(f"methodgen: {rep['failed']} of {rep['tasks']} sweep tasks failed after "
+              f"{args.retries} retries (rows with status \"failed\")", file=sys.stderr)
+        return 1
+    return 0
 
 
 def add_parser(sub) -> None:
     """Register the ``sweep`` subcommand on ``sub`` (an argparse subparsers object)."""
-    return None
+    p = sub.add_parser("sweep", help="run a parameter study (methods × h × parameters × initial "
+                                     "conditions) in-process or on Dask")
+    p.add_argument("spec", help="sweep spec TOML file (see examples/sweep_kepler.toml)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run on an existing Dask cluster (e.g. tcp://host:8786); needs methodgen[distributed]")
+    where.add_argument("--workers", type=_count(1), metavar="N",
+                       help="run on a local Dask cluster of N worker processes; needs methodgen[distributed]")
+    p.add_argument("--retries", type=_count(0), default=2, metavar="K",
+                   help="re-run a failed task up to K times before reporting it (default 2)")
+    p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV to FILE")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_sweep)
