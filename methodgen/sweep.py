@@ -81,9 +81,17 @@ class EngineError(MethodgenError):
 
 # --- the spec ---------------------------------------------------------------------------
 
-_TOP = {"scene": (str,), "methods": (str, list), "h": (int, float, list), "steps": (int,),
-        "t_final": (int, float), "check_resolution": (bool,), "params": (dict,), "initial": (dict,)}
-_INITIAL = {"count": (int,), "spread": (int, float), "seed": (int,), "batch": (int,)}
+#: key -> (accepted TOML types, what the error message says is valid)
+_TOP = {"scene": ((str,), "a string (built-in scene name or scene file path)"),
+        "methods": ((str, list), "a method name or a list of names"),
+        "h": ((int, float, list), "a number or a list of numbers"),
+        "steps": ((int,), "an integer"),
+        "t_final": ((int, float), "a number"),
+        "check_resolution": ((bool,), "a boolean"),
+        "params": ((dict,), "a table of parameter = number or list of numbers"),
+        "initial": ((dict,), "a table")}
+_INITIAL = {"count": ((int,), "an integer"), "spread": ((int, float), "a number"),
+            "seed": ((int,), "an integer"), "batch": ((int,), "an integer")}
 
 
 @dataclass(frozen=True)
@@ -132,25 +140,18 @@ class SweepSpec:
                             "batch": self.batch}}
 
 
-def _type_name(types: tuple) -> str:
-    names = {"str": "string", "int": "integer", "float": "number", "list": "list", "dict": "table",
-             "bool": "boolean"}
-    return " or ".join(names.get(t.__name__, t.__name__) for t in types)
-
-
 def _check_table(table: Mapping, allowed: dict, where: str) -> None:
     """Unknown keys and wrong types are errors naming the key and what is valid."""
     unknown = sorted(set(table) - set(allowed))
     if unknown:
         raise SpecError(f"unknown key(s) {unknown} in {where}; valid keys are {sorted(allowed)}")
-    for key, types in allowed.items():
+    for key, (types, want) in allowed.items():
         if key not in table:
             continue
         value = table[key]
         # bool is an int subclass: `steps = true` must not pass as 1.
         if (isinstance(value, bool) and bool not in types) or not isinstance(value, types):
-            raise SpecError(f"{where}: {key} must be a {_type_name(types)}, got "
-                            f"{type(value).__name__} {value!r}")
+            raise SpecError(f"{where}: {key} must be {want}, got {type(value).__name__} {value!r}")
 
 
 def _number(value, where: str) -> float:
@@ -830,7 +831,8 @@ def run_sweep(spec, scheduler: str | None = None, workers: int | None = None, re
             engine = {"kind": "scheduler", "workers": None, "scheduler": scheduler}
         try:
             try:
-                client = distributed.Client(cluster if cluster is not None else scheduler, timeout="20s")
+                # Connect timeout: Dask's distributed.comm.timeouts.connect (default 30 s).
+                client = distributed.Client(cluster if cluster is not None else scheduler)
             except (OSError, TimeoutError) as exc:
                 raise EngineError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
             with client:
