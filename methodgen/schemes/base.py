@@ -303,21 +303,25 @@ def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:
 
 def is_linear_field(system: Hamiltonian) -> bool:
     """``f = J∇H`` is linear in y (H quadratic)."""
-    f = vector_field(system)
-    return all(sp.diff(fi, a, b) == 0 for fi in f for a in system.y for b in system.y)
+    return _field_degree(system) <= 1
+
+
+def _field_degree(system: Hamiltonian) -> float:
+    """Total polynomial degree of ``f = J∇H`` in y, with coefficients free of y (inf otherwise)."""
+    deg = 0
+    for fi in vector_field(system):
+        if not fi.is_polynomial(*system.y):
+            return float("inf")
+        poly = sp.Poly(fi, *system.y)
+        if poly.free_symbols_in_domain & set(system.y):
+            return float("inf")
+        deg = max(deg, poly.total_degree())
+    return deg
 
 
 def is_quadratic_field(system: Hamiltonian) -> bool:
     """``f = J∇H`` is a polynomial of degree ≤ 2 in y (H cubic), coefficients free of y."""
-    f = vector_field(system)
-    for fi in f:
-        try:
-            poly = sp.Poly(fi, *system.y)
-        except sp.PolynomialError:
-            return False
-        if poly.free_symbols_in_domain & set(system.y) or poly.total_degree() > 2:
-            return False
-    return True
+    return _field_degree(system) <= 2
 
 
 def midpoint_gradient(system: Hamiltonian) -> Callable:
