@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -195,11 +196,28 @@ def test_in_process_failure_retried_then_reported(inject_failure):
         assert r["attempts"] == 2 and r["energy_error"] is None
 
 
+def test_without_dask_in_process_works_and_workers_is_a_clear_error(monkeypatch, tmp_path, capsys):
+    # None in sys.modules makes `import distributed` raise ImportError, as if not installed.
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    monkeypatch.setitem(sys.modules, "dask", None)
+    assert sw.run_sweep(WITH_REF)["ok"] == 2
+    with pytest.raises(sw.EngineError, match=r"pip install 'methodgen\[distributed\]'"):
+        sw.run_sweep(WITH_REF, workers=2)
+    spec = _write(tmp_path, 'scene = "kepler"\nmethods = ["midpoint"]\nh = 0.01\nsteps = 10\n')
+    assert main(["sweep", str(spec), "--workers", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Dask, which is not installed" in err
+    assert isinstance(sw.EngineError("x"), MethodgenError)
+
+
 # --- Dask -----------------------------------------------------------------------------------
 
-distributed = pytest.importorskip("distributed")
+# Not importorskip at module level: without dask the in-process tests above must still run.
+requires_dask = pytest.mark.skipif(importlib.util.find_spec("distributed") is None,
+                                   reason="needs methodgen[distributed]")
 
 
+@requires_dask
 def test_local_cluster_matches_in_process():
     """workers=2: a LocalCluster of 2 single-threaded *processes* (the production path:
     tasks, module sources and results really cross process boundaries)."""
@@ -216,11 +234,14 @@ def test_local_cluster_matches_in_process():
 def threaded_cluster():
     """Threads, not processes: the failure injection below monkeypatches this process's
     methodgen.sweep, which worker threads share (worker processes would not see it)."""
+    import distributed
+
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
         yield cluster
 
 
+@requires_dask
 def test_scheduler_failure_retried_then_reported(inject_failure, threaded_cluster):
     counter = inject_failure
     rep = sw.run_sweep(SMALL, scheduler=threaded_cluster.scheduler_address, retries=2)
@@ -233,11 +254,13 @@ def test_scheduler_failure_retried_then_reported(inject_failure, threaded_cluste
             assert "KeyError" in r["error"] and "injected failure" in r["error"]
 
 
+@requires_dask
 def test_references_as_dask_tasks_match_in_process(threaded_cluster):
     remote = sw.run_sweep(WITH_REF, scheduler=threaded_cluster.scheduler_address)
     assert _results(remote["rows"]) == _results(sw.run_sweep(WITH_REF)["rows"])
 
 
+@requires_dask
 def test_unreachable_scheduler_is_a_clean_error():
     import dask
 
@@ -296,20 +319,6 @@ def test_cli_spec_error_is_one_line_exit_2(tmp_path, capsys):
     assert main(["sweep", str(spec)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "unknown key(s) ['step']" in err
-
-
-def test_without_dask_in_process_works_and_workers_is_a_clear_error(monkeypatch, tmp_path, capsys):
-    # None in sys.modules makes `import distributed` raise ImportError, as if not installed.
-    monkeypatch.setitem(sys.modules, "distributed", None)
-    monkeypatch.setitem(sys.modules, "dask", None)
-    assert sw.run_sweep(WITH_REF)["ok"] == 2
-    with pytest.raises(sw.EngineError, match=r"pip install 'methodgen\[distributed\]'"):
-        sw.run_sweep(WITH_REF, workers=2)
-    spec = _write(tmp_path, 'scene = "kepler"\nmethods = ["midpoint"]\nh = 0.01\nsteps = 10\n')
-    assert main(["sweep", str(spec), "--workers", "2"]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "Dask, which is not installed" in err
-    assert isinstance(sw.EngineError("x"), MethodgenError)
 
 
 def test_cli_rejects_workers_and_scheduler_together(tmp_path, capsys):
