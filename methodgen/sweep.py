@@ -321,7 +321,11 @@ class ModuleSource:
 
 @dataclass(frozen=True)
 class RefJob:
-    """One reference solution: the unperturbed y0 of the scene with ``params`` up to time ``T``."""
+    """One reference solution: the unperturbed y0 of the scene with ``params`` up to time ``T``.
+
+    ``y0`` (length 2d) is projected onto the constraint manifold of ``params``
+    for constrained scenes, exactly as the tasks' states are.
+    """
 
     key: str
     scene_text: str
@@ -340,15 +344,22 @@ class Task:
         ``(method, h, parameter values…, batch)``: rows are sorted by it.
     name : str
         Human-readable key, e.g. ``"midpoint h=0.01 k=1.5 batch=0"``.
+    method : str
     h : float
-        Step size as given in the spec; ``h_used`` is the one integrated with
-        (``t_final / steps`` when the spec gives ``t_final``).
+        Step size as given in the spec.
+    h_used : float
+        The step size integrated with (``t_final / steps`` when the spec gives ``t_final``).
+    steps : int
     params : tuple of (str, float)
         All parameter values (scene defaults overridden by the swept ones).
     swept : tuple of str
         Names of the swept parameters.
-    y0 : numpy.ndarray, shape (batch, 2d)
-        Initial states of the batch.
+    batch : int
+        Index of the batch within the ensemble.
+    y0 : numpy.ndarray, shape (n, 2d)
+        Initial states of the batch (n ≤ ``[initial].batch``), already projected
+        onto the constraint manifold for constrained scenes.
+    check_resolution : bool
     ref : str or None
         Key of the :class:`RefJob` whose result this task compares against.
     """

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+from pathlib import Path
 
 
 def _count(minimum: int):
@@ -63,12 +65,21 @@ def cmd_sweep(args) -> int:
     """Run the sweep of ``args.spec``; return the exit status."""
     # Imported here: the other commands do not need the sweep layer.
     from .emit import write_atomic
+    from .errors import InputError
     from .sweep import run_sweep, rows_to_csv
 
+    if args.csv:
+        # Checked before the run, which may take hours, not after it.
+        folder = Path(args.csv).resolve().parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK):
+            raise InputError(f"cannot write --csv {args.csv}: {folder} is not a writable folder")
     rep = run_sweep(args.spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
                     progress=not args.json)
     if args.csv:
-        write_atomic(args.csv, rows_to_csv(rep))
+        try:
+            write_atomic(args.csv, rows_to_csv(rep))
+        except OSError as exc:
+            raise InputError(f"cannot write {args.csv}: {exc}") from None
     if args.json:
         print(json.dumps(rep, allow_nan=False))
     else:
