@@ -135,6 +135,8 @@ def reference(system, y0: np.ndarray, T: float) -> Reference:
         return Reference(circ, "exact (circular Kepler orbit)")
     rhs, jac = ode_rhs(system)
     sol = solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-15)
+    if not sol.success:
+        raise RuntimeError(f"the DOP853 reference solution failed: {sol.message}")
     return Reference(sol.y[:, -1], "DOP853 at rtol=1e-13, atol=1e-15")
 
 
