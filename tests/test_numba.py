@@ -285,3 +285,15 @@ def test_compiled_code_is_cached_on_disk(pair):
     cache = os.path.join(os.path.dirname(nb_mod.__file__), "__pycache__")
     stem = os.path.basename(nb_mod.__file__)[:-3]
     assert any(f.startswith(stem) and f.endswith(".nbi") for f in os.listdir(cache))
+
+
+def test_more_than_three_unknowns_uses_gaussian_elimination(tmp_path):
+    # Non-separable H: the midpoint rule keeps all 4 unknowns (no 1x1..3x3 formula).
+    system = mg.Hamiltonian("(px**2 + py**2)*(1 + x**2)/2 + (x**2 + y**2)/2 + x*y*px",
+                            ["x", "y"], ["px", "py"], name="nonsep")
+    scheme = mg.discretize(system, "midpoint")
+    nb_mod = mg.generate(scheme, tmp_path / "nonsep_numba.py", backend="numba")
+    np_mod = mg.generate(scheme, tmp_path / "nonsep.py")
+    assert nb_mod._N == 4
+    Y0 = np.array([0.3, -0.2, 0.1, 0.4]) * (1.0 + 0.1 * np.arange(3))[:, None]
+    _close(nb_mod.integrate(Y0, 0.05, 300), np_mod.integrate(Y0, 0.05, 300))
