@@ -21,7 +21,7 @@ import numpy as np
 
 from . import __version__
 from .build import build, generated_dir, scene_module_path
-from .emit import emit_source, file_status, module_filename, signature, write_atomic
+from .emit import BACKENDS, emit_source, file_status, module_filename, signature, write_atomic
 from .errors import InputError, MethodgenError
 from .scene import load_scene, scene_names
 from .runio import ChunkWriter
@@ -110,12 +110,14 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "seconds": seconds,
         "us_per_step": seconds / steps_done * 1e6 if steps_done else 0.0,
         "module": str(getattr(module, "__file__", "")),
+        "backend": getattr(module, "BACKEND", "numpy"),
     }
 
 
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
-              interrupted_path: str | None = None, plot: str | None = None) -> dict:
+              interrupted_path: str | None = None, plot: str | None = None,
+              backend: str = "numpy") -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -133,8 +135,14 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
     h = scene.h if h is None else h
     steps = scene.steps if steps is None else steps
-    module = build(scene.system, method, path=scene_module_path(scene, method))
+    module = build(scene.system, method, path=scene_module_path(scene, method, backend), backend=backend)
     y = np.array(scene.y0)
+    if getattr(module, "BACKEND", "numpy") == "numba":
+        # Compile (or load from numba's disk cache) before the timed region.
+        try:
+            module.step(y, h)
+        except (RuntimeError, FloatingPointError, ValueError):
+            pass
     chunk = steps if not chunk else chunk
     writer = None
     meta = dict(scene=scene.name, method=method, h=h, state_names=list(module.STATE_NAMES))
@@ -230,7 +238,7 @@ def _print_run(rep: dict) -> None:
 def cmd_run(args) -> int:
     try:
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,
-                        plot=args.plot)
+                        plot=args.plot, backend=args.backend)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         where = f"; saved {fail.report['steps_done'] + 1} states to {fail.saved}" if fail.saved else ""
@@ -260,6 +268,8 @@ def _targets(names: list[str]):
 
 
 def cmd_generate(args) -> int:
+    if args.backend != "numpy" and not args.out:
+        raise InputError("generated/ holds the numpy modules only; pass --out DIR with --backend numba")
     out = Path(args.out) if args.out else generated_dir()
     if out is None:
         raise InputError("no generated/ folder found (not a source checkout); pass --out DIR")
@@ -269,10 +279,10 @@ def cmd_generate(args) -> int:
         if not scene.builtin:
             raise InputError(f"{scene.name} is not a built-in scene; use the Python API "
                              "methodgen.generate for your own scenes")
-        path = out / module_filename(scene.name, method)
+        path = out / module_filename(scene.name, method, args.backend)
         expected.add(path.name)
-        sig = signature(scene.system, method)
-        source = emit_source(discretize(scene.system, method), sig)
+        sig = signature(scene.system, method, args.backend)
+        source = emit_source(discretize(scene.system, method), sig, backend=args.backend)
         current = path.read_text(encoding="utf-8") if path.is_file() else None
         if current == source:
             same.append(path)
@@ -284,7 +294,8 @@ def cmd_generate(args) -> int:
             written.append(path)
     if args.check and not args.scenes:
         for extra in sorted(out.glob("*.py")):
-            if extra.name not in expected:
+            other_backend = extra.name.endswith("_numba.py") != (args.backend == "numba")
+            if extra.name not in expected and not other_backend:
                 problems.append(f"{extra}: not generated from any built-in scene")
     if args.json:
         print(json.dumps({"ok": not problems, "problems": problems, "written": [str(p) for p in written],
@@ -421,6 +432,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
     p.add_argument("--plot", metavar="FILE", help="draw phase portrait, invariant errors (log scale) and "
                                                   "constraint residuals to FILE (.png/.svg/.pdf; needs methodgen[plot])")
+    p.add_argument("--backend", choices=BACKENDS, default="numpy",
+                   help="numpy, or numba: compiled integration loop (needs methodgen[fast]; "
+                        "compiled once, cached on disk)")
     p.add_argument("--save", metavar="FILE.npz", help="write the trajectory to an .npz (in chunks)")
     p.add_argument("--chunk", type=_positive_int, metavar="N",
                    help="with --save: steps per chunk (memory stays bounded; default: one chunk)")
@@ -463,6 +477,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("scenes", nargs="*", help="scene names (default: all built-in scenes)")
     p.add_argument("--check", action="store_true", help="only check that the files are in sync; exit 1 if not")
     p.add_argument("--out", help="output folder (default: the checkout's generated/)")
+    p.add_argument("--backend", choices=BACKENDS, default="numpy",
+                   help="numpy (the committed generated/ modules) or numba (needs --out)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_generate)
 
