@@ -355,7 +355,7 @@ def _print_bench(rep: dict) -> None:
         print(f"\nBrouwer's law: harmonic oscillator, midpoint, h = {br['h']:g}, {br['ensemble']} random "
               f"phases, {br['steps']} steps")
         for r in br["rows"]:
-            print(f"  {r['stepper']:<42} RMS energy error slope {r['slope']:.2f} "
+            print(f"  {r['stepper']:<52} RMS energy error slope {r['slope']:.2f} "
                   f"(final {r['rms_energy_error'][-1]:.2e}, {r['seconds']:.1f} s)")
 
 
@@ -378,7 +378,7 @@ def cmd_bench(args) -> int:
     if args.brouwer:
         rep["brouwer"] = bench.brouwer(ensemble=args.ensemble,
                                        steps=args.brouwer_steps or (10_000 if args.quick else 100_000),
-                                       progress=progress)
+                                       progress=progress, dyadic=not args.quick)
     if args.plot:
         if "work_precision" not in rep:
             raise InputError("--plot draws the work-precision diagram; drop --only-extras")
