@@ -117,7 +117,7 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
               interrupted_path: str | None = None, plot: str | None = None,
-              backend: str = "numpy") -> dict:
+              backend: str = "numpy", extended: bool = False) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -125,7 +125,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     or fails numerically, the states computed so far are saved — to ``save`` or
     to ``interrupted_path`` — and :class:`RunFailure` is raised.  With ``plot``
     the run is drawn (phase portrait, invariant errors, constraint residuals).
+    With ``extended`` each step is refined in extended precision
+    (``integrate(..., extended=True)``: round-off that follows Brouwer's law).
     """
+    if extended and backend != "numpy":
+        raise InputError("--extended needs the numpy backend (numba has no long double)")
     if plot:
         from .plots import check_available
         check_available()  # a missing matplotlib is reported before the run, not after
@@ -136,6 +140,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     h = scene.h if h is None else h
     steps = scene.steps if steps is None else steps
     module = build(scene.system, method, path=scene_module_path(scene, method, backend), backend=backend)
+    if extended and module.EXTENDED_BITS <= 53:
+        raise InputError(f"--extended needs a long double wider than double; numpy.longdouble has "
+                         f"{module.EXTENDED_BITS} bits on this platform")
     y = np.array(scene.y0)
     if getattr(module, "BACKEND", "numpy") == "numba":
         # Compile (or load from numba's disk cache) before the timed region.
@@ -161,7 +168,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             info: dict = {} if compensation is None else {"compensation": compensation}
             t0 = time.perf_counter()
             try:
-                part = module.integrate(y, h, n, info=info)
+                part = module.integrate(y, h, n, info=info, **({"extended": True} if extended else {}))
             finally:
                 seconds += time.perf_counter() - t0
             compensation = info.get("compensation")
@@ -238,7 +245,7 @@ def _print_run(rep: dict) -> None:
 def cmd_run(args) -> int:
     try:
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,
-                        plot=args.plot, backend=args.backend)
+                        plot=args.plot, backend=args.backend, extended=args.extended)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         where = f"; saved {fail.report['steps_done'] + 1} states to {fail.saved}" if fail.saved else ""
@@ -354,8 +361,10 @@ def _print_bench(rep: dict) -> None:
     if br:
         print(f"\nBrouwer's law: harmonic oscillator, midpoint, h = {br['h']:g}, {br['ensemble']} random "
               f"phases, {br['steps']} steps")
+        if br.get("note"):
+            print(f"  note: {br['note']}")
         for r in br["rows"]:
-            print(f"  {r['stepper']:<52} RMS energy error slope {r['slope']:.2f} "
+            print(f"  {r['stepper']:<62} RMS energy error slope {r['slope']:.2f} "
                   f"(final {r['rms_energy_error'][-1]:.2e}, {r['seconds']:.1f} s)")
 
 
@@ -435,6 +444,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=BACKENDS, default="numpy",
                    help="numpy, or numba: compiled integration loop (needs methodgen[fast]; "
                         "compiled once, cached on disk)")
+    p.add_argument("--extended", action="store_true",
+                   help="refine each step in extended precision (long double): removes the small "
+                        "systematic round-off drift of long runs (Brouwer's law); slower")
     p.add_argument("--save", metavar="FILE.npz", help="write the trajectory to an .npz (in chunks)")
     p.add_argument("--chunk", type=_positive_int, metavar="N",
                    help="with --save: steps per chunk (memory stays bounded; default: one chunk)")

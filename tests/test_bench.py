@@ -67,11 +67,15 @@ def test_brouwer_stepper_follows_sqrt_t_below_the_plain_stepper():
     """RMS energy error of the exact numerical states (extended precision): √t growth,
     and compensated summation keeps it well below the plain-summation stepper."""
     rep = bench.brouwer(ensemble=100, steps=20_000)
-    good, plain = rep["rows"]
-    assert 0.35 < good["slope"] < 0.65
-    assert good["rms_energy_error"][-1] < 0.1 * plain["rms_energy_error"][-1]
+    rows = {("extended" if r["extended"] else "plain" if "plain" in r["stepper"] else "default"): r
+            for r in rep["rows"]}
+    assert set(rows) == {"extended", "default", "plain"}
+    for key in ("extended", "default"):
+        good = rows[key]
+        assert 0.35 < good["slope"] < 0.65, key
+        assert good["rms_energy_error"][-1] < 0.1 * rows["plain"]["rms_energy_error"][-1], key
     # Negative control of the slope fit: a linear drift is not called √t.
-    t = np.array(good["t"])
+    t = np.array(rows["extended"]["t"])
     slope_lin = np.polyfit(np.log(t[t >= t[-1] / 100]), np.log(1e-16 * t[t >= t[-1] / 100]), 1)[0]
     assert not 0.35 < slope_lin < 0.65
 
