@@ -90,3 +90,16 @@ def test_reference_is_exact_where_known():
     assert np.allclose(ref.y, [-1.0, 0, 0, 0, -1.0, 0], atol=1e-14)
     ecc = bench.reference(circ, np.array([0.4, 0, 0, 0, 1.6, 1.2]), 1.0)
     assert ecc.kind.startswith("DOP853")
+
+
+@pytest.mark.slow
+def test_brouwer_law_over_a_million_steps_at_h_001():
+    """The issue's acceptance run (about 8 min): 100 phases, h = 0.01, 10⁶ steps.  The refined
+    stepper follows √t over the last two decades of t; the default stepper, whose small
+    systematic drift takes over after ~10⁵ steps, is the negative control."""
+    rep = bench.brouwer(ensemble=100, steps=1_000_000)
+    ext = next(r for r in rep["rows"] if r["extended"])
+    default = next(r for r in rep["rows"] if not r["extended"] and "plain" not in r["stepper"])
+    assert 0.4 < ext["slope"] < 0.6
+    assert default["slope"] > 0.6
+    assert ext["rms_energy_error"][-1] < default["rms_energy_error"][-1]
