@@ -168,7 +168,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             info: dict = {} if compensation is None else {"compensation": compensation}
             t0 = time.perf_counter()
             try:
-                part = module.integrate(y, h, n, info=info, **({"extended": True} if extended else {}))
+                part = module.integrate(y, h, n, info=info, extended=extended)
             finally:
                 seconds += time.perf_counter() - t0
             compensation = info.get("compensation")
