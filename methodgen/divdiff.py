@@ -13,12 +13,17 @@ and, the point of the exercise, *no* ``0/0`` at ``a = b``: the factor
 * integer powers: ``u_b^n - u_a^n = (u_b - u_a) Σ u_b^k u_a^(n-1-k)``;
 * rational powers ``u^(p/q)`` through ``w = u^(1/q)``:
   ``w[a,b] = u[a,b] / Σ w_b^k w_a^(q-1-k)``;
-* elementary functions through the half-angle identities of
-  :mod:`methodgen.special` (``exp[a,b] = exp(m) sinhc(δ/2)`` etc.).
+* elementary functions ``g`` of the grammar by the chain rule of divided
+  differences, ``(g∘u)[a, b] = g[u(a), u(b)] · u[a, b]`` (exact), with ``g[·,·]``
+  one of the functions of :mod:`methodgen.special` (``exp_dd``, ``atan_dd``, …)
+  whose defining relation is the quotient and whose generated helper evaluates a
+  cancellation-free form (``exp[a,b] = exp(m) sinhc(δ/2)``, addition formulas for
+  tan/tanh/atan, ``log[a,b] = 2 atanhc((b-a)/(a+b))/(a+b)``).
 
-A function outside these rules falls back to the symmetric Taylor series about
-the midpoint when ``|δ|`` is small and the plain quotient otherwise; the switch
-point is chosen where both agree to round-off (see :func:`_series_fallback`).
+There is no fallback: a function outside these rules raises
+:class:`NoDividedDifference` (the parser admits none).  So whatever the
+verification layer proves about the quotients is what the generated code
+evaluates, on every branch.
 
 These are the building blocks of the energy-momentum ``κ`` (a divided
 difference of ``V`` in ``r²``), Itoh–Abe (coordinate-wise divided differences)
@@ -29,12 +34,14 @@ from __future__ import annotations
 
 import sympy as sp
 
-from .special import atanhc, sinc_u, sinhc
+from .errors import InputError
+from .special import DIVIDED_DIFFERENCES, exp_dd
 
-__all__ = ["divided_difference"]
+__all__ = ["divided_difference", "NoDividedDifference"]
 
-#: Relative switch point of the series fallback (see _series_fallback).
-SERIES_SWITCH = sp.Rational(1, 10)
+
+class NoDividedDifference(InputError):
+    """The expression contains a function without an exact divided-difference rule."""
 
 
 def divided_difference(f: sp.Expr, x: sp.Symbol, a: sp.Expr, b: sp.Expr) -> sp.Expr:
@@ -93,42 +100,23 @@ class _DD:
                     + half * (self.at_a(u) + self.at_b(u)) * self.dd(v))
         if f.is_Pow:
             return self._pow(f)
-        if isinstance(f, sp.exp):
+        rule = DIVIDED_DIFFERENCES.get(type(f))
+        if rule is not None:
+            # Chain rule of divided differences, exact: (g∘u)[a, b] = g[u(a), u(b)] · u[a, b].
             u = f.args[0]
-            ua, ub = self.at_a(u), self.at_b(u)
-            return sp.exp((ua + ub) / 2) * sinhc((ub - ua) / 2) * self.dd(u)
-        if isinstance(f, sp.log):
-            u = f.args[0]
-            ua, ub = self.at_a(u), self.at_b(u)
-            # log(ub/ua) = 2 atanh((ub-ua)/(ua+ub)), exact for ua, ub > 0.
-            return 2 / (ua + ub) * atanhc((ub - ua) / (ua + ub)) * self.dd(u)
-        if isinstance(f, (sp.sin, sp.cos, sp.sinh, sp.cosh)):
-            u = f.args[0]
-            ua, ub = self.at_a(u), self.at_b(u)
-            m, half_delta = (ua + ub) / 2, (ub - ua) / 2
-            factor = {
-                sp.sin: sp.cos(m) * sinc_u(half_delta),
-                sp.cos: -sp.sin(m) * sinc_u(half_delta),
-                sp.sinh: sp.cosh(m) * sinhc(half_delta),
-                sp.cosh: sp.sinh(m) * sinhc(half_delta),
-            }[f.func]
-            return factor * self.dd(u)
-        if isinstance(f, sp.tan):
-            u = f.args[0]
-            ua, ub = self.at_a(u), self.at_b(u)
-            return sinc_u(ub - ua) / (sp.cos(ua) * sp.cos(ub)) * self.dd(u)
-        if isinstance(f, sp.tanh):
-            u = f.args[0]
-            ua, ub = self.at_a(u), self.at_b(u)
-            return sinhc(ub - ua) / (sp.cosh(ua) * sp.cosh(ub)) * self.dd(u)
-        return self._series_fallback(f)
+            return rule(self.at_a(u), self.at_b(u)) * self.dd(u)
+        raise NoDividedDifference(
+            f"no exact divided difference for {f.func.__name__}({', '.join(map(str, f.args))}): "
+            "the grammar's functions are " + ", ".join(sorted(g.__name__ for g in DIVIDED_DIFFERENCES)))
 
     def _pow(self, f: sp.Pow) -> sp.Expr:
         base, e = f.args
         x = self.x
         if x in e.free_symbols or not e.is_Rational:
-            # u**e = exp(e log u) for u > 0 (the only case where it is real).
-            return self.dd(sp.exp(e * sp.log(base)))
+            # u**e = exp(e log u) for u > 0 (the only case where it is real).  Applied
+            # directly: SymPy would fold exp(e*log(u)) straight back into u**e.
+            g = e * sp.log(base)
+            return exp_dd(self.at_a(g), self.at_b(g)) * self.dd(g)
         ba, bb = self.at_a(base), self.at_b(base)
         if e.is_Integer:
             n = int(e)
@@ -147,22 +135,3 @@ class _DD:
             return dw * sp.Add(*[wb**k * wa**(p - 1 - k) for k in range(p)])
         m = -p
         return -dw * sp.Add(*[wb**k * wa**(m - 1 - k) for k in range(m)]) / (wa**m * wb**m)
-
-    def _series_fallback(self, f: sp.Expr) -> sp.Expr:
-        """Quotient far from the diagonal, symmetric Taylor series near it.
-
-        ``f[a,b] = Σ_k f^(2k+1)(m) (δ/2)^(2k) / (2k+1)!`` with four terms
-        (truncation ``O(δ^8)``, coefficient ``1/(2^8 9!) ≈ 1e-8``).  At the
-        switch ``|δ| = 0.1 (1 + |m|)`` the truncation is ~1e-16 relative and the
-        quotient's cancellation error is ~eps/0.1, so the two branches agree to
-        a few ulps: Newton sees no jump.
-        """
-        x, a, b = self.x, self.a, self.b
-        m, delta = (a + b) / 2, b - a
-        series = sp.S.Zero
-        deriv = sp.diff(f, x)
-        for k in range(4):
-            series += deriv.xreplace({x: m}) * (delta / 2) ** (2 * k) / sp.factorial(2 * k + 1)
-            deriv = sp.diff(deriv, x, 2)
-        quotient = (self.at_b(f) - self.at_a(f)) / delta
-        return sp.Piecewise((quotient, sp.Abs(delta) > SERIES_SWITCH * (1 + sp.Abs(m))), (series, True))

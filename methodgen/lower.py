@@ -29,7 +29,7 @@ from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 from .derive import Invariant
-from .special import SPECIAL_FUNCTIONS
+from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
 
@@ -219,6 +219,13 @@ def _helpers(exprs) -> tuple[str, ...]:
         for f in sp.sympify(e).atoms(sp.Function):
             if type(f) in SPECIAL_FUNCTIONS:
                 used.add(SPECIAL_FUNCTIONS[type(f)][1:])
+    # Close over the helpers a helper calls (e.g. expdd calls sinhc).
+    todo = list(used)
+    while todo:
+        for dep in HELPER_DEPENDENCIES.get(todo.pop(), ()):
+            if dep not in used:
+                used.add(dep)
+                todo.append(dep)
     return tuple(sorted(used))
 
 

@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import sympy as sp
 
-__all__ = ["sinc_u", "sinhc", "atanhc", "dsinc_u", "dsinhc", "datanhc", "safe_div", "SPECIAL_FUNCTIONS",
+__all__ = ["sinc_u", "sinhc", "atanhc", "atanc", "dsinc_u", "dsinhc", "datanhc", "datanc", "safe_div",
+           "DividedDifference", "exp_dd", "log_dd", "sin_dd", "cos_dd", "tan_dd", "sinh_dd", "cosh_dd",
+           "tanh_dd", "atan_dd", "datan_dd", "DIVIDED_DIFFERENCES", "SPECIAL_FUNCTIONS", "HELPER_DEPENDENCIES",
            "to_elementary"]
 
 
@@ -92,6 +94,17 @@ class atanhc(_RemovableFunction):
         return sp.atanh(x) / x
 
 
+class atanc(_RemovableFunction):
+    r"""``atan(x)/x``, 1 at 0 (every real x)."""
+
+    def fdiff(self, argindex=1):
+        return datanc(self.args[0])
+
+    def as_quotient(self):
+        x = self.args[0]
+        return sp.atan(x) / x
+
+
 class _OddDerivative(_RemovableFunction):
     _value_at_zero = sp.S.Zero
     _even = "odd"
@@ -132,6 +145,17 @@ class datanhc(_OddDerivative):
         return (x / (1 - x**2) - sp.atanh(x)) / x**2
 
 
+class datanc(_OddDerivative):
+    r"""Derivative of :class:`atanc`: ``(x/(1+x**2) - atan x)/x**2``, 0 at 0."""
+
+    def fdiff(self, argindex=1):
+        return sp.diff(self.as_quotient(), self.args[0])
+
+    def as_quotient(self):
+        x = self.args[0]
+        return (x / (1 + x**2) - sp.atan(x)) / x**2
+
+
 class safe_div(sp.Function):
     r"""``n/d`` where ``d != 0`` and 0 where ``d = 0``.
 
@@ -162,6 +186,219 @@ class safe_div(sp.Function):
         return n / d
 
 
+# --- divided differences of the elementary functions --------------------------------
+#
+# ``f[a, b] = (f(b) - f(a))/(b - a)`` of one elementary function f is a function
+# of its own: its *defining relation* is the quotient (``as_quotient``), which is
+# all the verification layer needs — every discrete-gradient identity then
+# reduces to a rational-function identity in the atoms ``f(a)``, ``f(b)``.  How
+# the generated code evaluates it without cancellation (``stable_form``, e.g.
+# ``exp(m)·sinhc(δ/2)``) is a separate, generic claim, proved once per function
+# by :mod:`methodgen.verify.helpers` and tested against mpmath.
+
+
+def _fresh_pair():
+    return sp.Dummy("a", real=True), sp.Dummy("b", real=True)
+
+
+class DividedDifference(sp.Function):
+    """``(f(b) - f(a))/(b - a)`` of an elementary ``f``, ``f'(a)`` at ``a = b`` (symmetric in a, b).
+
+    Subclasses set ``func`` (the SymPy function) and ``_stable`` (a formula in
+    the removable-singularity functions above, valid on f's whole real domain,
+    or None when it needs a branch: then ``datan_dd``-style helpers give the
+    derivatives).
+    """
+
+    nargs = 2
+    func_elementary = None   # type: ignore[assignment]
+
+    @classmethod
+    def eval(cls, a, b):
+        if a == b or (a - b).is_zero:
+            x = sp.Dummy("x", real=True)
+            return sp.diff(cls.func_elementary(x), x).xreplace({x: a})
+        # Canonical argument order: f[a, b] = f[b, a], so equal values print equally.
+        if sp.default_sort_key(b) < sp.default_sort_key(a):
+            return cls(b, a)
+        return None
+
+    def _eval_is_real(self):
+        a, b = self.args
+        return (a.is_real and b.is_real) or None
+
+    def as_quotient(self) -> sp.Expr:
+        a, b = self.args
+        f = self.func_elementary
+        return (f(b) - f(a)) / (b - a)
+
+    @classmethod
+    def stable_form(cls, a, b):
+        """The formula the generated code evaluates (None: branch-wise, see the template)."""
+        return None
+
+    def fdiff(self, argindex=1):
+        a, b = self.args
+        A, B = _fresh_pair()
+        form = self.stable_form(A, B)
+        if form is None:
+            return self._branch_derivative(argindex)
+        d = sp.diff(form, B if argindex == 2 else A)
+        return d.xreplace({A: a, B: b})
+
+    def _branch_derivative(self, argindex):  # pragma: no cover - overridden where needed
+        raise NotImplementedError
+
+
+def _exp(g):
+    """``exp(g)``, with ``exp(c·log u)`` written ``u**c`` as SymPy writes powers (so they cancel)."""
+    if g.is_Mul:
+        logs = [f for f in g.args if isinstance(f, sp.log)]
+        if len(logs) == 1:
+            return logs[0].args[0] ** (g / logs[0])
+    return sp.exp(g)
+
+
+class exp_dd(DividedDifference):
+    r"""``exp[a, b] = exp((a+b)/2) sinhc((b-a)/2)``."""
+    func_elementary = sp.exp
+
+    def as_quotient(self):
+        a, b = self.args
+        return (_exp(b) - _exp(a)) / (b - a)
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return sp.exp((a + b) / 2) * sinhc((b - a) / 2)
+
+
+class sin_dd(DividedDifference):
+    r"""``sin[a, b] = cos((a+b)/2) sinc((b-a)/2)``."""
+    func_elementary = sp.sin
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return sp.cos((a + b) / 2) * sinc_u((b - a) / 2)
+
+
+class cos_dd(DividedDifference):
+    r"""``cos[a, b] = -sin((a+b)/2) sinc((b-a)/2)``."""
+    func_elementary = sp.cos
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return -sp.sin((a + b) / 2) * sinc_u((b - a) / 2)
+
+
+class sinh_dd(DividedDifference):
+    r"""``sinh[a, b] = cosh((a+b)/2) sinhc((b-a)/2)``."""
+    func_elementary = sp.sinh
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return sp.cosh((a + b) / 2) * sinhc((b - a) / 2)
+
+
+class cosh_dd(DividedDifference):
+    r"""``cosh[a, b] = sinh((a+b)/2) sinhc((b-a)/2)``."""
+    func_elementary = sp.cosh
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return sp.sinh((a + b) / 2) * sinhc((b - a) / 2)
+
+
+class tan_dd(DividedDifference):
+    r"""``tan[a, b] = sinc(b-a) / (cos a cos b)`` (addition formula)."""
+    func_elementary = sp.tan
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return sinc_u(b - a) / (sp.cos(a) * sp.cos(b))
+
+
+class tanh_dd(DividedDifference):
+    r"""``tanh[a, b] = sinhc(b-a) / (cosh a cosh b)`` (addition formula)."""
+    func_elementary = sp.tanh
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return sinhc(b - a) / (sp.cosh(a) * sp.cosh(b))
+
+
+class log_dd(DividedDifference):
+    r"""``log[a, b] = 2 atanhc((b-a)/(a+b)) / (a+b)`` for a, b > 0 (log's real domain).
+
+    The generated helper returns NaN unless a > 0 and b > 0, so a state that
+    leaves the domain stops the run instead of producing a real number.
+    """
+    func_elementary = sp.log
+
+    @classmethod
+    def stable_form(cls, a, b):
+        return 2 / (a + b) * atanhc((b - a) / (a + b))
+
+
+class atan_dd(DividedDifference):
+    r"""``atan[a, b]``: ``atanc(t)/c`` with ``c = 1 + ab``, ``t = (b-a)/c`` where c > 0, else the quotient.
+
+    ``atan b - atan a = atan((b-a)/(1+ab))`` holds exactly where ``1 + ab > 0``
+    (the set of b containing a); elsewhere ``|b - a| >= 2`` and the plain
+    quotient has no cancellation.
+    """
+    func_elementary = sp.atan
+
+    @classmethod
+    def branch_form(cls, a, b):
+        c = 1 + a * b
+        return atanc((b - a) / c) / c
+
+    def _branch_derivative(self, argindex):
+        a, b = self.args
+        return datan_dd(a, b) if argindex == 2 else datan_dd(b, a)
+
+
+class datan_dd(sp.Function):
+    r"""``∂/∂b atan[a, b] = (1/(1+b²) - atan[a, b])/(b - a)``, ``-a/(1+a²)²`` at a = b.
+
+    Jacobians only.  Where ``c = 1 + ab > 0`` the generated helper evaluates
+    ``((1+a²) datanc(t)/c - a atanc(t))/c²`` (no cancellation), else the quotient.
+    """
+
+    nargs = 2
+
+    @classmethod
+    def eval(cls, a, b):
+        if a == b or (a - b).is_zero:
+            return -a / (1 + a**2) ** 2
+        return None
+
+    def _eval_is_real(self):
+        a, b = self.args
+        return (a.is_real and b.is_real) or None
+
+    def as_quotient(self):
+        a, b = self.args
+        return (1 / (1 + b**2) - (sp.atan(b) - sp.atan(a)) / (b - a)) / (b - a)
+
+    @classmethod
+    def branch_form(cls, a, b):
+        c = 1 + a * b
+        t = (b - a) / c
+        return ((1 + a**2) * datanc(t) / c - a * atanc(t)) / c**2
+
+    def fdiff(self, argindex=1):
+        # Second derivatives (never in generated code): from the defining quotient.
+        a, b = self.args
+        A, B = _fresh_pair()
+        return sp.diff(datan_dd(A, B).as_quotient(), B if argindex == 2 else A).xreplace({A: a, B: b})
+
+
+#: The divided difference of each elementary function of the grammar.
+DIVIDED_DIFFERENCES: dict = {sp.exp: exp_dd, sp.log: log_dd, sp.sin: sin_dd, sp.cos: cos_dd, sp.tan: tan_dd,
+                             sp.sinh: sinh_dd, sp.cosh: cosh_dd, sp.tanh: tanh_dd, sp.atan: atan_dd}
+
+
 #: Name of the runtime helper each function prints as.
 SPECIAL_FUNCTIONS: dict[type, str] = {
     sinc_u: "_sinc",
@@ -171,6 +408,25 @@ SPECIAL_FUNCTIONS: dict[type, str] = {
     dsinhc: "_dsinhc",
     datanhc: "_datanhc",
     safe_div: "_sdiv",
+    atanc: "_atanc",
+    datanc: "_datanc",
+    exp_dd: "_expdd",
+    log_dd: "_logdd",
+    sin_dd: "_sindd",
+    cos_dd: "_cosdd",
+    tan_dd: "_tandd",
+    sinh_dd: "_sinhdd",
+    cosh_dd: "_coshdd",
+    tanh_dd: "_tanhdd",
+    atan_dd: "_atandd",
+    datan_dd: "_datandd",
+}
+
+#: Helpers a helper calls (so the template emits them too).
+HELPER_DEPENDENCIES: dict[str, tuple[str, ...]] = {
+    "expdd": ("sinhc",), "sinhdd": ("sinhc",), "coshdd": ("sinhc",), "tanhdd": ("sinhc",),
+    "sindd": ("sinc",), "cosdd": ("sinc",), "tandd": ("sinc",),
+    "logdd": ("atanhc",), "atandd": ("atanc",), "datandd": ("atanc", "datanc", "atandd"),
 }
 
 
@@ -180,4 +436,5 @@ def to_elementary(expr: sp.Expr) -> sp.Expr:
     The result is equal to ``expr`` wherever the quotients are defined; the
     verification layer uses it to reduce identities with ordinary SymPy.
     """
-    return expr.replace(lambda e: isinstance(e, (_RemovableFunction, safe_div)), lambda e: e.as_quotient())
+    return expr.replace(lambda e: isinstance(e, (_RemovableFunction, safe_div, DividedDifference, datan_dd)),
+                        lambda e: e.as_quotient())

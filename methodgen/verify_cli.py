@@ -1,15 +1,19 @@
-"""``methodgen verify SCENE [--method M] [--json] [--format text|markdown|latex]``.
+"""``methodgen verify SCENE [--method M] [--json] [--format text|markdown|latex] [--timeout S]``.
 
 Verifies every claim that applies to the scene's methods (or one method) and
 prints the certificates.  ``--json`` prints exactly one JSON object
 ``{"ok": bool, "certificates": [...], "reports": [...]}``; the exit status is
-1 when some claim is refuted, 0 otherwise; bad input is a one-line error, exit 2.
+1 when some claim is refuted, 0 otherwise (an ``undecided`` claim — exception
+or ``--timeout`` overrun — is not a failure); bad input is a one-line error,
+exit 2.  Once a verification has run for 2 s, progress goes to stderr, claim
+group by claim group (never to stdout).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 
 
 def _dim(text: str) -> int:
@@ -19,6 +23,16 @@ def _dim(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
     if not 1 <= v <= 12:
         raise argparse.ArgumentTypeError(f"dimension must be between 1 and 12, got {v}")
+    return v
+
+
+def _timeout(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
     return v
 
 
@@ -37,7 +51,8 @@ def cmd_verify(args) -> int:
         discretize(scene.system, args.method)  # raises InputError / MethodNotApplicable
     if not methods:
         raise InputError(f"scene {scene.name!r} lists no methods; pass --method")
-    reports = [verify(discretize(scene.system, m), conjugacy_dim=args.conjugacy_dim) for m in methods]
+    reports = [verify(discretize(scene.system, m), conjugacy_dim=args.conjugacy_dim,
+                      timeout=args.timeout, progress=True) for m in methods]
     ok = all(r.ok for r in reports)
     if args.json:
         certs = []
@@ -68,4 +83,7 @@ def add_parser(sub) -> None:
                    help="output format without --json (default: text)")
     p.add_argument("--conjugacy-dim", type=_dim, default=None,
                    help="dimension n for the Exercise 2.1 conjugacy proof (default: 2d)")
+    p.add_argument("--timeout", type=_timeout, default=None, metavar="SECONDS",
+                   help="time budget of each claim group; a claim over budget is 'undecided' "
+                        "(default: 60)")
     p.set_defaults(func=cmd_verify)

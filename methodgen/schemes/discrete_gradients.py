@@ -103,9 +103,12 @@ class AVF:
                     path = {a: a + sigma * (b - a) for a, b in zip(y0, y1)}
                     out.append(sp.integrate(sp.expand(g.xreplace(path)), (sigma, 0, 1)))
                 elif kinds[i] == "divided-difference":
-                    # ∫ ∂_i h(y_i) along the segment = h[y0_i, y1_i] for the part of H in y_i.
-                    Hi = sp.integrate(g, ys[i])
-                    out.append(divided_difference(Hi, ys[i], y0[i], y1[i]))
+                    # ∂H/∂y_i depends on y_i only, so H = h(y_i) + (rest without y_i) and the
+                    # AVF component ∫ h'(y_i(σ)) dσ is h[y0_i, y1_i]: the divided difference of
+                    # H's terms in y_i (the others held at y0; they drop out exactly).
+                    Hi = sp.Add(*[t for t in sp.Add.make_args(system.H) if ys[i] in t.free_symbols])
+                    others = {s: a for j, (s, a) in enumerate(zip(ys, y0)) if j != i}
+                    out.append(divided_difference(Hi.xreplace(others), ys[i], y0[i], y1[i]))
                 else:
                     out.append(sp.Add(*[wk * g.xreplace({a: a + ck * (b - a) for a, b in zip(y0, y1)})
                                         for ck, wk in zip(cs, ws)]))

@@ -145,6 +145,28 @@ def applies(system: Hamiltonian) -> str | None:
     return None
 
 
+def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
+    """The angular momenta L (first integrals of H) that the term-wise discrete gradient keeps.
+
+    L is quadratic, so ``L(y1) - L(y0) = ∇L(ȳ)ᵀ(y1 - y0) = h ∇L(ȳ)ᵀ J ∇̄H``.  With
+    ``∇̄H = [Σ V_t[E0, E1] ∇E_t(q̄); M⁻¹ p̄]`` this is ``h (Σ V_t[·] {L, E_t} + {L, T})(ȳ)``,
+    so L is kept exactly when every term is a function of a quadratic form E_t with
+    ``{L, E_t} = 0`` (then ``{L, T} = {L, H} = 0`` too).  A term V(E) whose form is not
+    rotation-invariant (``4(x² + 2y²)²``) keeps no L, even if the sum U happens to be radial.
+    """
+    if not terms or any(t.kind != "quadratic-form" for t in terms):
+        return ()
+    q, p = list(system.q), list(system.p)
+    out = []
+    for inv in angular_momenta(system):
+        L = inv.expr
+        # {L, E(q)} = -Σ_k ∂L/∂p_k ∂E/∂q_k
+        if all(sp.expand(sum(sp.diff(L, pk) * sp.diff(t.E, qk) for qk, pk in zip(q, p))) == 0
+               for t in terms):
+            out.append(inv)
+    return tuple(out)
+
+
 def _term_dg(term: _Term, q, q0, q1) -> list[sp.Expr]:
     """Discrete gradient of one additive term, as a list over the coordinates."""
     sub0, sub1 = dict(zip(q, q0)), dict(zip(q, q1))
@@ -179,8 +201,7 @@ def build(system: Hamiltonian) -> Scheme:
         return sp.Matrix(Gq + list(Gp))
 
     kinds = sorted({t.kind for t in terms})
-    rotational = all(t.kind == "quadratic-form" for t in terms) and sep.isotropic
-    momenta = tuple(inv.name for inv in angular_momenta(system)) if rotational else ()
+    momenta = tuple(inv.name for inv in kept_angular_momenta(system, terms))
     notes = []
     if "quadratic-form" in kinds:
         notes.append("κ∇U(q̄) = Σ V[E0, E1] ∇E(q̄) over terms V(E) with E a quadratic form "

@@ -18,7 +18,19 @@ claim                                  module
 =====================================  ===============================================
 
 Statuses: ``proved`` (exact reduction to 0, no floats), ``refuted`` (a
-counterexample point), ``numerical`` (sample points and tolerance; never a proof).
+counterexample point), ``numerical`` (sample points and tolerance; never a
+proof), ``undecided`` (the reduction raised an exception or exceeded its time
+budget; ``details["reason"]`` says which).
+
+Never a crash, bounded time: each claim group (one row of the table above, for
+one scheme) runs as a deferred thunk under a per-claim time budget
+(:data:`DEFAULT_TIMEOUT` = 60 s unless ``verify(..., timeout=...)``), see
+:mod:`.budget`.  An exception or an overrun — also while deciding whether the
+claim applies (``radial_profile``, ``is_quadratic_field``, ...) — becomes one
+``undecided`` certificate named after the group; no exception escapes
+:func:`verify` (``KeyboardInterrupt`` still does).  The budget is enforced
+with ``SIGALRM`` and so only in the main thread on POSIX; elsewhere the claims
+run without a limit.  The worst case is thus about ten budgets per scheme.
 
 The module object is callable, so ``methodgen.verify(scheme)`` works once
 ``methodgen.verify`` has been imported.
@@ -26,11 +38,17 @@ The module object is callable, so ``methodgen.verify(scheme)`` works once
 
 from __future__ import annotations
 
+import math
 import sys
+import threading
+import time
 import types
+from typing import Callable, NamedTuple
 
 from ..derive import angular_momenta, radial_profile, separable_split
 from ..schemes.base import is_linear_field, is_quadratic_field
+from .budget import BudgetExceeded, budget
+from .common import REF_KAHAN, REF_NOTES
 from .conjugacy import conjugacy_certificate
 from .constrained import constrained_certificates
 from .discrete_gradients import dg_certificates, dg_symmetry
@@ -39,9 +57,18 @@ from .kahan import (forms_agree_generic, forms_agree_user, modified_energy, modi
                     modified_volume)
 from .maps import explicit_symmetry, residual_symmetry, symplectic_certificate
 from .quadratic import retiming_certificate
-from .report import NUMERICAL, PROVED, REFUTED, Certificate, Report
+from .report import NUMERICAL, PROVED, REFUTED, STATUSES, UNDECIDED, Certificate, Report
 
-__all__ = ["verify", "Report", "Certificate", "PROVED", "REFUTED", "NUMERICAL"]
+__all__ = ["verify", "Report", "Certificate", "PROVED", "REFUTED", "NUMERICAL", "UNDECIDED",
+           "STATUSES", "DEFAULT_TIMEOUT", "BudgetExceeded", "budget"]
+
+#: Default time budget, in seconds, of each claim group (``verify(timeout=None)``).
+DEFAULT_TIMEOUT = 60.0
+#: With ``progress=True``, progress lines appear on stderr once a verification
+#: has run this many seconds (so fast runs print nothing).
+PROGRESS_AFTER = 2.0
+
+_REASON_CHARS = 300
 
 
 def _symmetry(scheme) -> list[Certificate]:
@@ -54,7 +81,281 @@ def _symmetry(scheme) -> list[Certificate]:
     return []   # constrained methods: see constrained_certificates
 
 
-def verify(scheme, conjugacy_dim: int | None = None) -> Report:
+# --- claim groups -------------------------------------------------------------------
+
+class _Claim(NamedTuple):
+    """One claim group: a label, its reference and a thunk returning certificates."""
+
+    label: str
+    ref: str
+    run: Callable[[], object]     # -> Certificate | list[Certificate] | None
+
+
+class _Undecidable(Exception):
+    """Whether a claim applies could not be decided (the message is the reason)."""
+
+
+def _one_line(exc: BaseException) -> str:
+    msg = str(exc).strip().splitlines()
+    text = f"{type(exc).__name__}: {msg[0]}" if msg and msg[0] else type(exc).__name__
+    return text if len(text) <= _REASON_CHARS else text[:_REASON_CHARS - 1] + "…"
+
+
+class _Lazy:
+    """A property of the system, computed on first use and shared by claim groups.
+
+    A failure is remembered, so the next group that needs it is undecided at
+    once instead of spending its own budget on the same computation.
+    """
+
+    def __init__(self, what: str, fn: Callable[[], object]):
+        self.what, self.fn = what, fn
+        self.value, self.done, self.failure = None, False, None
+
+    def __call__(self):
+        if self.done:
+            return self.value
+        if self.failure is not None:
+            raise self.failure
+        try:
+            self.value = self.fn()
+        except BudgetExceeded:
+            self.failure = _Undecidable(f"could not decide whether the claim applies: {self.what} "
+                                        "ran out of time in an earlier claim")
+            raise
+        except Exception as exc:
+            self.failure = _Undecidable(f"could not decide whether the claim applies: {self.what} "
+                                        f"failed: {_one_line(exc)}")
+            raise self.failure from exc
+        self.done = True
+        return self.value
+
+
+def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
+    """The claim groups that apply, as deferred thunks.
+
+    Only cheap attribute tests are made here; the checks that compute
+    (``radial_profile``, ``is_quadratic_field``...) run inside the thunks.
+    """
+    system, traits, m = scheme.system, scheme.traits, scheme.method
+    d = system.dim
+    radial = _Lazy("the radial-potential test (radial_profile, angular_momenta)",
+                   lambda: radial_profile(system) is not None and bool(angular_momenta(system)))
+
+    def _isotropic():
+        sep = separable_split(system)
+        return sep is not None and bool(sep.isotropic)
+
+    isotropic = _Lazy("the separable split (separable_split)", _isotropic)
+    quadratic = _Lazy("the quadratic-field test (is_quadratic_field)", lambda: is_quadratic_field(system))
+    linear = _Lazy("the linear-field test (is_linear_field)", lambda: is_linear_field(system))
+    claims: list[_Claim] = []
+
+    def add(label, ref, run):
+        claims.append(_Claim(label, ref, run))
+
+    # Claim 1: first integrals of the flow (system-level).
+    if d >= 2 and not system.constraints:
+        add(f"q × p first integrals for every radial potential V ({d}D)", f"{REF_NOTES}, Ex. 1.1.1",
+            lambda: angular_momentum_generic(d) if radial() and isotropic() else [])
+        add("q × p first integrals of this H", f"{REF_NOTES}, Ex. 1.1.1",
+            lambda: angular_momentum_user(system) if radial() else [])
+    # Claims 2, 4: discrete gradients.
+    if traits.discrete_gradient and scheme.discrete_gradient is not None:
+        what = "identity, consistency and κ" if m == "energy-momentum" else "identity and consistency"
+        add(f"discrete-gradient {what} ({m})", f"{REF_NOTES}, Ex. 1.1.2",
+            lambda: dg_certificates(scheme))
+    # Claim 3 and every other invariant the traits promise.
+    if not system.constraints:
+        add(f"invariants kept by the step ({m})", f"{REF_NOTES}, Ex. 1.1.3",
+            lambda: invariant_certificates(scheme))
+    # Claim 5: Exercise 2.1.
+    if m == "trapezoidal":
+        n = conjugacy_dim or 2 * d
+        add(f"trapezoidal rule conjugate to the midpoint rule (n = {n})", f"{REF_NOTES}, Ex. 2.1",
+            lambda: conjugacy_certificate(n))
+    # Claim 6: Kahan on quadratic vector fields.
+    if m == "kahan":
+        def _energy():
+            fast = modified_energy_fast(system) if d == 1 else None
+            return fast if fast is not None else modified_energy(system)
+
+        for label, run in ((f"Kahan's two forms agree (generic quadratic field, n = {2 * d})",
+                            lambda: forms_agree_generic(2 * d)),
+                           ("Kahan's two forms agree on this field", lambda: forms_agree_user(system)),
+                           ("Kahan preserves a modified energy", _energy),
+                           ("Kahan preserves a modified volume form", lambda: modified_volume(system))):
+            add(label, REF_KAHAN, (lambda run=run: run() if quadratic() else []))
+    # Claims 7, 8: symplecticity.
+    if system.constraints:
+        add(f"constraints, symmetry and symplecticity on T*Q ({m})",
+            f"{REF_NOTES}, section 1.3 (RATTLE)", lambda: constrained_certificates(scheme))
+    elif traits.symplectic:
+        add(f"the step map is symplectic ({m})", "symplecticity (section 1.2)",
+            lambda: symplectic_certificate(scheme))
+        add(f"quadratic H: the step is the exact flow at a re-timed step ({m})",
+            f"{REF_NOTES}, section 1.2 (Theorem 1.1)",
+            lambda: retiming_certificate(scheme) if linear() else None)
+    # Claim 9: symmetry.
+    if traits.symmetric and not system.constraints:
+        add(f"the step is symmetric ({m})", "symmetry (claim 9)", lambda: _symmetry(scheme))
+    return claims
+
+
+def _undecided(label: str, ref: str, seconds: float, reason: str, **details) -> Certificate:
+    return Certificate(label, UNDECIDED, seconds=seconds, ref=ref, details={"reason": reason, **details})
+
+
+def _as_certificates(out) -> list[Certificate]:
+    if out is None:
+        return []
+    items = [out] if isinstance(out, Certificate) else list(out)
+    bad = [c for c in items if c is not None and not isinstance(c, Certificate)]
+    if bad:
+        raise TypeError(f"a claim returned {type(bad[0]).__name__}, not a Certificate")
+    return [c for c in items if c is not None]
+
+
+def _run_claim(claim: _Claim, seconds: float) -> list[Certificate]:
+    """Run one claim group under a budget; an exception or an overrun is one undecided certificate."""
+    t0 = time.perf_counter()
+    b = budget(seconds)
+    try:
+        with b:
+            out = claim.run()
+        return _as_certificates(out)
+    except BudgetExceeded as exc:
+        if exc.budget is not b:          # an enclosing budget ran out: not ours to report
+            raise
+        return [_undecided(claim.label, claim.ref, time.perf_counter() - t0,
+                           f"time budget of {seconds:g} s exceeded", timeout=seconds)]
+    except _Undecidable as exc:
+        return [_undecided(claim.label, claim.ref, time.perf_counter() - t0, str(exc))]
+    except Exception as exc:
+        return [_undecided(claim.label, claim.ref, time.perf_counter() - t0,
+                           f"reduction failed: {_one_line(exc)}", exception=type(exc).__name__)]
+
+
+def _claim_seconds(timeout) -> float:
+    """The per-claim budget: ``None``/0 → :data:`DEFAULT_TIMEOUT`; negative or non-finite → ValueError."""
+    default = float(DEFAULT_TIMEOUT)
+    if timeout is None:
+        return default
+    try:
+        t = float(timeout)
+    except (TypeError, ValueError):
+        raise ValueError(f"timeout must be a number of seconds (or None), got {timeout!r}") from None
+    if not math.isfinite(t) or t < 0:
+        raise ValueError(f"timeout must be a finite number of seconds >= 0 (0 or None: the default "
+                         f"{default:g} s), got {timeout!r}")
+    return t if t > 0 else default
+
+
+# --- progress -------------------------------------------------------------------------
+
+class _Progress:
+    """Claim-by-claim progress on stderr, shown only once :data:`PROGRESS_AFTER` seconds passed.
+
+    A watcher thread switches it on, so a long first claim is reported too.
+    On a terminal it is a ``tqdm`` line updated in place (plain lines without
+    tqdm); on a pipe or file, one plain line per claim group.  Never stdout.
+    """
+
+    def __init__(self, total: int, enabled: bool):
+        self.total, self.enabled = total, enabled and total > 0
+        self.file = sys.stderr
+        self.t0 = time.monotonic()
+        self.lock = threading.Lock()
+        self.stop = threading.Event()
+        self.current: tuple[int, str] | None = None
+        self.active = False
+        self.bar = None
+        self.thread = None
+        if self.enabled:
+            self.thread = threading.Thread(target=self._watch, name="methodgen-verify-progress",
+                                           daemon=True)
+            self.thread.start()
+
+    def _tty(self) -> bool:
+        try:
+            return bool(self.file.isatty())
+        except Exception:
+            return False
+
+    def _watch(self):
+        if self.stop.wait(max(float(PROGRESS_AFTER), 0.0)):
+            return
+        with self.lock:
+            if self.stop.is_set():
+                return
+            if not self.active:
+                self.active = True
+                if self.current is not None:
+                    self._show(*self.current)
+        while not self.stop.wait(1.0):   # keep the elapsed time of a long claim fresh
+            with self.lock:
+                if self.bar is not None and not self.stop.is_set():
+                    self.bar.refresh()
+
+    def step(self, i: int, label: str) -> None:
+        if not self.enabled:
+            return
+        with self.lock:
+            self.current = (i, label)
+            if not self.active and time.monotonic() - self.t0 >= float(PROGRESS_AFTER):
+                self.active = True       # do not depend on the watcher thread at group boundaries
+            if self.active:
+                self._show(i, label)
+
+    def _show(self, i: int, label: str) -> None:
+        try:
+            if self.bar is None and self._tty():
+                try:
+                    from tqdm import tqdm
+                except ImportError:
+                    tqdm = None
+                if tqdm is not None:
+                    self.bar = tqdm(total=self.total, initial=i, desc=label, file=self.file,
+                                    leave=False, dynamic_ncols=True,
+                                    bar_format="verify: [{n}/{total}] {desc} … {elapsed}")
+                    self.bar.start_t -= time.monotonic() - self.t0   # elapsed since verify() began
+                    self.bar.refresh()
+                    return
+            if self.bar is not None:
+                self.bar.n = i
+                self.bar.set_description_str(label, refresh=False)
+                self.bar.refresh()
+            else:
+                print(f"verify: [{i}/{self.total}] {label} … ({time.monotonic() - self.t0:.1f} s)",
+                      file=self.file, flush=True)
+        except Exception:            # progress must never break a verification
+            self.enabled = False
+
+    def close(self) -> None:
+        if not self.enabled and self.thread is None:
+            return
+        self.stop.set()
+        with self.lock:
+            if self.bar is not None:
+                try:
+                    self.bar.close()
+                except Exception:
+                    pass
+                self.bar = None
+
+
+# --- verify -----------------------------------------------------------------------------
+
+def _title(scheme) -> str:
+    try:
+        system = scheme.system
+        return f"{scheme.method} on {system.name or 'H = ' + str(system.H)}"
+    except Exception:
+        return f"{getattr(scheme, 'method', '?')} on an unprintable system"
+
+
+def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = None,
+           progress: bool = False) -> Report:
     """Certify every claim that applies to ``scheme`` (and its system).
 
     Parameters
@@ -64,50 +365,47 @@ def verify(scheme, conjugacy_dim: int | None = None) -> Report:
     conjugacy_dim : int, optional
         Phase-space dimension for the Exercise 2.1 conjugacy (trapezoidal
         rule); default ``2d`` of the system.
+    timeout : float, optional
+        Time budget in seconds of *each* claim group; ``None`` or 0 means
+        :data:`DEFAULT_TIMEOUT` (60 s).  A claim group that exceeds it is
+        ``undecided``.  Enforced in the main thread on POSIX only (SIGALRM).
+    progress : bool
+        Print claim-by-claim progress on stderr once the verification has run
+        for :data:`PROGRESS_AFTER` (2) seconds.  Off by default; the CLI turns it on.
 
     Returns
     -------
     Report
-        ``.ok`` is False iff some applicable claim was refuted.
+        ``.ok`` is False iff some applicable claim was refuted; ``.decided`` is
+        False if some claim is ``undecided``.  No exception escapes (except
+        ``KeyboardInterrupt`` and the ``ValueError`` of a bad ``timeout``).
     """
-    system, traits = scheme.system, scheme.traits
+    seconds = _claim_seconds(timeout)
+    title = _title(scheme)
+    label = f"which claims apply ({getattr(scheme, 'method', '?')})"
+    plan = _Claim(label, REF_NOTES, lambda: _plan(scheme, conjugacy_dim))
+    claims: list[_Claim] = []
     certs: list[Certificate] = []
-    # Claim 1: first integrals of the flow (system-level).
-    if system.dim >= 2 and radial_profile(system) is not None and angular_momenta(system) \
-            and not system.constraints:
-        sep = separable_split(system)
-        if sep is not None and sep.isotropic:
-            certs += angular_momentum_generic(system.dim)
-        certs += angular_momentum_user(system)
-    # Claims 2, 4: discrete gradients.
-    if traits.discrete_gradient and scheme.discrete_gradient is not None:
-        certs += dg_certificates(scheme)
-    # Claim 3 and every other invariant the traits promise.
-    if not system.constraints:
-        certs += invariant_certificates(scheme)
-    # Claim 5: Exercise 2.1.
-    if scheme.method == "trapezoidal":
-        certs.append(conjugacy_certificate(conjugacy_dim or 2 * system.dim))
-    # Claim 6: Kahan on quadratic vector fields.
-    if scheme.method == "kahan" and is_quadratic_field(system):
-        certs.append(forms_agree_generic(2 * system.dim))
-        certs.append(forms_agree_user(system))
-        fast = modified_energy_fast(system) if system.dim == 1 else None
-        certs.append(fast if fast is not None else modified_energy(system))
-        certs.append(modified_volume(system))
-    # Claims 7, 8: symplecticity.
-    if system.constraints:
-        certs += constrained_certificates(scheme)
-    elif traits.symplectic:
-        certs.append(symplectic_certificate(scheme))
-        if is_linear_field(system):
-            r = retiming_certificate(scheme)
-            if r is not None:
-                certs.append(r)
-    # Claim 9: symmetry.
-    if traits.symmetric and not system.constraints:
-        certs += _symmetry(scheme)
-    title = f"{scheme.method} on {system.name or 'H = ' + str(system.H)}"
+    t0 = time.perf_counter()
+    b = budget(seconds)
+    try:
+        with b:
+            claims = plan.run()
+    except BudgetExceeded as exc:
+        if exc.budget is not b:
+            raise
+        certs.append(_undecided(label, REF_NOTES, time.perf_counter() - t0,
+                                f"time budget of {seconds:g} s exceeded", timeout=seconds))
+    except Exception as exc:
+        certs.append(_undecided(label, REF_NOTES, time.perf_counter() - t0,
+                                f"reduction failed: {_one_line(exc)}", exception=type(exc).__name__))
+    bar = _Progress(len(claims), progress)
+    try:
+        for i, claim in enumerate(claims, 1):
+            bar.step(i, claim.label)
+            certs += _run_claim(claim, seconds)
+    finally:
+        bar.close()
     return Report(title, certs)
 
 

@@ -17,9 +17,10 @@ import sympy as sp
 from ..derive import gradient, separable_split
 from .common import REF_NOTES, at, system_domain, y1_symbols
 from .exact import certify
+from .helpers import helper_certificates
 
 __all__ = ["dg_identity", "dg_consistency", "dg_symmetry", "kappa_midpoint_gradient",
-           "kappa_form", "dg_certificates"]
+           "kappa_form", "kappa_applies", "dg_certificates"]
 
 
 def dg_identity(system, dg: sp.Matrix, label: str, ref: str = "") -> "Certificate":
@@ -79,12 +80,34 @@ def kappa_form(scheme) -> "Certificate":
                    expr, system_domain(system), f"{REF_NOTES}, Ex. 1.1.2")
 
 
+def kappa_applies(scheme) -> bool:
+    """Is the scheme's q-part the notes' single κ∇U(q̄) (Ex. 1.1.2) for this system?
+
+    Yes in one degree of freedom, and when every term of U is a function of the same
+    quadratic form E (a radial U: E = |q|²): then Σ V_t[E0, E1] ∇E(q̄) = κ∇U(q̄) exactly.
+    For a term-wise discrete gradient (Hénon–Heiles, N-body sums) the method is not the
+    notes' κ-scaled midpoint gradient, so the claim is not this method's and is not checked.
+    """
+    from ..schemes.energy_momentum import decompose
+
+    system = scheme.system
+    if system.dim == 1:
+        return True
+    terms = decompose(system)
+    if not terms or any(t.kind != "quadratic-form" for t in terms):
+        return False
+    forms = {sp.expand(t.E) for t in terms}
+    return len(forms) == 1
+
+
 def dg_certificates(scheme) -> list:
-    """Identity and consistency for a discrete-gradient scheme; κ for energy-momentum."""
+    """Identity and consistency for a discrete-gradient scheme; κ for energy-momentum where it is
+    the notes' κ; one certificate per generated helper the discrete gradient evaluates."""
     system, dg, label = scheme.system, scheme.discrete_gradient, scheme.method
     ref = f"{REF_NOTES}, Ex. 1.1.2" if scheme.method == "energy-momentum" else \
         "discrete gradients (claim 4; McLachlan-Quispel-Robidoux 1999)"
     out = [dg_identity(system, dg, label, ref), dg_consistency(system, dg, label, ref)]
-    if scheme.method == "energy-momentum":
+    if scheme.method == "energy-momentum" and kappa_applies(scheme):
         out.append(kappa_form(scheme))
+    out += helper_certificates(list(dg))
     return out

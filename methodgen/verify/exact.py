@@ -30,7 +30,9 @@ from math import gcd, isqrt
 
 import sympy as sp
 
-from ..special import _RemovableFunction, to_elementary
+from ..special import DividedDifference, _RemovableFunction, datan_dd, to_elementary
+
+_QUOTIENT_FUNCTIONS = (DividedDifference, datan_dd)
 
 try:  # guarded quotient n/d (0 where d = 0), used by newer Gonzalez forms
     from ..special import safe_div
@@ -94,16 +96,84 @@ def _flatten(expr) -> list[sp.Expr]:
     return [sp.sympify(expr)]
 
 
-def _generic_branch(e: sp.Expr) -> sp.Expr:
-    """Replace each Piecewise by its first branch and ``safe_div(n, d)`` by ``n/d``.
+#: Cases of a guarded quotient split at most this many guards deep (2**k cases).
+MAX_GUARDS = 3
 
-    That is the generic case (e.g. |Δ|² > 0); the other branch applies only on
-    the removable point itself, where the callers' identities hold trivially.
+#: What ``reduce_to_zero`` reports when SymPy's construction already gives 0.
+ZERO_AS_BUILT = "0 as constructed: SymPy cancels the terms while building the expression"
+
+
+def _zero_set(d: sp.Expr) -> dict | None:
+    """A substitution describing the real solutions of ``d = 0`` for a sum of squares, or None.
+
+    ``d = Σ c_k e_k²`` with numbers ``c_k > 0`` vanishes over the reals exactly when
+    every ``e_k = 0``; each ``e_k`` linear in some symbol is solved for it (e.g.
+    ``|Δ|² = 0`` gives ``y1 = y0``).
     """
-    e = e.replace(lambda x: isinstance(x, sp.Piecewise), lambda x: x.args[0].expr)
-    if safe_div is not None:
-        e = e.replace(lambda x: isinstance(x, safe_div), lambda x: x.args[0] / x.args[1])
-    return e
+    sub: dict = {}
+    for t in sp.Add.make_args(sp.expand(d) if not d.is_Add else d):
+        c, rest = t.as_coeff_Mul()
+        if not (c.is_number and c.is_positive and rest.is_Pow and rest.exp == 2):
+            return None
+        e = rest.base.xreplace(sub)
+        if e == 0:
+            continue
+        for x in sorted(e.free_symbols, key=lambda s: s.name, reverse=True):
+            coeff = sp.diff(e, x)
+            if coeff.is_number and coeff != 0 and x not in sp.diff(e, x).free_symbols \
+                    and sp.expand(e - coeff * x).free_symbols.isdisjoint({x}):
+                val = sp.expand(x - e / coeff)
+                sub = {k: v.xreplace({x: val}) for k, v in sub.items()}
+                sub[x] = val
+                break
+        else:
+            return None
+    return sub
+
+
+def guard_cases(e: sp.Expr):
+    """Split ``e`` at its guarded quotients ``safe_div(n, d)`` into exhaustive cases.
+
+    Returns a list of ``(label, expression)``: for each guard denominator ``d``
+    the case ``d != 0`` (the guard is ``n/d``) and the case ``d = 0`` (the guard is
+    0 and the zero set of d is substituted).  The identity holds everywhere iff it
+    reduces to 0 in every case.  ``None`` when a zero set cannot be described.
+    """
+    if safe_div is None or not e.has(safe_div):
+        return [("", e)]
+    # Group guards by their expanded denominator: (p - p1)**2 and (p1 - p)**2 are one guard.
+    rep: dict = {}
+    for g in sorted(e.atoms(safe_div), key=sp.default_sort_key):
+        rep.setdefault(sp.expand(g.args[1]), g.args[1])
+    dens = sorted(rep, key=sp.default_sort_key)
+    if len(dens) > MAX_GUARDS:
+        return None
+    zero_sets = []
+    for d in dens:
+        z = _zero_set(rep[d])
+        if z is None:
+            return None
+        zero_sets.append(z)
+    cases = []
+    for mask in range(2 ** len(dens)):
+        expr, labels, sub = e, [], {}
+        for k, d in enumerate(dens):
+            if mask >> k & 1:
+                labels.append(f"case {rep[d]} = 0")
+                sub.update(zero_sets[k])
+                expr = expr.replace(lambda x, d=d: isinstance(x, safe_div) and sp.expand(x.args[1]) == d,
+                                    lambda x: sp.S.Zero)
+            else:
+                labels.append(f"case {rep[d]} ≠ 0")
+                expr = expr.replace(lambda x, d=d: isinstance(x, safe_div) and sp.expand(x.args[1]) == d,
+                                    lambda x: x.args[0] / x.args[1])
+        if sub:
+            expr = expr.xreplace(sub)
+            if expr.has(safe_div):   # a guard whose denominator vanished with the others
+                expr = expr.replace(lambda x: isinstance(x, safe_div),
+                                    lambda x: sp.S.Zero if sp.expand(x.args[1]) == 0 else x.args[0] / x.args[1])
+        cases.append((", ".join(labels), expr))
+    return cases
 
 
 def guarded(e: sp.Expr) -> sp.Expr:
@@ -176,35 +246,63 @@ def _trig_reduce(e: sp.Expr) -> bool:
     return num == 0
 
 
-def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True) -> str | None:
+def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True, cheap: bool = True) -> str | None:
     """Try to reduce ``e`` to exactly 0; return the name of the reduction that did, or None.
 
+    Soundness rules (what makes ``proved`` mean proved for the generated code):
+
+    * a ``Piecewise`` is never reduced on one branch: an expression with one is not
+      proved here (methodgen's schemes emit none; the parser refuses them);
+    * a guarded quotient ``safe_div(n, d)`` is split into its exhaustive cases
+      ``d ≠ 0`` (``n/d``) and ``d = 0`` (0, with the zero set of d substituted),
+      and every case must reduce to 0 (:func:`guard_cases`);
+    * the removable-singularity functions and divided differences of
+      :mod:`methodgen.special` are replaced by their defining quotients; they are
+      analytic, so an identity proved away from their removable points holds there
+      too by continuity.  That the generated helpers evaluate exactly these
+      functions is proved separately (:mod:`methodgen.verify.helpers`).
+
     The cheap reductions come first; ``simplify`` (slow, and unpredictable on
-    large expressions) only when ``allow_simplify`` and the expression is small.
+    large expressions) only when ``allow_simplify`` and the expression is small;
+    ``cheap=False`` skips straight to ``simplify``.
     """
     if e == 0:
-        return "automatic canonicalisation (0 as built)"
-    notes = []
-    if e.has(sp.Piecewise) or (safe_div is not None and e.has(safe_div)):
-        e = _generic_branch(e)
-        notes.append("generic Piecewise branch")
-    if e.atoms(_RemovableFunction):
+        return ZERO_AS_BUILT
+    if e.has(sp.Piecewise):
+        return None
+    cases = guard_cases(e)
+    if cases is None:
+        return None
+    names = []
+    for label, ce in cases:
+        m = _reduce_case(ce, allow_simplify, cheap)
+        if m is None:
+            return None
+        names.append(f"{label}: {m}" if label else m)
+    return "; ".join(names)
+
+
+def _reduce_case(e: sp.Expr, allow_simplify: bool, cheap: bool) -> str | None:
+    if e == 0:
+        return "0 by substitution"
+    pre = ""
+    if any(isinstance(f, (_RemovableFunction,) + _QUOTIENT_FUNCTIONS) for f in e.atoms(sp.Function)):
         e = to_elementary(e)
-        notes.append("to_elementary")
-    pre = " + ".join(notes) + " + " if notes else ""
-    if sp.cancel(sp.together(e)) == 0:
-        return pre + "cancel"
-    ex = sp.expand(e)
-    if ex == 0:
-        return pre + "expand"
-    if _radical_reduce(e):
-        return pre + "radical elimination + polynomial reduction"
-    if _trig_reduce(e):
-        return pre + "half-angle expand_trig + reduction mod sin²+cos²=1"
-    if e.has(sp.exp, sp.sinh, sp.cosh, sp.tanh, sp.atanh, sp.log):
-        r = sp.cancel(sp.expand(e.rewrite(sp.exp)))
-        if r == 0:
-            return pre + "rewrite(exp) + cancel"
+        pre = "special functions → their defining quotients + "
+    if cheap:
+        if sp.cancel(sp.together(e)) == 0:
+            return pre + "cancel"
+        ex = sp.expand(e)
+        if ex == 0:
+            return pre + "expand"
+        if _radical_reduce(e):
+            return pre + "radical elimination + polynomial reduction"
+        if _trig_reduce(e):
+            return pre + "half-angle expand_trig + reduction mod sin²+cos²=1"
+        if e.has(sp.exp, sp.sinh, sp.cosh, sp.tanh, sp.atanh, sp.log):
+            r = sp.cancel(sp.expand(e.rewrite(sp.exp)))
+            if r == 0:
+                return pre + "rewrite(exp) + cancel"
     if allow_simplify and sp.count_ops(e) <= SIMPLIFY_LIMIT and sp.simplify(e) == 0:
         return pre + "simplify"
     return None
@@ -214,7 +312,7 @@ def _value(e: sp.Expr, point: dict):
     """Exact value at a rational point (None if undefined), and whether it is rational."""
     try:
         v = guarded(e).xreplace(point)
-        v = to_elementary(v) if v.atoms(_RemovableFunction) else v
+        v = to_elementary(v)
         v = sp.nsimplify(v) if v.has(sp.Float) else v
     except (ZeroDivisionError, TypeError):
         return None, False
@@ -300,7 +398,7 @@ def numerical_check(exprs, domain: Domain, tol: float, n: int = 5, seed: int = 7
         vals = []
         for e in exprs:
             v = guarded(e).xreplace(pt)
-            v = to_elementary(v) if v.atoms(_RemovableFunction) else v
+            v = to_elementary(v)
             v = sp.N(v, DIGITS)
             if not v.is_number or v.has(sp.zoo, sp.nan):
                 vals = None
@@ -369,15 +467,14 @@ def certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
     if ce is None and failing:
         still = []
         for e in failing:
-            g = to_elementary(_generic_branch(e))
-            m = "simplify" if (sp.count_ops(g) <= SIMPLIFY_LIMIT and sp.simplify(g) == 0) else None
+            m = reduce_to_zero(e, allow_simplify=True, cheap=False)
             if m is None:
                 still.append(e)
             elif m not in methods:
                 methods.append(m)
         failing = still
     if not failing:
-        return Certificate(claim, PROVED, text, tex, ", ".join(methods) or "automatic canonicalisation (0 as built)",
+        return Certificate(claim, PROVED, text, tex, ", ".join(methods) or ZERO_AS_BUILT,
                            time.perf_counter() - t0, ref, det)
     if ce is not None:
         pt, i, v, exact = ce

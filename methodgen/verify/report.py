@@ -11,12 +11,13 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["Certificate", "Report", "PROVED", "REFUTED", "NUMERICAL", "STATUSES"]
+__all__ = ["Certificate", "Report", "PROVED", "REFUTED", "NUMERICAL", "UNDECIDED", "STATUSES"]
 
 PROVED = "proved"
 REFUTED = "refuted"
 NUMERICAL = "numerical"
-STATUSES = (PROVED, REFUTED, NUMERICAL)
+UNDECIDED = "undecided"   # the reduction raised or ran out of time: neither proof nor refutation
+STATUSES = (PROVED, REFUTED, NUMERICAL, UNDECIDED)
 
 
 @dataclass
@@ -29,8 +30,10 @@ class Certificate:
         The claim in words.
     status : str
         ``"proved"`` (an identity reduced to exactly 0, no floating point),
-        ``"refuted"`` (a counterexample point where it is nonzero) or
-        ``"numerical"`` (checked at sample points with a tolerance; never a proof).
+        ``"refuted"`` (a counterexample point where it is nonzero),
+        ``"numerical"`` (checked at sample points with a tolerance; never a proof) or
+        ``"undecided"`` (the reduction raised an exception or exceeded its time
+        budget; ``details["reason"]`` says which — not a failure, not a proof).
     expression : str
         The expression that was reduced (or checked), as text.
     latex : str
@@ -61,15 +64,25 @@ class Certificate:
 
     @property
     def passed(self) -> bool:
-        """False for a refutation or a numerical check that failed its tolerance."""
+        """False for a refutation or a numerical check that failed its tolerance.
+
+        An undecided claim has not failed: ``passed`` is True (see
+        :attr:`Report.decided`).
+        """
         if self.status == REFUTED:
             return False
+        if self.status == UNDECIDED:
+            return True
         return bool(self.details.get("passed", True))
 
     def to_dict(self) -> dict:
         return {"claim": self.claim, "status": self.status, "seconds": round(self.seconds, 4),
                 "method": self.method, "ref": self.ref, "expression": self.expression,
                 "latex": self.latex, "details": self.details}
+
+
+def _reason(c: Certificate) -> str:
+    return str(c.details.get("reason", "not decided")).replace("\n", " ")
 
 
 def _md_escape(text: str) -> str:
@@ -108,8 +121,22 @@ class Report:
         return all(c.passed for c in self.certificates)
 
     @property
+    def undecided(self) -> list[Certificate]:
+        """The certificates whose claim could not be decided (exception or time budget)."""
+        return [c for c in self.certificates if c.status == UNDECIDED]
+
+    @property
+    def decided(self) -> bool:
+        """True iff every claim was decided (no ``undecided`` certificate)."""
+        return not self.undecided
+
+    @property
     def seconds(self) -> float:
         return sum(c.seconds for c in self.certificates)
+
+    def _summary(self) -> str:
+        n = len(self.undecided)
+        return f", {n} undecided" if n else ""
 
     def __getitem__(self, i):
         return self.certificates[i]
@@ -132,13 +159,18 @@ class Report:
         """A Markdown section: a summary table, then one paragraph per certificate."""
         lines = [f"### Verification: {_md_escape(self.title)}", "",
                  f"Overall: **{'ok' if self.ok else 'REFUTED CLAIMS'}** "
-                 f"({len(self.certificates)} claims, {self.seconds:.2f} s)", "",
+                 f"({len(self.certificates)} claims{self._summary()}, {self.seconds:.2f} s)", "",
                  "| # | claim | status | method | s |", "|---|---|---|---|---|"]
         for i, c in enumerate(self.certificates, 1):
-            lines.append(f"| {i} | {_md_escape(c.claim)} | **{c.status}** | {_md_escape(c.method)} "
+            how = _reason(c) if c.status == UNDECIDED else c.method
+            lines.append(f"| {i} | {_md_escape(c.claim)} | **{c.status}** | {_md_escape(how)} "
                          f"| {c.seconds:.2f} |")
         lines.append("")
         for i, c in enumerate(self.certificates, 1):
+            if c.status == UNDECIDED:
+                lines.append(f"{i}. *{_md_escape(c.claim)}* ({c.ref}) — **{c.status}**: "
+                             f"{_md_escape(_reason(c))}.")
+                continue
             lines.append(f"{i}. *{_md_escape(c.claim)}* ({c.ref}) — **{c.status}** by {c.method}.")
             if c.latex:
                 lines.append(f"   Reduced: $${c.latex}$$")
@@ -150,6 +182,10 @@ class Report:
         """A LaTeX fragment (``description`` list) for a course handout."""
         out = [rf"\subsection*{{Verification: {_tex_escape(self.title)}}}", r"\begin{description}"]
         for c in self.certificates:
+            if c.status == UNDECIDED:
+                out.append(rf"\item[{_tex_escape(c.status)}] {_tex_escape(c.claim)} "
+                           rf"({_tex_escape(c.ref)}; {_tex_escape(_reason(c))}, {c.seconds:.2f}\,s)")
+                continue
             out.append(rf"\item[{_tex_escape(c.status)}] {_tex_escape(c.claim)} "
                        rf"({_tex_escape(c.ref)}; {_tex_escape(c.method)}, {c.seconds:.2f}\,s)")
             if c.latex:
@@ -160,8 +196,12 @@ class Report:
         return "\n".join(out) + "\n"
 
     def __str__(self) -> str:
-        rows = [f"{self.title}: {'ok' if self.ok else 'REFUTED'}"]
+        rows = [f"{self.title}: {'ok' if self.ok else 'REFUTED'}"
+                + (f" ({len(self.undecided)} undecided)" if self.undecided else "")]
         for c in self.certificates:
+            if c.status == UNDECIDED:
+                rows.append(f"  [{c.status:>9}] {c.claim}  ({_reason(c)})")
+                continue
             rows.append(f"  [{c.status:>9}] {c.claim}  ({c.method}, {c.seconds:.2f} s)")
             if c.status == REFUTED and "counterexample" in c.details:
                 rows.append(f"              counterexample: {c.details['counterexample']}")

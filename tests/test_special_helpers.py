@@ -1,0 +1,159 @@
+"""The generated helpers against mpmath, near and at their removable points (numerical).
+
+The exact side — that each helper's formula *is* the function the proofs use — is
+proved by :mod:`methodgen.verify.helpers` (tested at the end of this file, with
+negative controls).  Here: floating-point accuracy of the emitted scalar (`_f_`) and
+vector (`_v_`) helpers at gaps from 1e-1 down to 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mpmath
+import numpy as np
+import pytest
+import sympy as sp
+
+from helpers import special_helpers
+from methodgen.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, exp_dd, log_dd, sinc_u, sinhc,
+                               tan_dd)
+from methodgen.verify.helpers import _certificate, helper_certificate
+
+MP = {"exp": mpmath.exp, "log": mpmath.log, "sin": mpmath.sin, "cos": mpmath.cos, "tan": mpmath.tan,
+      "sinh": mpmath.sinh, "cosh": mpmath.cosh, "tanh": mpmath.tanh, "atan": mpmath.atan}
+DERIV = {"exp": mpmath.exp, "log": lambda x: 1 / x, "sin": mpmath.cos, "cos": lambda x: -mpmath.sin(x),
+         "tan": lambda x: 1 / mpmath.cos(x) ** 2, "sinh": mpmath.cosh, "cosh": mpmath.sinh,
+         "tanh": lambda x: 1 / mpmath.cosh(x) ** 2, "atan": lambda x: 1 / (1 + x * x)}
+GAPS = [1e-1, 1e-3, 1e-6, 1e-9, 1e-12, 1e-15, 0.0]
+#: Base points: moderate, large, negative; for atan both sides of 1 + ab = 0.
+POINTS = {"log": [0.3, 1.7, 40.0], "atan": [-3.0, -0.4, 0.0, 0.7, 5.0]}
+
+
+def _exact(name, a, b):
+    with mpmath.workdps(60):
+        A, B = mpmath.mpf(a), mpmath.mpf(b)
+        if A == B:
+            return DERIV[name](A)
+        return (MP[name](B) - MP[name](A)) / (B - A)
+
+
+@pytest.mark.parametrize("name", sorted(f.__name__ for f in DIVIDED_DIFFERENCES))
+def test_divided_difference_helpers_accurate_near_and_on_the_diagonal(name):
+    """Numerical: relative error ≤ 8 ulp of both flavours at gaps 1e-1 … 1e-15 and 0."""
+    hs = special_helpers()
+    f, v = hs[f"_f_{name}dd"], hs[f"_v_{name}dd"]
+    worst = 0.0
+    for a in POINTS.get(name, [-1.3, -0.2, 0.0, 0.45, 2.5]):
+        for gap in GAPS:
+            for b in (a + gap, a - gap):
+                if name == "log" and b <= 0:
+                    continue
+                want = _exact(name, a, b)
+                for got in (f(a, b), float(v(np.array([a]), np.array([b]))[0])):
+                    worst = max(worst, abs(got - float(want)) / max(abs(float(want)), 1e-300))
+    assert worst < 8 * np.finfo(float).eps, worst
+
+
+def test_atan_helper_on_both_branches_and_across_the_branch_switch():
+    """Numerical: far apart (1 + ab ≤ 0) the quotient branch; the switch 1 + ab = 0 itself."""
+    hs = special_helpers()
+    worst = 0.0
+    for a, b in [(-3.0, 2.0), (2.0, -0.5), (-0.5, 2.0), (4.0, -0.25), (-1e3, 1e3), (1e-3, -1e3), (10.0, -10.0)]:
+        want = float(_exact("atan", a, b))
+        for got in (hs["_f_atandd"](a, b), float(hs["_v_atandd"](np.array([a]), np.array([b]))[0])):
+            worst = max(worst, abs(got - want) / abs(want))
+    assert worst < 8 * np.finfo(float).eps
+
+
+def test_naive_quotient_fails_the_same_accuracy_check():
+    """Negative control: the plain quotient loses ~eps/gap, and the check above would see it."""
+    a = 0.45
+    b = a + 1e-9
+    naive = (math.atan(b) - math.atan(a)) / (b - a)
+    want = float(_exact("atan", a, b))
+    assert abs(naive - want) / want > 1e-9
+
+
+def test_log_helper_is_nan_outside_the_domain():
+    hs = special_helpers()
+    for a, b in [(-1.0, -1.2), (-1.0, 0.5), (0.0, 1.0), (0.3, -0.3)]:
+        assert math.isnan(hs["_f_logdd"](a, b))
+        assert np.isnan(hs["_v_logdd"](np.array([a]), np.array([b]))[0])
+
+
+@pytest.mark.parametrize("name", ["atanc", "datanc", "datandd"])
+def test_new_derivative_helpers_match_mpmath(name):
+    """Numerical: the Jacobian helpers of atan (relative 1e-13 incl. the series switch at 1e-2)."""
+    hs = special_helpers()
+    mpmath.mp.dps = 50
+    if name == "datandd":
+        pts = [(0.4, 0.4 + g) for g in (1e-1, 1e-3, 1e-8, 0.0)] + [(-3.0, 2.0), (2.0, 2.0)]
+        for a, b in pts:
+            A, B = mpmath.mpf(a), mpmath.mpf(b)
+            want = (-A / (1 + A * A) ** 2 if A == B else
+                    (1 / (1 + B * B) - (mpmath.atan(B) - mpmath.atan(A)) / (B - A)) / (B - A))
+            for got in (hs["_f_datandd"](a, b), hs["_v_datandd"](np.array([a]), np.array([b]))[0]):
+                assert abs(got - float(want)) <= 1e-13 * max(1.0, abs(float(want)))
+        return
+    fn = {"atanc": lambda x: mpmath.atan(x) / x if x else mpmath.mpf(1),
+          "datanc": lambda x: (x / (1 + x * x) - mpmath.atan(x)) / x**2 if x else mpmath.mpf(0)}[name]
+    for x in [0.0, 1e-9, 9.99e-3, 1.001e-2, 0.3, -2.0, 40.0]:
+        want = float(fn(mpmath.mpf(x)))
+        for got in (hs[f"_f_{name}"](x), hs[f"_v_{name}"](np.array([x]))[0]):
+            assert abs(got - want) <= 1e-13 * max(1.0, abs(want))
+
+
+# --- the exact side: the helper certificates ------------------------------------------
+
+@pytest.mark.parametrize("cls", sorted(DIVIDED_DIFFERENCES.values(), key=lambda c: c.__name__)
+                         + [sinc_u, sinhc, atanc], ids=lambda c: c.__name__)
+def test_every_helper_is_proved_to_evaluate_its_defining_relation(cls):
+    cert = helper_certificate(cls)
+    assert cert.status == "proved", (cert.claim, cert.method)
+
+
+def test_a_wrong_stable_form_is_refuted(monkeypatch):
+    """Negative control: exp[a, b] with sinhc(b - a) instead of sinhc((b - a)/2)."""
+    monkeypatch.setattr(exp_dd, "stable_form",
+                        classmethod(lambda cls, a, b: sp.exp((a + b) / 2) * sinhc(b - a)))
+    _certificate.cache_clear()
+    try:
+        cert = helper_certificate(exp_dd)
+        assert cert.status == "refuted" and "counterexample" in cert.details
+    finally:
+        monkeypatch.undo()
+        _certificate.cache_clear()
+
+
+def test_a_wrong_atan_branch_is_refuted_inside_its_domain(monkeypatch):
+    """Negative control: atanc(t) without the 1/(1+ab) factor."""
+    monkeypatch.setattr(atan_dd, "branch_form", classmethod(lambda cls, a, b: atanc((b - a) / (1 + a * b))))
+    _certificate.cache_clear()
+    try:
+        cert = helper_certificate(atan_dd)
+        assert cert.status == "refuted"
+        pt = cert.details["counterexample"]
+        assert 1 + sp.Rational(pt["a"]) * sp.Rational(pt["b"]) > 0   # a point of the branch
+    finally:
+        monkeypatch.undo()
+        _certificate.cache_clear()
+
+
+def test_a_wrong_log_form_is_not_proved(monkeypatch):
+    """Negative control: log[a, b] as atanhc((b-a)/(a+b))/(a+b) (factor 2 missing)."""
+    from methodgen.special import atanhc
+    monkeypatch.setattr(log_dd, "stable_form",
+                        classmethod(lambda cls, a, b: atanhc((b - a) / (a + b)) / (a + b)))
+    _certificate.cache_clear()
+    try:
+        assert helper_certificate(log_dd).status != "proved"
+    finally:
+        monkeypatch.undo()
+        _certificate.cache_clear()
+
+
+def test_tan_form_proved_algebraically():
+    """tan's addition formula is an identity wherever both sides are defined (not only near a)."""
+    cert = helper_certificate(tan_dd)
+    assert cert.status == "proved" and "derivative" not in cert.method
