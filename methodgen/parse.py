@@ -41,6 +41,53 @@ FUNCTIONS: dict[str, object] = {
 #: Named constants of the grammar.
 CONSTANTS: dict[str, sp.Expr] = {"pi": sp.pi}
 
+#: SymPy function classes allowed in an expression (``sqrt`` and powers are ``Pow``).
+SMOOTH_FUNCTIONS: tuple[type, ...] = (sp.exp, sp.log, sp.sin, sp.cos, sp.tan, sp.sinh, sp.cosh,
+                                      sp.tanh, sp.atan)
+
+#: Why a non-smooth SymPy function is refused, and what to write instead.
+#: ``{a}`` is the (first) argument, ``{u}`` the same parenthesised if needed, ``{u2}`` its square.
+_NONSMOOTH: dict[str, tuple[str, str]] = {
+    "Abs": ("|x| has a kink at 0; for real symbols sqrt({u2}) is Abs({a}) and ({u2})**(3/2) "
+            "is {u2}*Abs({a})",
+            "write {u2} or sqrt({u2} + eps**2)"),
+    "Max": ("max(a, b) has a kink where a = b",
+            "use a smooth blend such as (a + b + sqrt((a - b)**2 + eps**2))/2"),
+    "Min": ("min(a, b) has a kink where a = b",
+            "use a smooth blend such as (a + b - sqrt((a - b)**2 + eps**2))/2"),
+    "sign": ("sign(x) jumps at 0",
+             "use tanh({u}/eps) or {u}/sqrt({u2} + eps**2)"),
+    "Heaviside": ("the step function jumps at 0",
+                  "use (1 + tanh({u}/eps))/2"),
+    "Piecewise": ("the branches of a piecewise expression meet with a jump or a kink",
+                  "write one smooth formula valid on the whole domain"),
+    "floor": ("floor(x) jumps at every integer", "write a smooth formula"),
+    "ceiling": ("ceiling(x) jumps at every integer", "write a smooth formula"),
+    "frac": ("the fractional part jumps at every integer",
+             "for a periodic potential use sin and cos"),
+    "DiracDelta": ("the Dirac delta is a distribution, not a function",
+                   "use a smooth bump such as exp(-{u2}/eps**2)"),
+    "re": ("re(z) is not a smooth real function of real symbols (z is taken as complex)",
+           "write H as a real expression of the real symbols"),
+    "im": ("im(z) is not a smooth real function of real symbols (z is taken as complex)",
+           "write H as a real expression of the real symbols"),
+    "arg": ("arg(x) jumps from 0 to pi at x = 0 for real x",
+            "write H as a real expression of the real symbols"),
+    "conjugate": ("conjugate(z) is not a smooth real function of real symbols",
+                  "write H as a real expression of the real symbols"),
+}
+
+#: Names a user may type for a refused SymPy function (text input).
+_NONSMOOTH_TEXT: dict[str, str] = {
+    **{k: k for k in _NONSMOOTH},
+    "abs": "Abs", "fabs": "Abs", "max": "Max", "min": "Min", "sgn": "sign", "heaviside": "Heaviside",
+    "step": "Heaviside", "piecewise": "Piecewise", "where": "Piecewise", "ceil": "ceiling",
+    "delta": "DiracDelta", "real": "re", "imag": "im", "angle": "arg", "conj": "conjugate",
+}
+
+_GRAMMAR = ("numbers, symbols, pi, E, + - * / **, sqrt and the functions "
+            "exp, log, sin, cos, tan, sinh, cosh, tanh, atan")
+
 #: Names a user symbol may not take (the grammar's own words).
 RESERVED = frozenset(FUNCTIONS) | frozenset(CONSTANTS)
 
@@ -114,6 +161,58 @@ def parse_expr(text: str, symbols: Mapping[str, sp.Symbol], *, what: str = "expr
         raise ParseError(f"{what} must be a scalar expression")
     if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
         raise ParseError(f"{what} is not a finite real expression: {expr}")
+    check_smooth(expr, what)
+    return expr
+
+
+def _needs(what: str) -> str:
+    if what.startswith("constraint"):
+        return "RATTLE/SHAKE need smooth constraints g(q) (their Jacobian G(q))"
+    return "a discrete gradient needs a smooth H"
+
+
+def _refusal(what: str, shown: str, cls_name: str, arg: str | None) -> str:
+    """One line: what is refused, why, and what to write instead."""
+    reason, remedy = _NONSMOOTH[cls_name]
+    if arg is None:
+        arg = "x"
+    u = arg if _NAME_RE.fullmatch(arg) else f"({arg})"
+    fmt = {"a": arg, "u": u, "u2": f"{u}**2"}
+    return f"{what}: {shown} is not smooth ({reason.format(**fmt)}); {_needs(what)} — {remedy.format(**fmt)}"
+
+
+def check_smooth(expr: sp.Expr, what: str = "expression") -> sp.Expr:
+    """Refuse every node of ``expr`` that is not in the smooth grammar; return ``expr``.
+
+    Allowed node classes: symbols, rational numbers, floats, the constants ``pi``
+    and ``E``, ``Add``, ``Mul``, ``Pow`` (which includes ``sqrt`` and rational
+    powers, smooth on their real domain) and the functions of
+    :data:`SMOOTH_FUNCTIONS`.  Everything else — ``Abs`` (SymPy's form of
+    ``sqrt(q**2)`` for real ``q``), ``Max``/``Min``, ``sign``, ``Heaviside``,
+    ``Piecewise``, ``floor`` …, and any other function — raises a one-line
+    :class:`ParseError` naming the node and why it is refused: a discrete
+    gradient (and the exact proofs of :mod:`methodgen.verify`) need a smooth H.
+
+    The same check is applied to parsed text and to SymPy input
+    (:class:`methodgen.Hamiltonian`), to the Hamiltonian and to constraints.
+    """
+    for node in sp.preorder_traversal(expr):
+        if isinstance(node, (sp.Symbol, sp.Rational, sp.Add, sp.Mul, sp.Pow) + SMOOTH_FUNCTIONS):
+            continue
+        if isinstance(node, sp.Float) and node.is_finite:
+            continue
+        if node is sp.pi or node is sp.E:
+            continue
+        name = type(node).__name__
+        if name in _NONSMOOTH:
+            arg = str(node.args[0]) if node.args and not isinstance(node, sp.Piecewise) else None
+            raise ParseError(_refusal(what, str(node), name, arg))
+        if isinstance(node, sp.Function) or isinstance(getattr(node, "func", None), sp.FunctionClass):
+            fname = getattr(node.func, "__name__", name)
+            raise ParseError(f"{what}: function {fname} (in {node}) is not in the grammar: allowed are "
+                             f"{_GRAMMAR}; {_needs(what)}")
+        shown = str(node) if str(node) == name else f"{node} ({name})"
+        raise ParseError(f"{what}: {shown} is not in the grammar: allowed are {_GRAMMAR}")
     return expr
 
 
@@ -217,6 +316,13 @@ class _Builder:
         if not isinstance(node.func, ast.Name):
             raise self.fail(node, "only direct calls of " + ", ".join(sorted(FUNCTIONS)) + " are allowed")
         fname = node.func.id
+        if fname in _NONSMOOTH_TEXT:
+            cls_name = _NONSMOOTH_TEXT[fname]
+            arg = ast.unparse(node.args[0]) if len(node.args) == 1 and cls_name not in (
+                "Max", "Min", "Piecewise") else None
+            col = getattr(node, "col_offset", None)
+            where = f" (column {col + 1})" if col is not None else ""
+            raise ParseError(_refusal(f"{self.what}{where}", ast.unparse(node), cls_name, arg))
         if fname not in FUNCTIONS:
             raise self.fail(node, f"unknown function {fname!r}; allowed functions are "
                             + ", ".join(sorted(FUNCTIONS)))

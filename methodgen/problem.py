@@ -16,7 +16,7 @@ from typing import Iterable, Mapping, Sequence
 import sympy as sp
 
 from .errors import InputError, ParseError
-from .parse import check_name, parse_expr
+from .parse import check_name, check_smooth, parse_expr
 
 __all__ = ["Hamiltonian"]
 
@@ -40,7 +40,11 @@ class Hamiltonian:
     H : str or sympy.Expr
         The Hamiltonian.  Text is parsed with the safe whitelist parser of
         :mod:`methodgen.parse` (never evaluated); a SymPy expression may use any
-        symbols whose *names* are declared below.
+        symbols whose *names* are declared below.  Both must be smooth: only
+        numbers, ``pi``, ``E``, ``+ * **`` (so ``sqrt``) and ``exp log sin cos tan
+        sinh cosh tanh atan`` are accepted (:func:`methodgen.parse.check_smooth`);
+        ``Abs`` — also as ``sqrt(q**2)`` —, ``Max``, ``sign``, ``Piecewise`` … are
+        refused with the reason.
     q, p : sequence of str or sympy.Symbol, length d
         Coordinates and conjugate momenta, in the order of the state vector
         ``y = (q_1..q_d, p_1..p_d)``.
@@ -151,12 +155,11 @@ class Hamiltonian:
                 raise InputError(f"{what}: unknown symbol {s.name!r}; declared symbols are: {declared}")
             repl[s] = self._symbols[s.name]
         expr = value.xreplace(repl)
-        if expr.atoms(sp.Function) - expr.atoms(sp.exp, sp.log, sp.sin, sp.cos, sp.tan, sp.sinh,
-                                                  sp.cosh, sp.tanh, sp.atan):
-            bad = sorted(str(f.func) for f in expr.atoms(sp.Function))
-            raise InputError(f"{what}: functions {bad} are not supported in generated code")
         if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
             raise InputError(f"{what} is not a finite real expression: {expr}")
+        # The same whitelist as for text: smooth functions only (Abs, Max, sign,
+        # Piecewise, ... are refused with the reason; sqrt(q**2) is Abs(q) here).
+        check_smooth(expr, what)
         return expr, str(value)
 
     def __setattr__(self, key, value):

@@ -105,3 +105,21 @@ def test_sympy_input_and_undeclared_symbols():
 def test_bad_hamiltonians(kwargs, fragment):
     with pytest.raises(InputError, match=fragment):
         mg.Hamiltonian(**kwargs)
+
+
+@pytest.mark.parametrize("text, fragment", [
+    ("sqrt(x**2)", "Abs(x) is not smooth"),
+    ("(x**2)**(3/2) + y", "Abs(x) is not smooth"),
+    ("abs(x)", "abs(x) is not smooth"),
+    ("Max(x, y)", "Max(x, y) is not smooth"),
+    ("Heaviside(x)", "Heaviside(x) is not smooth"),
+])
+def test_non_smooth_text_is_refused_with_the_reason(text, fragment):
+    with pytest.raises(ParseError) as err:
+        parse_expr(text, SYMS)
+    assert fragment in str(err.value) and "smooth H" in str(err.value)
+
+
+def test_rational_powers_of_signed_expressions_are_smooth_and_accepted():
+    e = parse_expr("x**(1/3) + (x - y)**(3/2) + sqrt(x**4) + sqrt(x**2 + y**2)", SYMS)
+    assert not e.has(sp.Abs)

@@ -140,6 +140,9 @@ class Scheme:
     resolution: str | None = None
     fixed_point: bool = False
     options: tuple[tuple[str, object], ...] = field(default=())
+    #: How the discrete gradient was assembled (e.g. Gonzalez: ∇H(ȳ), the numerator N,
+    #: Itoh–Abe components), in y0/y1 symbols, for structural proofs; None when not recorded.
+    structure: dict | None = None
 
     h = STEP
 

@@ -28,6 +28,8 @@ References
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import sympy as sp
 
@@ -182,8 +184,17 @@ class Gonzalez:
 
         traits = Traits(order=2, symmetric=True, symplectic=False, energy_preserving=True,
                         preserved=("H",), solve="newton", discrete_gradient=True, notes=(how,))
-        return gradient_scheme(system, Gonzalez.NAME, dg, traits,
-                               "y1 = y0 + h J [∇H(ȳ) + (H(y1) - H(y0) - ∇H(ȳ)ᵀΔ)/|Δ|² Δ]")
+        scheme = gradient_scheme(system, Gonzalez.NAME, dg, traits,
+                                 "y1 = y0 + h J [∇H(ȳ) + (H(y1) - H(y0) - ∇H(ȳ)ᵀΔ)/|Δ|² Δ]")
+        # The parts, in y0/y1 symbols, for the structural proofs of methodgen.verify.structural.
+        y1 = scheme.y1
+        sub = {}
+        for m, dl, a, b in zip(mids, dels, ys, y1):
+            sub[m] = (a + b) / 2
+            sub[dl] = b - a
+        parts = {"kind": "gonzalez", "G": [g.xreplace(sub) for g in grad_m], "N": N.xreplace(sub),
+                 "D2": D2.xreplace(sub), "ia": None if polynomial else [c.xreplace(sub) for c in ia]}
+        return replace(scheme, structure=parts)
 
 
 # --- Itoh–Abe ---------------------------------------------------------------------

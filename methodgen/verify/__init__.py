@@ -73,7 +73,7 @@ _REASON_CHARS = 300
 
 def _symmetry(scheme) -> list[Certificate]:
     if scheme.discrete_gradient is not None:
-        return [dg_symmetry(scheme.system, scheme.discrete_gradient, scheme.method)]
+        return [dg_symmetry(scheme.system, scheme.discrete_gradient, scheme.method, scheme=scheme)]
     if not scheme.unknowns:
         return [explicit_symmetry(scheme)]
     if scheme.traits.solve == "linear":

@@ -18,17 +18,29 @@ from ..derive import gradient, separable_split
 from .common import REF_NOTES, at, system_domain, y1_symbols
 from .exact import certify
 from .helpers import helper_certificates
+from .structural import gonzalez_symmetry_structural, identity_structural
 
 __all__ = ["dg_identity", "dg_consistency", "dg_symmetry", "kappa_midpoint_gradient",
            "kappa_form", "kappa_applies", "dg_certificates"]
 
 
-def dg_identity(system, dg: sp.Matrix, label: str, ref: str = "") -> "Certificate":
-    """``(y1 - y0)ᵀ ∇̄H - (H(y1) - H(y0))`` reduced to 0 (or refuted)."""
+def dg_identity(system, dg: sp.Matrix, label: str, ref: str = "", scheme=None) -> "Certificate":
+    """``(y1 - y0)ᵀ ∇̄H - (H(y1) - H(y0))`` reduced to 0 (or refuted).
+
+    With ``scheme`` given, the structural proof of :mod:`.structural` (coordinate
+    lemmas, the Gonzalez form) is tried first; the whole expression is reduced only
+    when the scheme has no such structure or a lemma does not reduce.
+    """
     y0, y1 = system.y, y1_symbols(system)
     expr = sum((b - a) * g for a, b, g in zip(y0, y1, dg)) - (at(system.H, y0, y1) - system.H)
-    return certify(f"{label}: (y1 - y0)ᵀ ∇̄H(y0, y1) = H(y1) - H(y0) (discrete-gradient identity, "
-                   "hence H(y1) = H(y0))", expr, system_domain(system), ref or f"{REF_NOTES}, Ex. 1.1.2")
+    claim = (f"{label}: (y1 - y0)ᵀ ∇̄H(y0, y1) = H(y1) - H(y0) (discrete-gradient identity, "
+             "hence H(y1) = H(y0))")
+    ref = ref or f"{REF_NOTES}, Ex. 1.1.2"
+    if scheme is not None:
+        cert = identity_structural(scheme, claim, ref, expr)
+        if cert is not None:
+            return cert
+    return certify(claim, expr, system_domain(system), ref)
 
 
 def dg_consistency(system, dg: sp.Matrix, label: str, ref: str = "") -> "Certificate":
@@ -39,14 +51,18 @@ def dg_consistency(system, dg: sp.Matrix, label: str, ref: str = "") -> "Certifi
                    expr, system_domain(system), ref or f"{REF_NOTES}, Ex. 1.1.2")
 
 
-def dg_symmetry(system, dg: sp.Matrix, label: str) -> "Certificate":
+def dg_symmetry(system, dg: sp.Matrix, label: str, scheme=None) -> "Certificate":
     """``∇̄H(y0, y1) - ∇̄H(y1, y0)``: a symmetric ∇̄H makes ``y1 = y0 + hJ∇̄H`` self-adjoint."""
     y0, y1 = system.y, y1_symbols(system)
     swap = {**dict(zip(y0, y1)), **dict(zip(y1, y0))}
+    claim = (f"{label}: ∇̄H(y0, y1) = ∇̄H(y1, y0), so y1 = y0 + hJ∇̄H is symmetric "
+             "(its adjoint, y0 = y1 - hJ∇̄H(y1, y0), is the same equation)")
+    if scheme is not None:
+        cert = gonzalez_symmetry_structural(scheme, claim, "symmetry (claim 9)")
+        if cert is not None:
+            return cert
     expr = dg - dg.xreplace(swap)
-    return certify(f"{label}: ∇̄H(y0, y1) = ∇̄H(y1, y0), so y1 = y0 + hJ∇̄H is symmetric "
-                   "(its adjoint, y0 = y1 - hJ∇̄H(y1, y0), is the same equation)",
-                   expr, system_domain(system), "symmetry (claim 9)")
+    return certify(claim, expr, system_domain(system), "symmetry (claim 9)")
 
 
 def kappa_midpoint_gradient(system, kappa=None) -> sp.Matrix:
@@ -106,7 +122,7 @@ def dg_certificates(scheme) -> list:
     system, dg, label = scheme.system, scheme.discrete_gradient, scheme.method
     ref = f"{REF_NOTES}, Ex. 1.1.2" if scheme.method == "energy-momentum" else \
         "discrete gradients (claim 4; McLachlan-Quispel-Robidoux 1999)"
-    out = [dg_identity(system, dg, label, ref), dg_consistency(system, dg, label, ref)]
+    out = [dg_identity(system, dg, label, ref, scheme=scheme), dg_consistency(system, dg, label, ref)]
     if scheme.method == "energy-momentum" and kappa_applies(scheme):
         out.append(kappa_form(scheme))
     out += helper_certificates(list(dg))

@@ -111,7 +111,7 @@ def _zero_set(d: sp.Expr) -> dict | None:
     ``|Δ|² = 0`` gives ``y1 = y0``).
     """
     sub: dict = {}
-    for t in sp.Add.make_args(sp.expand(d) if not d.is_Add else d):
+    for t in sp.Add.make_args(d):
         c, rest = t.as_coeff_Mul()
         if not (c.is_number and c.is_positive and rest.is_Pow and rest.exp == 2):
             return None
@@ -132,6 +132,12 @@ def _zero_set(d: sp.Expr) -> dict | None:
 
 
 def guard_cases(e: sp.Expr):
+    """``[(label, expression)]`` of :func:`guard_cases_with_zero_sets` (None if it cannot split)."""
+    full = guard_cases_with_zero_sets(e)
+    return None if full is None else [(label, expr) for label, expr, _ in full]
+
+
+def guard_cases_with_zero_sets(e: sp.Expr):
     """Split ``e`` at its guarded quotients ``safe_div(n, d)`` into exhaustive cases.
 
     Returns a list of ``(label, expression)``: for each guard denominator ``d``
@@ -140,7 +146,7 @@ def guard_cases(e: sp.Expr):
     reduces to 0 in every case.  ``None`` when a zero set cannot be described.
     """
     if safe_div is None or not e.has(safe_div):
-        return [("", e)]
+        return [("", e, {})]
     # Group guards by their expanded denominator: (p - p1)**2 and (p1 - p)**2 are one guard.
     rep: dict = {}
     for g in sorted(e.atoms(safe_div), key=sp.default_sort_key):
@@ -172,7 +178,7 @@ def guard_cases(e: sp.Expr):
             if expr.has(safe_div):   # a guard whose denominator vanished with the others
                 expr = expr.replace(lambda x: isinstance(x, safe_div),
                                     lambda x: sp.S.Zero if sp.expand(x.args[1]) == 0 else x.args[0] / x.args[1])
-        cases.append((", ".join(labels), expr))
+        cases.append((", ".join(labels), expr, sub))
     return cases
 
 
@@ -412,6 +418,29 @@ def numerical_check(exprs, domain: Domain, tol: float, n: int = 5, seed: int = 7
     return (got > 0 and worst <= tol), worst, pts
 
 
+def _case_counterexample(exprs, domain: Domain):
+    """:func:`find_counterexample`, also inside each guard case (e.g. on ``y1 = y0``, which
+    random points never hit); the point reports the substituted symbols too."""
+    ce = find_counterexample(exprs, domain)
+    if ce is not None:
+        return ce
+    for i, e in enumerate(exprs):
+        cases = guard_cases_with_zero_sets(e) or []
+        for label, ce_expr, sub in cases:
+            if not sub:
+                continue
+            found = find_counterexample([ce_expr], domain)
+            if found is not None:
+                pt, _, v, exact = found
+                full = dict(pt)
+                free = set().union(*(val.free_symbols for val in sub.values())) - set(full) - set(sub)
+                full.update(domain.sample(free, random.Random(3)) if free else {})
+                for x, val in sub.items():
+                    full[x] = val.xreplace(full)
+                return full, i, v, exact
+    return None
+
+
 def _show(exprs) -> tuple[str, str]:
     if len(exprs) == 1:
         e = exprs[0]
@@ -463,7 +492,7 @@ def certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
             methods.append(m)
     # A false identity is refuted at a random point much faster than simplify
     # gives up, so look for a counterexample before the last-resort simplify.
-    ce = find_counterexample(failing, domain) if failing else None
+    ce = _case_counterexample(failing, domain) if failing else None
     if ce is None and failing:
         still = []
         for e in failing:
