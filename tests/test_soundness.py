@@ -38,8 +38,13 @@ def test_atan_divided_difference_is_exact_and_the_run_keeps_h(tmp_path):
     assert report.ok and _identity(report).status == "proved"
     assert [c.status for c in report.find("helper _atandd")] == ["proved"]
     mod = mg.generate(scheme, tmp_path / "atan10.py")
-    for h in (0.2, 0.05, 1e-3):   # the old series region was |Δq| < 0.1 (1 + |q̄|)
-        traj = mod.integrate(np.array([-1.0, 2.0]), h, 400)
+    # The old series region was |Δq| < 0.1 (1 + |q̄|).  h = 0.2 crosses the force spike of
+    # width 0.1 at q = 0 in one step: the local error estimate rightly calls it unresolved,
+    # so it is switched off here — this test is about H, which must be kept even then.
+    with pytest.raises(mod.ResolutionError):
+        mod.integrate(np.array([-1.0, 2.0]), 0.2, 400)
+    for h in (0.2, 0.05, 1e-3):
+        traj = mod.integrate(np.array([-1.0, 2.0]), h, 400, check_resolution=False)
         E = mod.hamiltonian(traj)
         assert np.max(np.abs(E - E[0])) <= 1e-13 * max(1.0, abs(E[0]))
 
@@ -181,6 +186,7 @@ def test_every_user_problem_verifies_with_every_applicable_method(problem):
             continue
         report = mg.verify(scheme, timeout=60)
         assert report.ok, (problem, method)
+        assert not report.undecided, (problem, method, [c.claim for c in report.undecided])
         if method in ENERGY:
             assert _identity(report).status in ("proved", "numerical"), (problem, method)
 

@@ -90,10 +90,15 @@ def _build(system: Hamiltonian, name: str, project: bool) -> Scheme:
     gradU1 = gradU.xreplace(at1)
     G1 = G.xreplace(at1)
     w = phalf - h / 2 * gradU1
+    structure = None
     if project:
         A1 = G1 * Minv * G1.T
-        c = A1.LUsolve(G1 * Minv * w)
+        b1 = G1 * Minv * w
+        c = A1.LUsolve(b1)
         p1 = w - G1.T * c
+        # The pieces of the velocity stage, so that verify can prove G(q1)M⁻¹p1 = 0
+        # from a lemma about LUsolve instead of cancelling p1(ν) (see verify/constrained.py).
+        structure = {"kind": "rattle", "q1": q1, "w": w, "G1": G1, "A1": A1, "b": b1, "c": c}
     else:
         p1 = w - G1.T * nuv / h
     dp = p1 - p0
@@ -108,7 +113,7 @@ def _build(system: Hamiltonian, name: str, project: bool) -> Scheme:
                "Newton on the scaled multipliers ν = h²λ/2; velocities not projected",))
     return Scheme(system=system, method=name, traits=traits, unknowns=nu, residual=residual,
                   guess=guess, increment=sp.Matrix(list(dq) + list(dp)),
-                  invariants=invariants(system), unknown_scale=scale,
+                  invariants=invariants(system), unknown_scale=scale, structure=structure,
                   description=("RATTLE: position stage with multipliers λ (g(q1) = 0), velocity "
                                "stage projected so that G(q1) M⁻¹ p1 = 0") if project else
                   "SHAKE: RATTLE's position stage, velocities updated with the same multipliers")

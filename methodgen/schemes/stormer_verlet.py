@@ -43,4 +43,7 @@ def build(system: Hamiltonian) -> Scheme:
     return Scheme(system=system, method=NAME, traits=traits, unknowns=(), residual=sp.zeros(0, 1),
                   guess=sp.zeros(0, 1), increment=sp.Matrix(list(dq) + list(dp)),
                   invariants=invariants(system),
-                  description="p½ = p0 - h/2 ∇U(q0), q1 = q0 + h ∇T(p½), p1 = p½ - h/2 ∇U(q1)")
+                  description="p½ = p0 - h/2 ∇U(q0), q1 = q0 + h ∇T(p½), p1 = p½ - h/2 ∇U(q1)",
+                  # the stages, for the structural symplecticity proof (verify/maps.py)
+                  structure={"kind": "splitting",
+                             "stages": (("kick", h / 2), ("drift", h), ("kick", h / 2))})

@@ -24,9 +24,9 @@ from .common import REF_NOTES, at, system_domain
 from .exact import certify, fmt_point
 from .maps import NUM_TOL, symplectic_matrix
 from .numeric import DPS, Stepper, param_point
-from .report import NUMERICAL, Certificate
+from .report import NUMERICAL, PROVED, Certificate
 
-__all__ = ["position_constraint", "velocity_constraint", "rattle_equations_symmetric",
+__all__ = ["position_constraint", "velocity_constraint", "velocity_structural", "rattle_equations_symmetric",
            "numerical_symmetry", "manifold_point", "symplectic_on_manifold", "constrained_certificates"]
 
 REF = f"{REF_NOTES}, section 1.3 (RATTLE)"
@@ -41,7 +41,95 @@ def position_constraint(scheme) -> Certificate:
                    g1 - scheme.residual, system_domain(system), REF)
 
 
+def _lusolve_lemma(m: int) -> bool:
+    """``A·LUsolve(A, b) = b`` for a generic symmetric m×m matrix A and vector b.
+
+    Decided in the rational-function field QQ(A_ij, b_i), where the nested
+    quotients of the LU solution normalise at once (``cancel`` needs seconds
+    already for m = 3).  Cached per m.
+    """
+    if m not in _LU_LEMMA:
+        A, b = _generic_system(m)
+        _LU_LEMMA[m] = field_zero(A * A.LUsolve(b) - b)
+    return _LU_LEMMA[m]
+
+
+def field_zero(exprs) -> bool:
+    """Every entry of ``exprs`` (rational functions with rational coefficients) is 0 in QQ(symbols)."""
+    exprs = list(exprs)
+    gens = sorted(set().union(*(e.free_symbols for e in exprs)), key=str)
+    if not gens:
+        return all(e == 0 for e in exprs)
+    K = sp.QQ.frac_field(*gens)
+    return all(K.from_sympy(e) == K.zero for e in exprs)
+
+
+_LU_LEMMA: dict[int, bool] = {}
+
+
+def _generic_system(m: int):
+    A = sp.Matrix(m, m, lambda i, j: sp.Symbol(f"_A{min(i, j) + 1}_{max(i, j) + 1}", real=True))
+    b = sp.Matrix(sp.symbols(f"_b1:{m + 1}", real=True))
+    return A, b
+
+
+def _same(a, b) -> bool:
+    from .structural import _same as same
+    return same(a, b)
+
+
+def velocity_structural(scheme) -> Certificate | None:
+    """``G(q1) M⁻¹ p1 = 0`` for RATTLE from the recorded velocity stage; None if not that form.
+
+    The scheme records ``p1 = w - G1ᵀ c`` with ``c = LUsolve(A1, b)``, ``A1 = G1 M⁻¹ G1ᵀ``,
+    ``b = G1 M⁻¹ w``.  Checked structurally: p1 is that expression, G1 is ``G`` at the
+    scheme's q1, A1 and b are those products, and c is the generic LU solution with
+    A1 and b substituted.  Proved: ``A·LUsolve(A, b) = b`` for generic symmetric A
+    (exact, in QQ(A, b)).  Then ``G1 M⁻¹ p1 = b - A1 c = 0`` wherever A1 is invertible
+    (the step is defined).
+    """
+    t0 = time.perf_counter()
+    st = scheme.structure or {}
+    if st.get("kind") != "rattle":
+        return None
+    system = scheme.system
+    sep = separable_split(system)
+    d, m = system.dim, len(system.constraints)
+    q1 = [a + b for a, b in zip(system.q, scheme.increment[:d])]
+    p1 = [a + b for a, b in zip(system.p, scheme.increment[d:])]
+    G1, w, A1, b, c = st["G1"], st["w"], st["A1"], st["b"], st["c"]
+    M = sep.Minv
+    checks = [
+        all(_same(x, y) for x, y in zip(q1, st["q1"])),
+        all(_same(x, y) for x, y in zip(at(constraint_jacobian(system), system.q, st["q1"]), G1)),
+        all(_same(x, y) for x, y in zip(G1 * M * G1.T, A1)),
+        all(_same(x, y) for x, y in zip(G1 * M * w, b)),
+        all(_same(x, y) for x, y in zip(p1, w - G1.T * c)),
+    ]
+    if not all(checks):
+        return None
+    Ag, bg = _generic_system(m)
+    inst = {**{Ag[i, j]: A1[i, j] for i in range(m) for j in range(i, m)},
+            **{bg[i]: b[i] for i in range(m)}}
+    if any(A1[i, j] != A1[j, i] for i in range(m) for j in range(m)):
+        return None
+    cg = Ag.LUsolve(bg)
+    if not all(_same(x, y.xreplace(inst)) for x, y in zip(c, cg)):
+        return None
+    if not _lusolve_lemma(m):
+        return None
+    method = ("structural: p1 = w - G1ᵀc with G1 = G(q1), c = LUsolve(A1, b), A1 = G1M⁻¹G1ᵀ, "
+              "b = G1M⁻¹w (checked on the scheme's expressions); A·LUsolve(A, b) = b proved for a "
+              f"generic symmetric {m}×{m} A (exact, in QQ(A, b)); so G1M⁻¹p1 = b - A1c = 0")
+    return Certificate(f"{scheme.method}: G(q1) M⁻¹ p1 = 0 (hidden velocity constraint), for every ν",
+                       PROVED, "G(q1) M⁻¹ p1", "", method, time.perf_counter() - t0, REF,
+                       {"structural": True})
+
+
 def velocity_constraint(scheme) -> Certificate:
+    cert = velocity_structural(scheme)
+    if cert is not None:
+        return cert
     system = scheme.system
     sep = separable_split(system)
     d = system.dim
