@@ -161,3 +161,37 @@ def test_formerly_slow_user_problems_are_decided(problem, method):
     sc = mg.load_scene(str(USER / f"{problem}.toml"))
     rep = mg.verify(mg.discretize(sc.system, method), timeout=60)
     assert rep.ok and not rep.undecided, [(c.claim, c.details.get("reason")) for c in rep.undecided]
+
+
+# --- AVF term by term -------------------------------------------------------------------
+
+def test_avf_exact_for_functions_of_affine_forms():
+    """Toda's exp(q1 - q2), a pendulum pair's cos(q1 - q2), Calogero's 1/(q1 - q2)**2: exact
+    divided differences, H claimed and proved — no quadrature."""
+    from methodgen.verify.discrete_gradients import dg_identity
+    for system in (CALOGERO, mg.Hamiltonian("(p1**2 + p2**2)/2 + exp(q1 - q2) - k*cos(q1 - q2)*(1 + q1)",
+                                            q=["q1", "q2"], p=["p1", "p2"], params={"k": 1.0})):
+        scheme = mg.discretize(system, "avf")
+        if system is CALOGERO:
+            assert scheme.traits.preserved == ("H",) and not scheme.traits.approximate
+            assert not any(e.has(sp.Float) for e in scheme.discrete_gradient)
+            assert dg_identity(system, scheme.discrete_gradient, scheme.y1, "avf",
+                               scheme=scheme).status == "proved"
+        else:
+            # cos(q1 - q2)*q1 is not a function of one affine form: quadrature, honestly labelled
+            assert scheme.traits.approximate == ("H",) and "H" not in scheme.traits.preserved
+            assert not scheme.traits.energy_preserving
+
+
+def test_linear_form_detection_and_its_limits():
+    from methodgen.schemes.discrete_gradients import additive_terms, linear_form_term
+    q1, q2, q3, g = sp.symbols("q1 q2 q3 g")
+    ys = (q1, q2, q3)
+    terms = additive_terms(g**2 * (1 / (q1 - q2)**2 + 1 / (q2 - q3)**2))
+    assert len(terms) == 2
+    L, u, G = linear_form_term(terms[0], ys)
+    assert sp.expand(G.xreplace({u: L}) - terms[0]) == 0 and not (G.free_symbols & set(ys))
+    assert linear_form_term(sp.exp(q1 - 2 * q3 + 1), ys)[0] == q1 - 2 * q3 + 1
+    # not one affine form: refused
+    assert linear_form_term(sp.cos(q1) * sp.cos(q2), ys) is None
+    assert linear_form_term(1 / sp.sqrt(q1**2 + q2**2), ys) is None

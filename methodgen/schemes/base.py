@@ -76,6 +76,11 @@ class Traits:
         The method is ``y1 = y0 + h J ∇̄H`` with a discrete gradient ∇̄H.
     notes : tuple of str
         How the scheme was derived (e.g. which cancelled form was used).
+    approximate : tuple of str
+        Invariants kept only up to a stated approximation error (e.g. AVF with a
+        quadrature rule: H to O(|Δy|^16) per step).  They are *not* in
+        ``preserved``, ``energy_preserving`` is False for them, and their
+        certificates are numerical.
     """
 
     order: int
@@ -86,14 +91,18 @@ class Traits:
     solve: str = "newton"
     discrete_gradient: bool = False
     notes: tuple[str, ...] = ()
+    approximate: tuple[str, ...] = ()
 
     def as_dict(self) -> dict:
-        return {
+        out = {
             "order": self.order, "symmetric": self.symmetric, "symplectic": self.symplectic,
             "energy_preserving": self.energy_preserving, "preserved": list(self.preserved),
             "solve": self.solve, "discrete_gradient": self.discrete_gradient,
             "notes": list(self.notes),
         }
+        if self.approximate:   # only when used, so modules without it keep their bytes
+            out["approximate"] = list(self.approximate)
+        return out
 
 
 @dataclass(frozen=True, eq=False)
