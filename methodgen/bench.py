@@ -18,11 +18,21 @@ report come from one run on one machine.
   default stepper without the refinement drifts after ~10⁵ steps.
 * :func:`solver_variants` — Newton, simplified Newton, fixed point: iterations
   and µs per step.
+* ``work_precision(..., peers=True)`` — methodgen's methods (either backend) over a
+  step-size ladder scaled from the scene's h, next to heyoka and REBOUND
+  (:mod:`methodgen.peers`) on the same problem, all against one reference: CPU
+  time of the integration call (min of 3 runs), final error, max relative energy
+  error, max invariant errors.
 
 References: the reference solution is exact where known (linear vector
 fields: ``expm``; circular Kepler orbits: a rotation), otherwise DOP853 at
 ``rtol = 1e-13, atol = 1e-15`` (constrained scenes: on the index-1 ODE with the
-multipliers eliminated).
+multipliers eliminated).  With ``peers=True`` and heyoka installed, heyoka in long
+double at ``tol = 1e-18`` replaces DOP853 (:func:`methodgen.peers.heyoka_reference`:
+on Kepler e = 0.6 over T = 2000 it is within 7e-15 of the exact solution where
+DOP853 is 3e-8 off; within 1e-14 of heyoka in quadruple precision on the outer
+solar system over 2·10⁵ days and on Hénon–Heiles over 10⁴, where DOP853 is 1e-9
+and 2e-8 off).
 
 .. [1] E. Hairer, R. I. McLachlan, A. Razakarivony, "Achieving Brouwer's law with
    implicit Runge-Kutta methods", BIT 48 (2008) 231-243.
@@ -45,10 +55,15 @@ from .schemes import discretize
 from .schemes.base import is_linear_field
 
 __all__ = ["Reference", "reference", "work_precision", "long_run", "brouwer", "solver_variants",
-           "ode_rhs"]
+           "ode_rhs", "PEER_FACTORS"]
 
 TOLERANCES = [10.0 ** -k for k in range(3, 14)]
 QUICK_TOLERANCES = [1e-3, 1e-6, 1e-9]
+#: ``--peers``: methodgen's step sizes as multiples of the scene's h (coarse to fine).
+PEER_FACTORS = (4.0, 2.0, 1.0, 0.5, 0.25, 0.125, 0.0625)
+QUICK_PEER_FACTORS = (2.0, 1.0)
+#: ``--peers``: finer step sizes of a method are skipped after a run longer than this (CPU s).
+PEER_RUN_BUDGET = 30.0
 
 
 def _cpu() -> float:
@@ -121,8 +136,12 @@ class Reference:
     kind: str
 
 
-def reference(system, y0: np.ndarray, T: float) -> Reference:
-    """Exact final state where known, else DOP853 at rtol 1e-13 (documented in ``kind``)."""
+def reference(system, y0: np.ndarray, T: float, *, heyoka: bool = False) -> Reference:
+    """Exact final state where known, else DOP853 at rtol 1e-13 (documented in ``kind``).
+
+    ``heyoka=True``: where no exact solution is known and heyoka is installed, heyoka in
+    long double at tol 1e-18 (:func:`methodgen.peers.heyoka_reference`) instead of DOP853.
+    """
     from scipy.integrate import solve_ivp
     from scipy.linalg import expm
 
@@ -134,6 +153,12 @@ def reference(system, y0: np.ndarray, T: float) -> Reference:
     circ = _circular_kepler(system, y0, T)
     if circ is not None:
         return Reference(circ, "exact (circular Kepler orbit)")
+    if heyoka:
+        from . import peers
+        if peers.import_peer("heyoka") is not None and not system.constraints \
+                and np.finfo(np.longdouble).nmant > 52:
+            return Reference(peers.heyoka_reference(system, y0, T),
+                             f"heyoka (Taylor) in long double, tol={peers.REFERENCE_TOL:g}, high accuracy")
     rhs, jac = ode_rhs(system)
     sol = solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-15)
     if not sol.success:
@@ -172,12 +197,17 @@ def _circular_kepler(system, y0, T):
 
 # --- measuring one trajectory -----------------------------------------------------------
 
-def _errors(module, traj, y_ref):
-    """Global error at the end, max energy error, max error of each monitored quantity."""
-    inv = module.invariants(traj)
+def _errors(module, traj, y_ref, monitors=None):
+    """Global error at the end, max energy error (absolute and relative), max error of each
+    monitored quantity (the module's, and ``monitors(traj)``'s: total momenta of N-body scenes)."""
+    inv = dict(module.invariants(traj))
+    if monitors is not None:
+        inv.update({k: v for k, v in monitors(traj).items() if k not in inv})
     out = {"error": float(np.max(np.abs(traj[-1] - y_ref)))}
     out["invariant_errors"] = {name: float(np.max(np.abs(v - v[0]))) for name, v in inv.items()}
     out["energy_error"] = out["invariant_errors"].get("H", float("nan"))
+    H0 = abs(float(inv["H"][0])) if "H" in inv else 0.0
+    out["energy_rel_error"] = out["energy_error"] / H0 if H0 > 0 else float("nan")
     if hasattr(module, "constraint_residuals"):
         g, gv = module.constraint_residuals(traj)
         out["constraint_error"] = float(max(np.max(np.abs(g)), np.max(np.abs(gv))))
@@ -235,14 +265,26 @@ def _ivp_row(system, module, solver, tol, y0, T, ref, rhs, jac):
 
 
 def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float | None = None,
-                   progress: bool = False) -> dict:
+                   progress: bool = False, peers: bool = False, backend: str = "numpy") -> dict:
     """Work-precision data for ``scene``: methodgen methods, fsolve and solve_ivp peers.
 
     Returns a dict with ``scene``, ``T``, ``reference`` and ``rows`` (one dict
     per run: method, kind, h or tol, seconds (CPU), error, energy_error,
-    invariant_errors, …).
+    energy_rel_error, invariant_errors, …).
+
+    ``backend``: of methodgen's rows (``"numba"``: the compiled loop, compiled before
+    the timed call).  ``peers=True``: methodgen's methods at ``scene.h`` ×
+    :data:`PEER_FACTORS` over ``T`` (default: the scene's own run, ``h·steps``),
+    next to heyoka and REBOUND where installed and applicable (:mod:`methodgen.peers`;
+    otherwise a line in ``notes``).  The fsolve and solve_ivp rows are left out there
+    (pure-Python right-hand sides over long runs); every row's CPU time is the
+    minimum of three runs.
     """
     methods = list(methods or scene.methods)
+    if peers:
+        return _work_precision_peers(scene, methods, quick=quick, T=T, progress=progress, backend=backend)
+    from .emit import resolve_backend
+    backend = resolve_backend(backend)
     T = T if T is not None else (2.0 if quick else 20.0)
     y0 = np.array(scene.y0)
     ref = reference(scene.system, y0, T)
@@ -251,7 +293,9 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     rows = []
     jobs = [(m, h) for m in methods for h in hs]
     for method, h in _progress(jobs, progress, "methodgen"):
-        module = build(scene.system, method, path=scene_module_path(scene, method))
+        module = build(scene.system, method, path=scene_module_path(scene, method, backend), backend=backend)
+        if backend != "numpy":
+            module.integrate(y0, h, 2, check_resolution=False)  # compile outside the timed region
         steps = int(round(T / h))
         try:
             rows.append(_generated_row(scene, method, module, y0, T / steps, steps, ref))
@@ -272,6 +316,70 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
                                  progress, "scipy"):
         rows.append(_ivp_row(scene.system, module, solver, tol, y0, T, ref, rhs, jac))
     return {"scene": scene.name, "T": T, "reference": ref.kind, "rows": rows}
+
+
+def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None, progress: bool,
+                          backend: str) -> dict:
+    """``work_precision(..., peers=True)``: see there and :mod:`methodgen.peers`."""
+    from . import peers as pe
+    from .emit import resolve_backend
+
+    T = float(T if T is not None else scene.h * scene.steps)
+    if not T > 0:
+        raise ValueError(f"the bench needs a positive final time, got T = {T}")
+    y0 = np.array(scene.y0)
+    notes = []
+    if np.finfo(np.longdouble).nmant <= 52 and pe.import_peer("heyoka") is not None:
+        notes.append("numpy.longdouble is plain double here: the reference is DOP853, not heyoka")
+    ref = reference(scene.system, y0, T, heyoka=True)
+    monitors = pe.nbody_monitors(scene)
+    base = build(scene.system, methods[0], path=scene_module_path(scene, methods[0]))
+
+    def errors(traj):
+        return _errors(base, traj, ref.y, monitors)
+
+    used = resolve_backend(backend)
+    if used != backend:
+        notes.append(f"backend {backend} is not available: methodgen rows use {used}")
+    hs = [abs(scene.h) * f for f in (QUICK_PEER_FACTORS if quick else PEER_FACTORS)]
+    rows = []
+    for method in _progress(methods, progress, "methodgen"):
+        module = build(scene.system, method, path=scene_module_path(scene, method, used), backend=used)
+        module.integrate(y0, hs[0], 2, check_resolution=False)  # numba: compile outside the timed region
+        for h in hs:
+            steps = max(1, int(round(T / h)))
+            info = {}
+
+            def run():
+                return module.integrate(y0, T / steps, steps, info=info, check_resolution=False)
+
+            try:
+                sec, traj = pe.min_cpu(run)
+            except (RuntimeError, FloatingPointError) as exc:
+                rows.append({"method": method, "kind": "methodgen", "h": T / steps, "backend": used,
+                             "failed": " ".join(str(exc).split())})
+                continue
+            its = info["newton_iterations"]
+            rows.append({"method": method, "kind": "methodgen", "backend": used, "h": T / steps, "steps": steps,
+                         "seconds": sec, "us_per_step": sec / steps * 1e6,
+                         "newton_mean": float(its.mean()) if its.size else 0.0,
+                         **_errors(module, traj, ref.y, monitors)})
+            del traj
+            if sec > PEER_RUN_BUDGET and h != hs[-1]:
+                notes.append(f"{method}: step sizes below h = {T / steps:.4g} skipped "
+                             f"(that run took {sec:.0f} s CPU)")
+                break
+    for name, fn in (("heyoka", pe.heyoka_rows), ("rebound", pe.rebound_rows)):
+        if pe.import_peer(name) is None:
+            notes.append(f"{name} is not installed: no {name} rows ({pe.INSTALL_HINT})")
+            continue
+        try:
+            rows += fn(scene, base, y0, T, ref.y, errors)
+        except pe.PeerUnsupported as exc:
+            notes.append(str(exc))
+    notes.append("scipy solve_ivp and fsolve rows are left out with --peers (run without --peers for them)")
+    return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
+            "rows": rows, "notes": notes}
 
 
 # --- long runs --------------------------------------------------------------------------

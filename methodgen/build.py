@@ -3,18 +3,18 @@
 :func:`build` computes the signature of ``(system, method)`` first — cheap, no
 derivation — and imports an existing file whose signature matches and whose
 content is intact.  Only otherwise does it derive, lower and emit.  A file
-whose content does not match its hash (edited, truncated) is never trusted:
-it is regenerated and a warning says so.
+whose content does not match its hash (edited, truncated) — or, in the
+per-user cache, that lacks this user's key tag — is never trusted: it is
+regenerated and a warning says so.
 """
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from types import ModuleType
 
-from .emit import (cache_dir, emit_source, file_status, load_module, module_filename, resolve_backend,
-                   signature, write_atomic)
+from .emit import (cache_dir, check_cache_folder, emit_source, file_status, load_module, module_filename,
+                   resolve_backend, signature, warn_regenerating, write_module)
 from .problem import Hamiltonian
 from .schemes import discretize
 
@@ -90,6 +90,11 @@ def generate(scheme, path=None, backend: str = "numpy") -> ModuleType:
 def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy") -> ModuleType:
     """Return the generated module for ``system`` and ``method``, generating it only if needed.
 
+    A file in the per-user cache is imported only when it carries this user's
+    key tag (:func:`methodgen.emit.file_status`) and its folders are private
+    (:func:`methodgen.emit.check_cache_folder`); an edited, truncated or
+    planted file is regenerated with a RuntimeWarning, never imported.
+
     Parameters
     ----------
     system : Hamiltonian
@@ -103,12 +108,11 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy") -
     backend = resolve_backend(backend)
     sig = signature(system, method, backend)
     path = default_path(system, method, backend) if path is None else Path(path)
+    check_cache_folder(path)  # a cache others can write to is refused before any derivation
     status = file_status(path, sig)
     if status == "ok":
         return load_module(path)
-    if status == "corrupt":
-        warnings.warn(f"generated module {path} does not match its content hash (edited or "
-                      "truncated); regenerating it", RuntimeWarning, stacklevel=2)
+    warn_regenerating(path, status)
     scheme = discretize(system, method)
-    write_atomic(path, emit_source(scheme, sig, backend=backend))
+    write_module(path, emit_source(scheme, sig, backend=backend))
     return load_module(path)

@@ -1,10 +1,14 @@
 """Command line: ``methodgen run | generate | scenes | methods``.
 
 Every command that reports numbers takes ``--json`` and then prints exactly one
-JSON object on stdout and nothing else there.  Errors a user can cause print
-one line ``methodgen: error: …`` on stderr and exit non-zero, without a
-traceback: 2 for bad input, 3 for a numerical failure (Newton did not
-converge, non-finite state), 1 for a failed ``generate --check``.
+JSON object on stdout and nothing else there (never ``NaN``/``Infinity``: a
+value that is not a number is ``null``, with a ``status`` saying why).  Errors a
+user can cause print one line ``methodgen: error: …`` on stderr and exit
+non-zero, without a traceback: 2 for bad input (including a path that cannot be
+used: missing folder, no permission, a file in the way, an untrusted cache), 3
+for a numerical failure (Newton did not converge, non-finite state or
+invariant) or a fault of the running system (disk full), 1 for a failed
+``generate --check``.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +27,7 @@ import numpy as np
 from . import __version__
 from .build import build, generated_dir, scene_module_path
 from .emit import BACKENDS, emit_source, file_status, module_filename, signature, write_atomic
-from .errors import InputError, MethodgenError
+from .errors import BAD_PATH_ERRNOS, InputError, MethodgenError, StorageError
 from .scene import load_scene, scene_names
 from .runio import ChunkWriter
 from .schemes import METHODS, discretize
@@ -67,42 +72,101 @@ def _step(text: str) -> float:
 class RunFailure(Exception):
     """A run stopped early; carries the report so far and the saved file."""
 
-    def __init__(self, exc: BaseException, report: dict, saved: Path | None, code: int):
+    def __init__(self, exc: BaseException, report: dict, saved: Path | None, code: int,
+                 saved_rows: int | None = None, note: str | None = None):
         super().__init__(str(exc))
         self.exc, self.report, self.saved, self.code = exc, report, saved, code
+        self.saved_rows, self.note = saved_rows, note
 
 
-def _invariant_stats(module, traj, acc: dict | None) -> dict:
-    """Update running max errors of every monitored invariant with ``traj`` (rows of states)."""
-    inv = module.invariants(traj)
+def json_clean(obj):
+    """``obj`` with every NaN/±inf float replaced by None (JSON has neither; ``allow_nan=False`` holds).
+
+    The reports say *why* a value is null in a ``status`` field next to it.
+    """
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_clean(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return json_clean(obj.item())
+    if isinstance(obj, np.ndarray):
+        return json_clean(obj.tolist())
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def _json_default(x):
+    """Anything else that is a number (as ``default=float`` used to accept), finite or null."""
+    return _finite_or_none(x)
+
+
+def dump_json(obj) -> str:
+    """One JSON object: non-finite numbers become null, never ``NaN``/``Infinity``."""
+    return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
+
+
+def _invariant_stats(module, traj, acc: dict | None, offset: int = 0) -> dict:
+    """Update running max errors of every monitored invariant with ``traj`` (rows of states).
+
+    ``offset`` is the step index of ``traj[0]``.  NaN never disappears into a
+    maximum (the builtin ``max(x, nan)`` returns x): the first step at which
+    an invariant is not finite is recorded, and the maximum is taken over the
+    finite values only, to be reported as null with a status.
+    """
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN is tracked below
+        inv = module.invariants(traj)
     acc = {} if acc is None else acc
     for name in module.INVARIANT_NAMES:
-        vals = inv[name]
+        vals = np.asarray(inv[name], dtype=float).reshape(len(traj), -1)
         if name not in acc:
-            acc[name] = {"initial": float(vals[0]), "max_abs_error": 0.0}
+            acc[name] = {"initial": float(vals[0, 0]) if vals.size else math.nan, "max_abs_error": 0.0,
+                         "nonfinite_step": None}
         entry = acc[name]
         if len(vals):
-            entry["max_abs_error"] = max(entry["max_abs_error"], float(np.max(np.abs(vals - entry["initial"]))))
-            entry["final"] = float(vals[-1])
+            err = np.abs(vals - entry["initial"])
+            bad = ~np.isfinite(err).all(axis=1)
+            if bad.any() and entry["nonfinite_step"] is None:
+                entry["nonfinite_step"] = offset + int(np.argmax(bad))
+            good = err[~bad]
+            if good.size:
+                entry["max_abs_error"] = max(entry["max_abs_error"], float(good.max()))
+            entry["final"] = float(vals[-1, 0])
     return acc
 
 
 def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done) -> dict:
     report_inv = {}
+    problems = []
     for name, v in (inv_acc or {}).items():
-        init, abs_err = v["initial"], v["max_abs_error"]
+        init, abs_err, bad = v["initial"], v["max_abs_error"], v.get("nonfinite_step")
+        if bad is not None:
+            # Not a number: reported as null with the reason, never as an error of 0.
+            report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": None,
+                                "max_rel_error": None, "status": "non-finite", "first_nonfinite_step": bad}
+            problems.append(f"{name} is not finite at step {bad}"
+                            + (f" ({name}(y0) = {init})" if bad == 0 else ""))
+            continue
         rel = abs_err / abs(init) if init != 0 else (0.0 if abs_err == 0 else math.inf)
         report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": abs_err,
-                            "max_rel_error": _finite_or_none(rel)}
+                            "max_rel_error": _finite_or_none(rel), "status": "ok"}
+    y_final = [float(v) for v in y_final]
+    if not all(math.isfinite(v) for v in y_final):
+        problems.append("the final state is not finite")
     return {
         "scene": scene.name,
         "method": method,
+        "status": "non-finite" if problems else "ok",
+        "status_detail": "; ".join(problems) or None,
         "h": h,
         "steps": steps,
         "steps_done": steps_done,
         "t_final": h * steps_done,
         "y0": list(scene.y0),
-        "y_final": [float(v) for v in y_final],
+        "y_final": y_final,
         "state_names": list(module.STATE_NAMES),
         "invariants": report_inv,
         "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
@@ -114,6 +178,13 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
     }
 
 
+_NUMERICAL = ("ConvergenceError", "NonFiniteError", "ResolutionError")
+
+
+def _note(text: str) -> None:
+    print(f"methodgen: note: {text}", file=sys.stderr)
+
+
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
               interrupted_path: str | None = None, plot: str | None = None,
@@ -123,7 +194,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
     ``chunk`` steps (memory stays bounded).  If the run is interrupted (Ctrl-C)
     or fails numerically, the states computed so far are saved — to ``save`` or
-    to ``interrupted_path`` — and :class:`RunFailure` is raised.  With ``plot``
+    to ``interrupted_path`` — and :class:`RunFailure` is raised.  If writing
+    fails (disk full), every chunk written before is kept as a readable file
+    and :class:`RunFailure` says where.  With ``plot``
     the run is drawn (phase portrait, invariant errors, constraint residuals).
     With ``extended`` each step is refined in extended precision
     (``integrate(..., extended=True)``: round-off that follows Brouwer's law).
@@ -160,9 +233,12 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     seconds = 0.0
     first = True
     compensation = None  # carried from chunk to chunk so chunking does not change the result
+    if save:
+        # A path that cannot be written is a StorageError here (exit 2), before any work.
+        writer = ChunkWriter(save, meta=meta)
+        for note in writer.recovered:
+            _note(note)
     try:
-        if save:
-            writer = ChunkWriter(save)
         while first or done < steps:
             n = min(chunk, steps - done)
             info: dict = {} if compensation is None else {"compensation": compensation}
@@ -173,7 +249,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 seconds += time.perf_counter() - t0
             compensation = info.get("compensation")
             rows = part if first else part[1:]
-            inv_acc = _invariant_stats(module, part, inv_acc)
+            inv_acc = _invariant_stats(module, part, inv_acc, offset=done)
             its_all.append(info.get("newton_iterations", np.zeros(0)))
             if writer is not None:
                 writer.append(rows)
@@ -184,35 +260,60 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             first = False
     except BaseException as exc:
         partial = getattr(exc, "trajectory", None)
-        numeric = type(exc).__name__ in ("ConvergenceError", "NonFiniteError", "ResolutionError")
-        if not (numeric or isinstance(exc, KeyboardInterrupt)):
+        numeric = type(exc).__name__ in _NUMERICAL
+        # A failed write of the --save file (disk full): keep what is on disk, say where.
+        io_fault = isinstance(exc, OSError) and writer is not None and writer.failed is not None
+        if not (numeric or io_fault or isinstance(exc, KeyboardInterrupt)):
             if writer is not None:
                 writer.abort()
             raise
-        if partial is not None and len(partial):
+        if io_fault:
+            rows = np.zeros((0,) + y.shape)
+        elif partial is not None and len(partial):
             rows = partial if first else partial[1:]
+            inv_acc = _invariant_stats(module, partial, inv_acc, offset=done)
             done += len(partial) - 1
-            inv_acc = _invariant_stats(module, partial, inv_acc)
             y = partial[-1]
         else:
             rows = np.zeros((0,) + y.shape)
+        if inv_acc is None:  # failed before a chunk was done (e.g. y0 outside the domain of H)
+            inv_acc = _invariant_stats(module, np.asarray(y, dtype=float)[None], None, offset=done)
         target = writer
+        note = None
         if target is None and (interrupted_path or isinstance(exc, KeyboardInterrupt)):
-            target = ChunkWriter(interrupted_path or f"{scene.name}_{method}_partial.npz".replace("-", "_"))
-            for k in kept:
-                target.append(k)
-        saved = None
+            try:
+                target = ChunkWriter(interrupted_path or f"{scene.name}_{method}_partial.npz".replace("-", "_"),
+                                     meta=meta)
+                for k in kept:
+                    target.append(k)
+            except OSError as wexc:  # the partial file cannot be written: say so, keep the report
+                note = f"the computed states were not saved: {wexc}"
+                if target is not None and target.failed is None:
+                    target.abort()
+                    target = None
+        saved = saved_rows = None
         if target is not None:
-            if len(rows):
-                target.append(rows)
-            saved = target.close(**meta, steps_done=done, complete=False, reason=type(exc).__name__)
+            try:
+                if len(rows):
+                    target.append(rows)
+            except OSError:
+                pass  # target.failed is set: close() keeps the complete chunks
+            try:
+                saved_rows = target.saved_rows
+                saved = target.close(steps_done=max(saved_rows - 1, 0), complete=False,
+                                     reason="write-error" if io_fault else type(exc).__name__)
+            except OSError as cexc:
+                note, saved_rows = str(cexc), None
         its = np.concatenate(its_all) if its_all else np.zeros(0)
         rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
-        raise RunFailure(exc, rep, saved, 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL) from None
+        code = 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL
+        raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
     its = np.concatenate(its_all) if its_all else np.zeros(0)
     rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
     if writer is not None:
-        rep["saved"] = str(writer.close(**meta, steps_done=done, complete=True, reason="complete"))
+        complete = rep["status"] == "ok"
+        rep["saved"] = str(writer.close(steps_done=done, complete=complete,
+                                        reason="complete" if complete else "non-finite"))
     if plot:
         from .plots import plot_run
         if writer is not None:
@@ -226,15 +327,26 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     return rep
 
 
+def _num(x, spec: str, width: int) -> str:
+    if x is not None and math.isfinite(x):
+        return format(x, f"{width}{spec}")
+    return format("nan" if x is None else str(x), f">{width}")
+
+
 def _print_run(rep: dict) -> None:
     print(f"scene {rep['scene']}  method {rep['method']}  h = {rep['h']:g}  steps = {rep['steps']}  "
           f"(t = 0 .. {rep['t_final']:g})")
     print(f"module: {rep['module']}")
     print(f"{'invariant':>10} {'initial':>22} {'final':>22} {'max abs error':>14} {'max rel error':>14}")
     for name, v in rep["invariants"].items():
-        rel = v["max_rel_error"]
-        rel_s = f"{rel:14.3e}" if rel is not None else f"{'inf':>14}"
-        print(f"{name:>10} {v['initial']:22.15g} {v['final']:22.15g} {v['max_abs_error']:14.3e} {rel_s}")
+        if v.get("status") == "non-finite":
+            err_s = f"{'non-finite':>14}"
+            rel_s = f"{'-':>14}"
+        else:
+            err_s = f"{v['max_abs_error']:14.3e}"
+            rel = v["max_rel_error"]
+            rel_s = f"{rel:14.3e}" if rel is not None else f"{'inf':>14}"
+        print(f"{name:>10} {_num(v['initial'], '.15g', 22)} {_num(v['final'], '.15g', 22)} {err_s} {rel_s}")
     nw = rep["newton"]
     print(f"Newton iterations per step: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
     print(f"wall time {rep['seconds']:.3f} s, {rep['us_per_step']:.2f} µs/step")
@@ -248,20 +360,32 @@ def cmd_run(args) -> int:
                         plot=args.plot, backend=args.backend, extended=args.extended)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
-        where = f"; saved {fail.report['steps_done'] + 1} states to {fail.saved}" if fail.saved else ""
-        print(f"methodgen: {what} at step {fail.report['steps_done']}: {fail.exc}{where}", file=sys.stderr)
+        if fail.saved:
+            n = fail.saved_rows if fail.saved_rows is not None else fail.report["steps_done"] + 1
+            where = f"; saved {n} states to {fail.saved}"
+        else:
+            where = f"; {fail.note}" if fail.note else ""
+        msg = " ".join(str(fail.exc).split()) or type(fail.exc).__name__  # one line, whatever the text
+        print(f"methodgen: {what} at step {fail.report['steps_done']}: {msg}{where}", file=sys.stderr)
         if args.json:
-            print(json.dumps({**fail.report, "error": str(fail.exc),
-                              "saved": str(fail.saved) if fail.saved else None}))
+            status = ("interrupted" if fail.code == 130 else "io-error" if isinstance(fail.exc, OSError)
+                      else "non-finite" if type(fail.exc).__name__ == "NonFiniteError" else "numerical-error")
+            print(dump_json({**fail.report, "status": status, "error": str(fail.exc),
+                             "saved": str(fail.saved) if fail.saved else None}))
         return fail.code
     if args.json:
-        print(json.dumps(rep))
+        print(dump_json(rep))
     else:
         _print_run(rep)
         if "saved" in rep:
             print(f"trajectory saved to {rep['saved']}")
         if "plot" in rep:
             print(f"plot written to {rep['plot']}")
+    if rep["status"] != "ok":
+        # The run finished but its numbers are not numbers: never a silent success.
+        print(f"methodgen: error: the run left the domain of the Hamiltonian: {rep['status_detail']}",
+              file=sys.stderr)
+        return EXIT_NUMERICAL
     return 0
 
 
@@ -327,8 +451,10 @@ def _print_bench(rep: dict) -> None:
     wp = rep.get("work_precision")
     if wp:
         print(f"work-precision on {wp['scene']}, t = 0 .. {wp['T']:g}; reference: {wp['reference']}")
+        for note in wp.get("notes", []):  # bench --peers: a peer missing or not applicable
+            print(f"  note: {note}")
         print(f"{'method':<28} {'h / tol':>9} {'steps':>7} {'CPU s':>9} {'error':>10} {'energy err':>10} "
-              f"{'inv/constr':>10} {'Newton':>6}")
+              f"{'rel. dE':>9} {'inv/constr':>10} {'Newton':>6}")
         for r in wp["rows"]:
             if "failed" in r:
                 print(f"{r['method']:<28} {r.get('h', 0):9.3g}  failed: {r['failed'][:60]}")
@@ -338,8 +464,8 @@ def _print_bench(rep: dict) -> None:
             if "constraint_error" in r:
                 others.append(r["constraint_error"])
             print(f"{r['method']:<28} {par:9.3g} {r['steps']:7d} {r['seconds']:9.4f} {_fmt(r['error']):>10} "
-                  f"{_fmt(r['energy_error']):>10} {_fmt(max(others) if others else None):>10} "
-                  f"{_fmt(r.get('newton_mean'), '.2f'):>6}")
+                  f"{_fmt(r['energy_error']):>10} {_fmt(r.get('energy_rel_error'), '.1e'):>9} "
+                  f"{_fmt(max(others) if others else None):>10} {_fmt(r.get('newton_mean'), '.2f'):>6}")
     sv = rep.get("solvers")
     if sv:
         print(f"\nnonlinear solvers on {sv['scene']} (h = {sv['h']:g}, {sv['steps']} steps)")
@@ -379,7 +505,10 @@ def cmd_bench(args) -> int:
     progress = not args.json
     rep: dict = {"scene": scene.name, "quick": bool(args.quick)}
     if not args.only_extras:
-        rep["work_precision"] = bench.work_precision(scene, methods, quick=args.quick, progress=progress)
+        if args.t_final is not None and not (math.isfinite(args.t_final) and args.t_final > 0):
+            raise InputError(f"--t-final must be a positive number, got {args.t_final}")
+        rep["work_precision"] = bench.work_precision(scene, methods, quick=args.quick, progress=progress,
+                                                     peers=args.peers, backend=args.backend, T=args.t_final)
         rep["solvers"] = bench.solver_variants(scene, methods, steps=300 if args.quick else 2000)
     if args.long:
         rep["long"] = bench.long_run(scene, methods, steps=args.long_steps or (20_000 if args.quick else 1_000_000),
@@ -395,7 +524,7 @@ def cmd_bench(args) -> int:
         rep["plot"] = str(plot_work_precision(rep["work_precision"]["rows"], args.plot,
                                               title=f"{scene.name}: work-precision"))
     if args.json:
-        print(json.dumps(rep, default=float))
+        print(dump_json(rep))
     else:
         _print_bench(rep)
         if "plot" in rep:
@@ -483,6 +612,13 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--only-extras", action="store_true",
                    help="skip the work-precision and solver tables (run only --long/--brouwer)")
     p.add_argument("--plot", metavar="FILE", help="write the work-precision diagram")
+    p.add_argument("--peers", action="store_true",
+                   help="heyoka and REBOUND on the same problem, in the same table and plot "
+                        "(methodgen[peers]; a missing one is a note); step sizes scaled from the scene's h")
+    p.add_argument("--backend", choices=BACKENDS, default="numpy",
+                   help="backend of methodgen's rows (numba: compiled loop, compiled before timing)")
+    p.add_argument("--t-final", type=float, metavar="T",
+                   help="final time of the work-precision runs (default 20; with --peers the scene's h*steps)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_bench)
 
@@ -505,17 +641,37 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings on the command line: one line each (``methodgen: warning: …``), no source excerpt."""
+    stream = sys.stderr if file is None else file
+    try:
+        stream.write(f"methodgen: warning: {' '.join(str(message).split())}\n")
+    except OSError:  # pragma: no cover - stderr gone
+        pass
+
+
+def _oserror_line(exc: OSError) -> str:
+    cause = exc.strerror or str(exc) or type(exc).__name__
+    where = exc.filename if exc.filename is not None else None
+    return f"{where}: {cause}" if where else cause
+
+
 def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
+    warnings.showwarning = _one_line_warning
     try:
         return args.func(args)
+    except StorageError as exc:
+        # A path that cannot be used is bad input (2); a full disk is a fault of the run (3).
+        print(f"methodgen: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT if exc.bad_path else EXIT_NUMERICAL
     except MethodgenError as exc:
         print(f"methodgen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
     except (RuntimeError, FloatingPointError) as exc:
         # ConvergenceError / NonFiniteError / ResolutionError of generated modules.
-        if type(exc).__name__ in ("ConvergenceError", "NonFiniteError", "ResolutionError"):
-            print(f"methodgen: error: {exc}", file=sys.stderr)
+        if type(exc).__name__ in _NUMERICAL:
+            print(f"methodgen: error: {' '.join(str(exc).split())}", file=sys.stderr)
             return EXIT_NUMERICAL
         raise
     except KeyboardInterrupt:
@@ -526,6 +682,11 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except OSError as exc:
+        # Any other file-system fault that was not turned into a StorageError where it
+        # happened: still one line naming the path and the cause, never a traceback.
+        print(f"methodgen: error: {_oserror_line(exc)}", file=sys.stderr)
+        return EXIT_INPUT if exc.errno in BAD_PATH_ERRNOS else EXIT_NUMERICAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,17 +10,27 @@
 * Files are written atomically (temporary file in the same folder, fsync,
   ``os.replace``): an interrupted write never leaves a half module, and two
   processes generating the same file leave one valid file.
-* Generated modules are imported from their file (never ``exec`` of a string).
+* Modules in the per-user cache carry one more first line, a keyed hash
+  (HMAC-SHA256 under a per-user secret in the cache root): a cached file is
+  imported only if this user's methodgen wrote it, and only from folders
+  nobody else can write to.  Files elsewhere (``generated/``) keep their
+  plain, deterministic bytes.
+* Generated modules are imported from their file (never ``exec`` of a string),
+  from exactly the bytes that were checked.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
+import hmac
+import importlib.machinery
 import importlib.util
 import os
 import re
+import secrets
+import stat
 import sys
-import tempfile
 import warnings
 from pathlib import Path
 from types import ModuleType
@@ -29,12 +39,13 @@ import jinja2
 import sympy
 
 from ._version import __version__
-from .errors import GenerationError, InputError
+from .errors import GenerationError, InputError, StorageError, UntrustedCacheError
 from .lower import Kernel, ModuleIR, lower
+from .runio import find_orphans, make_temp, storage_error
 
 __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
            "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available",
-           "resolve_backend"]
+           "resolve_backend", "write_module", "check_cache_folder", "cache_root_of", "untagged"]
 
 #: Code generation backends: plain numpy, or numba-compiled kernels and integration loop.
 BACKENDS = ("numpy", "numba")
@@ -44,6 +55,11 @@ _TEMPLATES = {"numpy": "module.py.j2", "numba": "numba_module.py.j2"}
 
 HEADER_SIGNATURE = "# signature: "
 HEADER_CONTENT = "# content-sha256: "
+#: First line of a module in the per-user cache only (never in generated/): HMAC-SHA256 of
+#: the rest of the file and its name under the user's secret key (see :func:`file_status`).
+HEADER_KEYED = "# methodgen-hmac-sha256: "
+#: The per-user secret, in the cache root (mode 0600).
+KEY_FILE = ".methodgen-key"
 
 
 def template_dir() -> Path:
@@ -190,7 +206,12 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
         "hamiltonian": _vector_view(ir.vector["hamiltonian"], [("_out", (1,))], "_out[..., 0]"),
         "invariants": _vector_view(ir.vector["invariants"],
                                    [("_out", (len(ir.invariant_names),))], "_out"),
+        # the increment with what the per-step checks need, and the initial-state checks
+        "post": _vector_view(ir.vector["post"], [("_out", ir.vector["post"].shape)], "_out"),
+        "check": _vector_view(ir.vector["check"], [("_out", ir.vector["check"].shape)], "_out"),
     }
+    if "domain" in ir.vector:
+        vector["domain"] = _vector_view(ir.vector["domain"], [("_out", ir.vector["domain"].shape)], "_out")
     if ir.n_constraints:
         m, d = ir.n_constraints, ir.dim
         vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")
@@ -223,22 +244,244 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
 # --- files --------------------------------------------------------------------
 
 def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (temporary file + ``os.replace``)."""
+    """Write ``text`` to ``path`` atomically (temporary file + ``os.replace``).
+
+    The file gets ordinary permissions (0644 less the umask).  The temporary
+    file ``.NAME.HOST-PID.XXXXXXXX.tmp`` is locked while it exists, so the
+    leftover of a killed process can be recognised (:func:`methodgen.runio.find_orphans`).
+
+    Raises
+    ------
+    StorageError
+        One line naming ``path`` and the cause (disk full, no permission, a
+        missing folder or a file in the way); also an ``OSError``.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = make_temp(path.parent, path.name)
+    except OSError as exc:
+        raise storage_error(exc, "write", path) from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
+            os.replace(tmp, path)  # still locked: never taken for an orphan
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(exc, OSError):
+            raise storage_error(exc, "write", path) from None
         raise
+
+
+# --- the per-user cache: who wrote a file ---------------------------------------
+
+def cache_root_of(path) -> Path | None:
+    """The cache root (resolved) when ``path`` lies in the per-user cache, else None."""
+    try:
+        root = cache_dir().resolve()
+        Path(path).resolve().relative_to(root)
+    except (ValueError, OSError, RuntimeError):
+        return None
+    return root
+
+
+def _check_folder(folder: Path) -> None:
+    try:
+        st = os.stat(folder)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise storage_error(exc, "use cache folder", folder) from None
+    if not stat.S_ISDIR(st.st_mode):
+        raise StorageError(f"cannot use cache folder {folder}: it is not a folder", folder, errno.ENOTDIR)
+    if os.name == "nt":  # pragma: no cover - no POSIX owners and modes to check
+        return
+    uid = os.geteuid() if hasattr(os, "geteuid") else None
+    if uid is not None and st.st_uid != uid:
+        raise UntrustedCacheError(
+            f"cache folder {folder} belongs to uid {st.st_uid}, not to you (uid {uid}); methodgen does "
+            "not import code from a folder someone else controls — set METHODGEN_CACHE to a folder of "
+            "your own")
+    if st.st_mode & 0o022:
+        who = " and ".join(w for w, bit in (("group", 0o020), ("others", 0o002)) if st.st_mode & bit)
+        raise UntrustedCacheError(
+            f"cache folder {folder} is writable by {who} (mode {stat.S_IMODE(st.st_mode):04o}); methodgen "
+            f"does not import code from a folder others can write to — run: chmod go-w {folder} "
+            "(or set METHODGEN_CACHE to a private folder)")
+
+
+def check_cache_folder(path) -> Path | None:
+    """Refuse a cache others could plant code in; no-op outside the cache.
+
+    For a ``path`` in the per-user cache, the cache root, the file's folder and
+    its ``__pycache__`` (numba keeps compiled code there) must belong to the
+    user and not be writable by group or others — the rule of ssh's
+    ``StrictModes`` and pip's cache.  Below a root that others cannot even
+    enter (mode ``0700``), nothing else needs checking.
+
+    Returns
+    -------
+    Path or None
+        The cache root, or None when ``path`` is not in the cache.
+
+    Raises
+    ------
+    UntrustedCacheError
+        A folder that is not the user's or is group/other-writable.
+    """
+    root = cache_root_of(path)
+    if root is None:
+        return None
+    _check_folder(root)
+    try:
+        closed = not (os.stat(root).st_mode & 0o011)
+    except OSError:
+        closed = False
+    if not closed:
+        folder = Path(path).resolve().parent
+        for d in ([folder] if folder != root else []) + [folder / "__pycache__"]:
+            _check_folder(d)
+    return root
+
+
+def _read_key(keyfile: Path) -> bytes | None:
+    try:
+        fd = os.open(keyfile, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise UntrustedCacheError(f"cannot read the cache key {keyfile}: {exc.strerror or exc} (a "
+                                  "symbolic link or no permission); remove it to get a new one") from None
+    try:
+        st = os.fstat(fd)
+        data = os.read(fd, 256)
+    finally:
+        os.close(fd)
+    uid = os.geteuid() if hasattr(os, "geteuid") else st.st_uid
+    private = os.name == "nt" or (st.st_uid == uid and not st.st_mode & 0o077)
+    if not stat.S_ISREG(st.st_mode) or not private:
+        raise UntrustedCacheError(
+            f"cache key {keyfile} is not a private file of yours (mode {stat.S_IMODE(st.st_mode):04o}, uid "
+            f"{st.st_uid}); anyone who can read it can forge cached modules — remove it (a new key is "
+            "made and the cache regenerated)")
+    try:
+        key = bytes.fromhex(data.decode("ascii").strip())
+    except (UnicodeDecodeError, ValueError):
+        key = b""
+    if len(key) < 32:
+        raise UntrustedCacheError(f"cache key {keyfile} is damaged; remove it (a new key is made and the "
+                                  "cache regenerated)")
+    return key
+
+
+def _cache_key(root: Path, create: bool) -> bytes | None:
+    """The user's secret key of the cache ``root``; made (0600, atomically) on first use if ``create``."""
+    keyfile = root / KEY_FILE
+    key = _read_key(keyfile)
+    if key is not None or not create:
+        return key
+    try:
+        fd, tmp = make_temp(root, KEY_FILE)
+    except OSError as exc:
+        raise storage_error(exc, "create the cache key in", root) from None
+    try:
+        if hasattr(os, "fchmod"):
+            os.fchmod(fd, 0o600)
+        os.write(fd, (secrets.token_hex(32) + "\n").encode("ascii"))
+        os.fsync(fd)
+        try:
+            os.link(tmp, keyfile)  # atomic and never over a key another process made first
+        except FileExistsError:
+            pass
+        except OSError:  # pragma: no cover - no hard links here: rename (last writer wins)
+            if not keyfile.exists():
+                os.replace(tmp, keyfile)
+    except OSError as exc:
+        raise storage_error(exc, "create the cache key", keyfile) from None
+    finally:
+        os.close(fd)
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+    return _read_key(keyfile)
+
+
+def _keyed_tag(key: bytes, name: str, text: str) -> str:
+    return hmac.new(key, b"methodgen-module-v1\0" + name.encode() + b"\0" + text.encode(),
+                    hashlib.sha256).hexdigest()
+
+
+def untagged(text: str) -> str:
+    """A module's text without the cache-only key line (what :func:`render` emitted)."""
+    return text.partition("\n")[2] if text.startswith(HEADER_KEYED) else text
+
+
+def write_module(path, text: str) -> None:
+    """Write a generated module; in the per-user cache, with the user's key tag.
+
+    Outside the cache (``generated/``, a path of the user's choosing) the bytes
+    are exactly ``text`` (deterministic, committable).  In the cache the
+    folder is checked (:func:`check_cache_folder`), the key made on first use,
+    temporary files of killed writers removed, and the first line becomes
+    ``# methodgen-hmac-sha256: …``.
+
+    Raises
+    ------
+    StorageError, UntrustedCacheError
+    """
+    path = Path(path)
+    text = untagged(text)
+    root = cache_root_of(path)
+    if root is not None:
+        if not root.exists():
+            try:
+                root.mkdir(mode=0o700, parents=True, exist_ok=True)
+            except OSError as exc:
+                raise storage_error(exc, "create cache folder", root) from None
+        check_cache_folder(path)
+        key = _cache_key(root, create=True)
+        try:
+            path.parent.mkdir(mode=0o755, parents=True, exist_ok=True)
+        except OSError as exc:
+            raise storage_error(exc, "create cache folder", path.parent) from None
+        for orphan, _, fd in find_orphans(path.parent, path.name):
+            try:
+                os.unlink(orphan)  # the temporary file of a killed generation: nothing to keep
+            except OSError:
+                pass
+            finally:
+                os.close(fd)
+        text = HEADER_KEYED + _keyed_tag(key, path.name, text) + "\n" + text
+    write_atomic(path, text)
+
+
+def _classify(path: Path, text: str, expected_signature: str | None) -> str:
+    """``"ok"``, ``"corrupt"``, ``"untrusted"`` or ``"stale"`` for the file text ``text`` at ``path``."""
+    tag = None
+    if text.startswith(HEADER_KEYED):
+        first, _, text = text.partition("\n")
+        tag = first[len(HEADER_KEYED):].strip()
+    first, _, body = text.partition("\n")
+    if not first.startswith(HEADER_CONTENT):
+        return "corrupt"
+    if hashlib.sha256(body.encode()).hexdigest() != first[len(HEADER_CONTENT):].strip():
+        return "corrupt"
+    root = cache_root_of(path)
+    if root is not None:
+        key = _cache_key(root, create=False)
+        if key is None or tag is None or not hmac.compare_digest(tag, _keyed_tag(key, path.name, text)):
+            return "untrusted"
+    if expected_signature is not None:
+        m = re.search(r"^" + re.escape(HEADER_SIGNATURE) + r"([0-9a-f]{64})$", body, re.M)
+        if not m or m.group(1) != expected_signature:
+            return "stale"
+    return "ok"
 
 
 def file_status(path: Path, expected_signature: str | None = None) -> str:
@@ -248,8 +491,16 @@ def file_status(path: Path, expected_signature: str | None = None) -> str:
     -------
     str
         ``"missing"``; ``"corrupt"`` (no header, or the body does not match
-        its content hash: edited or truncated); ``"stale"`` (valid, but its
-        signature differs from ``expected_signature``); or ``"ok"``.
+        its content hash: edited or truncated); ``"untrusted"`` (in the
+        per-user cache, but without a valid key tag: not written by this
+        user's methodgen — planted, edited with a recomputed hash, or from an
+        older version); ``"stale"`` (valid, but its signature differs from
+        ``expected_signature``); or ``"ok"``.
+
+    Raises
+    ------
+    UntrustedCacheError
+        The cache's key file is not private.
     """
     path = Path(path)
     if not path.is_file():
@@ -258,37 +509,78 @@ def file_status(path: Path, expected_signature: str | None = None) -> str:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
         return "corrupt"
-    first, _, body = text.partition("\n")
-    if not first.startswith(HEADER_CONTENT):
-        return "corrupt"
-    if hashlib.sha256(body.encode()).hexdigest() != first[len(HEADER_CONTENT):].strip():
-        return "corrupt"
-    if expected_signature is not None:
-        m = re.search(r"^" + re.escape(HEADER_SIGNATURE) + r"([0-9a-f]{64})$", body, re.M)
-        if not m or m.group(1) != expected_signature:
-            return "stale"
-    return "ok"
+    return _classify(path, text, expected_signature)
+
+
+class _VerifiedSourceLoader(importlib.machinery.SourceFileLoader):
+    """Imports exactly the bytes that were checked (no second read, no ``.pyc`` in between)."""
+
+    def __init__(self, fullname: str, path: str, source: bytes):
+        super().__init__(fullname, path)
+        self._source = source
+
+    def get_data(self, path):
+        if path == self.path:
+            return self._source
+        raise OSError(f"{path}: not read by methodgen's loader")  # i.e. no bytecode cache
+
+    def get_code(self, fullname):
+        return self.source_to_code(self._source, self.path)
 
 
 def load_module(path: Path) -> ModuleType:
-    """Import a generated module from its file (content hash checked first)."""
+    """Import a generated module from its file.
+
+    The file is read once; its content hash (and, in the per-user cache, the
+    folder and the user's key tag) is checked, and exactly those bytes are
+    compiled and run — no second read of the file and no ``.pyc``.
+
+    Raises
+    ------
+    GenerationError
+        The file is missing, corrupt, untrusted or unreadable (nothing is run).
+    UntrustedCacheError
+        A cache folder others can write to.
+    """
     path = Path(path).resolve()
-    status = file_status(path)
+    check_cache_folder(path)
+    try:
+        source = path.read_bytes()
+        status = _classify(path, source.decode("utf-8"), None)
+    except FileNotFoundError:
+        status = "missing"
+    except UnicodeDecodeError:
+        status = "corrupt"
+    except OSError as exc:
+        raise GenerationError(f"cannot read generated module {path}: {exc.strerror or exc}") from None
     if status != "ok":
-        raise GenerationError(f"generated module {path} is {status}; regenerate it")
+        why = {"untrusted": "not written by this user's methodgen (no valid key tag)"}.get(status, status)
+        raise GenerationError(f"generated module {path} is {why}; regenerate it (it was not imported)")
     digest = hashlib.sha256(str(path).encode()).hexdigest()[:12]
     name = f"methodgen_generated.{path.stem}_{digest}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    if spec is None or spec.loader is None:  # pragma: no cover - defensive
+    loader = _VerifiedSourceLoader(name, str(path), source)
+    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
+    if spec is None:  # pragma: no cover - defensive
         raise GenerationError(f"cannot import {path}")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
-        spec.loader.exec_module(module)
+        loader.exec_module(module)
     except BaseException:
         sys.modules.pop(name, None)
         raise
     return module
+
+
+def warn_regenerating(path, status: str, stacklevel: int = 3) -> None:
+    """The warning for a file that is regenerated because it cannot be trusted."""
+    if status == "corrupt":
+        warnings.warn(f"generated module {path} does not match its content hash (edited or "
+                      "truncated); regenerating it", RuntimeWarning, stacklevel=stacklevel)
+    elif status == "untrusted":
+        warnings.warn(f"cached module {path} was not written by this user's methodgen (no valid key "
+                      "tag: planted, edited, or from an older version); it is not imported — "
+                      "regenerating it", RuntimeWarning, stacklevel=stacklevel)
 
 
 def generate(scheme, path: str | os.PathLike | None = None, backend: str = "numpy") -> ModuleType:
@@ -319,8 +611,12 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
     if path is None:
         path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.method, backend)
     path = Path(path)
-    if file_status(path, sig) != "ok":
-        write_atomic(path, emit_source(scheme, sig, path.stem, backend))
+    check_cache_folder(path)
+    status = file_status(path, sig)
+    if status != "ok":
+        if status == "untrusted":
+            warn_regenerating(path, status)
+        write_module(path, emit_source(scheme, sig, path.stem, backend))
     return load_module(path)
 
 

@@ -9,7 +9,6 @@ the failure can be looked at), 2 for bad input or a missing matplotlib.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -62,6 +61,7 @@ def _jsonable(x):
 
 def cmd_figures(args) -> int:
     """Run the ``figures`` subcommand; see the module docstring for the exit status."""
+    from .cli import dump_json
     from .plots import write_figures
 
     out = Path(args.out) if args.out else _default_out()
@@ -71,7 +71,7 @@ def cmd_figures(args) -> int:
     c = res["checks"]
     ok = bool(c["figure1"]["passed"] and c["figure2"]["passed"])
     if args.json:
-        print(json.dumps(_jsonable({"ok": ok, "files": res["files"], "checks": c, "seconds": seconds})))
+        print(dump_json(_jsonable({"ok": ok, "files": res["files"], "checks": c, "seconds": seconds})))
     else:
         for f in res["files"]:
             print(f"wrote {f}")

@@ -28,7 +28,8 @@ import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
-from .derive import Invariant
+from .derive import Invariant, separable_split, vector_field
+from .schemes.base import STEP, is_linear_field
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
@@ -67,6 +68,22 @@ class ScalarPrinter(PythonCodePrinter):
             root = f"math.sqrt({self._print(b)})"
             power = root if abs(e.p) == 1 else f"{root}**{abs(e.p)}"
             return power if e.p > 0 else f"1/{power}"
+        return super()._print_Pow(expr, rational=rational)
+
+
+class CheckPrinter(ScalarPrinter):
+    """ScalarPrinter for the per-step checks (no trajectory depends on their rounding):
+    squares and cubes of a symbol as products and ``u**(3/2)`` as ``u*math.sqrt(u)``,
+    which CPython evaluates faster than ``**``."""
+
+    def _print_Pow(self, expr, rational=False):
+        b, e = expr.args
+        if b.is_Symbol and e.is_Integer and 2 <= e <= 3:
+            return "(" + "*".join([self._print(b)] * int(e)) + ")"
+        if b.is_Symbol and e.is_Rational and e.q == 2 and abs(e.p) == 3:
+            u = self._print(b)
+            power = f"({u}*math.sqrt({u}))"
+            return power if e.p > 0 else f"(1/{power})"
         return super()._print_Pow(expr, rational=rational)
 
 
@@ -166,6 +183,21 @@ class ModuleIR:
     signature: str
     resolution: str | None = None
     fixed_point: bool = False
+    #: Local error estimate of every step (see :func:`local_error_plan`): ``"carry"`` (E from
+    #: the field at both ends of the step, its start value carried over from the previous
+    #: step), ``"direct"`` (E computed by the ``post`` kernel) or None (linear field: exempt).
+    local_error: str | None = None
+    #: State components the estimate E lives in, and those of Δy it is measured against.
+    lerr_index: tuple[int, ...] = ()
+    lerr_norm: tuple[int, ...] = ()
+    #: E = lerr_scale * (Δy - T) (Kahan: 0.5, see local_error_plan), as Python source.
+    lerr_scale: str = "1.0"
+    #: The embedded partner of the method, for the module documentation.
+    lerr_partner: str = ""
+    #: Real-domain conditions of H and the constraints that a trajectory can violate:
+    #: ``(kind, expression)``, kind ``"positive"`` (log, negative fractional power) or
+    #: ``"nonnegative"`` (positive fractional power such as sqrt).
+    domain: tuple[tuple[str, str], ...] = ()
 
     @property
     def dim(self) -> int:
@@ -213,6 +245,29 @@ def _kernel(exprs: list[sp.Expr], shape: tuple[int, ...], printer, rename: dict)
     return Kernel(tcode, tuple(outputs), shape)
 
 
+def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dict,
+                    later_printer=None, shared=()) -> Kernel:
+    """Kernel of ``first`` followed by ``later``, which is written in the symbols ``links``
+    that stand for the outputs of ``first``.  Two CSE passes: the code of ``first`` is
+    exactly that of a kernel of ``first`` alone; ``later`` reuses its outputs (and is
+    printed with ``later_printer``, default ``printer``).  ``shared`` subexpressions of
+    ``later`` are computed once (CSE sees them as outputs too)."""
+    lp = later_printer or printer
+    first = tuple(sp.sympify(e).xreplace(rename) for e in first)
+    later = tuple(sp.sympify(e).xreplace(rename) for e in later)
+    shared = tuple(sp.sympify(e).xreplace(rename) for e in shared)
+    t1, r1 = _cse(first)
+    t2, r2 = (sp.cse(list(later + shared), symbols=sp.numbered_symbols("_e"), order="canonical")
+              if later else ([], []))
+    r2 = r2[:len(later)]
+    temps = [(str(s), printer.doprint(e)) for s, e in t1]
+    temps += [(str(s), printer.doprint(e)) for s, e in zip(links, r1)]
+    temps += [(str(s), lp.doprint(e)) for s, e in t2]
+    outputs = [((i,), str(s)) for i, s in enumerate(links)]
+    outputs += [((len(links) + j,), lp.doprint(e)) for j, e in enumerate(r2) if e != 0]
+    return Kernel(tuple(temps), tuple(outputs), (len(links) + len(later),))
+
+
 def _helpers(exprs) -> tuple[str, ...]:
     used = set()
     for e in exprs:
@@ -227,6 +282,139 @@ def _helpers(exprs) -> tuple[str, ...]:
                 used.add(dep)
                 todo.append(dep)
     return tuple(sorted(used))
+
+
+@dataclass(frozen=True)
+class LocalErrorPlan:
+    """How a generated stepper estimates the local error of a step (:func:`local_error_plan`)."""
+
+    kind: str                       # "carry" or "direct"
+    index: tuple[int, ...]          # components of E
+    norm: tuple[int, ...]           # components of Δy that E is measured against
+    extra: tuple                    # what the post kernel adds after Δy (see local_error_plan)
+    scale: sp.Rational              # E = scale * (Δy - T)
+    partner: str
+    shared: tuple = ()              # subexpressions to compute once (the components of E)
+
+
+def local_error_plan(scheme, dy=None) -> LocalErrorPlan | None:
+    """The embedded error estimate ``E`` of one step ``y0 → y1 = y0 + Δy`` of ``scheme``.
+
+    The classical embedded pair for second-order one-step methods is the
+    trapezoidal rule ``T = (h/2)(f(y0) + f(y1))`` and the midpoint rule
+    ``M = h f((y0 + y1)/2)`` applied to the chord of the step itself: both agree
+    with the exact flow to O(h³) and their gap ``T - M = (h/8) f''(Δy, Δy) + …``
+    has the size of the local error (for the exact flow, Euler–Maclaurin gives
+    ``Δy - T = -(h³/12) y⁽³⁾ + O(h⁵)``).  Each method supplies the partner from
+    its own stage data, so E costs at most one evaluation of f per step:
+
+    * midpoint rule and the discrete gradients (energy-momentum, AVF, Gonzalez,
+      Itoh–Abe): ``Δy/h`` is f at (or a discrete gradient near) the midpoint,
+      so ``E = Δy - T``; f(y1) is evaluated together with the increment and
+      carried over as f(y0) of the next step (``"carry"``);
+    * Kahan: ``Δy = 2M - T``, so ``E = (Δy - T)/2 = M - T`` (scale 1/2);
+    * trapezoidal rule: ``Δy = T``, so ``E = Δy - M``, with one evaluation of f
+      at the midpoint of the chord (``"direct"``);
+    * Störmer–Verlet, RATTLE, SHAKE: ``Δp`` is already the trapezoidal rule of
+      the forces (constraint forces included), and
+      ``E_q = Δq - (h/2)(∂H/∂p(y0) + ∂H/∂p(y1)) = (h²/4) M⁻¹(F(q0) - F(q1))``
+      needs no evaluation of U at all (``"direct"``).  E has no momentum part
+      and is measured against Δq (mass-weighted, ``|M E_q|/|M Δq|``, when the
+      kinetic energy is ½pᵀM⁻¹p): the chord average of ``(hω)²/4``, ω² the
+      curvature of U along the step.
+
+    When the momenta are eliminated (separable H, Newton on Δq) the position
+    part of ``Δy - T`` is the Newton residual: only the momenta are formed.
+    Because E uses the field at *both ends* of the step, a step that straddles
+    a fast region (a pericentre jumped over, its midpoint far from the
+    singularity) has a large E where the Jacobian at the midpoint and the
+    explicit predictor see nothing.
+
+    ``dy`` are symbols standing for the components of Δy (default: the
+    increment expressions themselves).  What the ``post`` kernel returns after
+    Δy, so that the per-step test costs a few operations: for ``"direct"``
+    ``|E|²`` and ``|Δy|²``; for ``"carry"`` ``|Δy|²``, ``a = Δy - (h/2) f(y1)``
+    and ``b = (h/2) f(y1)`` on the components of E, so that ``E = a - b`` of
+    the step before (or of the initial state).  The test is
+    ``|E|² > (MAX_LOCAL_ERROR / scale)² |Δy|²``.
+
+    Returns None for a linear vector field without constraints: the methods
+    are then exact up to a phase error and E vanishes identically (Figure 1
+    uses h·ω ≈ 5 on purpose).  Constraint forces make a linear field nonlinear.
+    """
+    system = scheme.system
+    if is_linear_field(system) and not system.constraints:
+        return None
+    d = system.dim
+    h = STEP
+    f = list(vector_field(system))
+    inc = list(scheme.increment) if dy is None else list(dy)
+    at1 = {s: s + dv for s, dv in zip(system.y, inc)}
+    full = tuple(range(2 * d))
+    index = tuple(range(d, 2 * d)) if scheme.resolution == "reduced" else full
+
+    def squares(exprs):
+        return sp.Add(*[e**2 for e in exprs])
+
+    if system.constraints or scheme.traits.solve == "explicit":
+        q = tuple(range(d))
+        sep = separable_split(system)
+        if sep is not None and sep.Minv is not None:
+            # ∂H/∂p = M⁻¹p is linear, so M E = M Δq - (h/2)(2 p0 + Δp): measured in the
+            # mass-weighted norm |M·| (the same ratio for a multiple of the identity),
+            # no division per step.
+            M = sep.Minv.inv()
+            MD = M * sp.Matrix(inc[:d])
+            E = [MD[i] - h / 2 * (2 * system.p[i] + inc[d + i]) for i in q]
+            D = list(MD)
+            if sep.isotropic:  # |M Δq|² = m² |Δq|²: one multiplication
+                D2 = M[0, 0] ** 2 * squares(inc[:d])
+                return LocalErrorPlan("direct", q, q, (squares(E), D2), sp.Integer(1),
+                                      "the trapezoidal rule of the positions (the momenta already are one)",
+                                      tuple(E))
+        else:
+            E = [inc[i] - h / 2 * (f[i] + f[i].xreplace(at1)) for i in q]
+            D = inc[:d]
+        return LocalErrorPlan("direct", q, q, (squares(E), squares(D)), sp.Integer(1),
+                              "the trapezoidal rule of the positions (the momenta already are one)",
+                              tuple(E) + tuple(D))
+    if scheme.method == "trapezoidal":
+        mid = {s: s + dv / 2 for s, dv in zip(system.y, inc)}
+        E = [inc[i] - h * f[i].xreplace(mid) for i in index]
+        return LocalErrorPlan("direct", index, full, (squares(E), squares(inc)), sp.Integer(1),
+                              "the midpoint rule on the chord of the step", tuple(E))
+    scale = sp.Rational(1, 2) if scheme.method == "kahan" else sp.Integer(1)
+    b = [h / 2 * f[i].xreplace(at1) for i in index]
+    a = [inc[i] - bi for i, bi in zip(index, b)]
+    return LocalErrorPlan("carry", index, full, (squares(inc), *a, *b), scale,
+                          "the trapezoidal rule on the chord of the step")
+
+
+def domain_conditions(system) -> tuple[tuple[str, sp.Expr], ...]:
+    """Conditions for H (and the constraints) to be real that a trajectory can violate.
+
+    ``log(u)`` needs u > 0, a fractional power ``u**e`` needs u ≥ 0 (u > 0 for
+    e < 0).  Conditions SymPy proves for real states are dropped (for
+    ``(x**2 + y**2)**(-1/2)`` only the singular point u = 0 is left, where the
+    value is infinite and is caught as such), and so are conditions on the
+    parameters alone (the initial check evaluates H there): most systems check
+    nothing per step.
+    """
+    state = set(system.y)
+    seen: dict[tuple[str, str], tuple[str, sp.Expr]] = {}
+    for expr in (system.H, *system.constraints):
+        for node in sp.preorder_traversal(expr):
+            if isinstance(node, sp.log):
+                u, kind = node.args[0], "positive"
+            elif isinstance(node, sp.Pow) and node.exp.is_integer is not True:
+                u = node.base
+                kind = "nonnegative" if (node.exp.is_Rational and node.exp > 0) else "positive"
+            else:
+                continue
+            if not (u.free_symbols & state) or u.is_nonnegative or u.is_positive:
+                continue
+            seen.setdefault((kind, sp.srepr(u)), (kind, u))
+    return tuple(seen[k] for k in sorted(seen))
 
 
 def lower(scheme, signature: str, module_name: str) -> ModuleIR:
@@ -270,6 +458,28 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
             vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
     scalar["increment"] = _kernel(inc, (d2,), sp_, rename)
     vector["increment"] = _kernel(inc, (d2,), vp, rename)
+    # After each solve one kernel gives the increment together with what the checks
+    # need at the new state y1 = y0 + Δy, sharing common subexpressions: the error
+    # estimate's field values or E itself, and the domain conditions.
+    # The checks are written in symbols _dy0, _dy1, ... bound to the increment, so the
+    # increment's code is exactly that of the increment kernel (same trajectories).
+    links = tuple(sp.Symbol(f"_dy{i}", real=True) for i in range(d2))
+    plan = local_error_plan(scheme, links)
+    conds = domain_conditions(system)
+    at1 = {s: s + dv for s, dv in zip(system.y, links)}
+    later = list(plan.extra if plan else ()) + [u.xreplace(at1) for _, u in conds]
+    shared = plan.shared if plan else ()
+    scalar["post"] = _chained_kernel(inc, later, links, sp_, rename,
+                                     CheckPrinter({"fully_qualified_modules": True}), shared)
+    vector["post"] = _chained_kernel(inc, later, links, vp, rename, shared=shared)
+    # At the initial state: H and the whole vector field (the carried field values
+    # of the first step are components of it), then the domain conditions.
+    check = [system.H] + list(vector_field(system))
+    scalar["check"] = _kernel(check, (len(check),), sp_, rename)
+    vector["check"] = _kernel(check, (len(check),), vp, rename)
+    if conds:
+        scalar["domain"] = _kernel([u for _, u in conds], (len(conds),), sp_, rename)
+        vector["domain"] = _kernel([u for _, u in conds], (len(conds),), vp, rename)
     vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
     n_cons = len(system.constraints)
@@ -309,4 +519,10 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         signature=signature,
         resolution=scheme.resolution,
         fixed_point=scheme.fixed_point,
+        local_error=plan.kind if plan else None,
+        lerr_index=plan.index if plan else (),
+        lerr_norm=plan.norm if plan else (),
+        lerr_scale=repr(float(plan.scale)) if plan else "1.0",
+        lerr_partner=plan.partner if plan else "",
+        domain=tuple((kind, str(u)) for kind, u in conds),
     )

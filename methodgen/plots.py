@@ -378,17 +378,25 @@ def plot_scene(scene_name: str, path, *, method: str | None = None, h: float | N
                     constraint_residuals=res, pairs=pairs, fmt=fmt)
 
 
-def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = None) -> Path:
-    """Work-precision diagram: error against wall time, log–log, one line per method (800 × 600 px).
+def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = None,
+                        energy: bool | None = None) -> Path:
+    """Work-precision diagram: error against CPU time, log–log, one line per method.
 
     Parameters
     ----------
     rows : iterable of dict
-        Keys ``method``, ``seconds``, ``error``.  Rows without ``seconds`` or
-        ``error`` (failed runs) and rows with non-positive or non-finite values
-        (not drawable on log axes) are left out.
+        Keys ``method``, ``seconds``, ``error`` (and ``kind``, ``energy_rel_error``).
+        Rows without ``seconds`` or ``error`` (failed runs) and rows with
+        non-positive or non-finite values (not drawable on log axes) are left out.
     path : path-like
+    energy : bool, optional
+        Add a second panel, the max relative energy error against CPU time.  Default:
+        when there are peer rows (``methodgen bench --peers``: kinds ``heyoka``,
+        ``rebound``).  800 × 600 px with one panel, 1400 × 600 px with two.
     """
+    rows = list(rows)
+    if energy is None:
+        energy = any(r.get("kind") in _PEER_STYLES for r in rows)
     groups: dict[str, list] = {}
     kinds: dict[str, str] = {}
     for r in rows:
@@ -396,27 +404,43 @@ def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = 
             continue
         s, e = float(r["seconds"]), float(r["error"])
         if np.isfinite(s) and np.isfinite(e) and s > 0 and e > 0:
-            groups.setdefault(str(r["method"]), []).append((s, e))
+            de = r.get("energy_rel_error")
+            de = float(de) if de is not None else float("nan")
+            groups.setdefault(str(r["method"]), []).append((s, e, de))
             kinds[str(r["method"])] = str(r.get("kind", "methodgen"))
     if not groups:
         raise InputError("no drawable rows (need positive, finite seconds and error)")
-    fig = _figure((8, 6))
-    ax = fig.subplots()
+    fig = _figure((14, 6) if energy else (8, 6))
+    axes = fig.subplots(1, 2) if energy else [fig.subplots()]
     # Distinct colours: the fixed method colours first, then unused tab10 colours;
-    # reference solvers (scipy, fsolve: bench's "kind") dashed with other markers.
+    # reference solvers (scipy, fsolve: bench's "kind") dashed with other markers,
+    # peers (heyoka, REBOUND) dashed with their own markers.
     spare = [c for c in (f"tab:{n}" for n in ("blue", "purple", "brown", "pink", "gray", "olive", "cyan"))
              if c not in _METHOD_COLORS.values()]
     for k, (m, pts) in enumerate(groups.items()):
         pts.sort(key=lambda x: x[0])
-        s, e = np.array([p[0] for p in pts]), np.array([p[1] for p in pts])
+        s, e, de = (np.array([p[i] for p in pts]) for i in range(3))
         color = _METHOD_COLORS.get(m) or spare[k % len(spare)]
-        ref = kinds[m] != "methodgen" or m.startswith("scipy")
-        ax.plot(s, e, "^--" if ref else "o-", lw=1, ms=4, label=m, color=color)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("wall time [s]")
-    ax.set_ylabel("error")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(title or "work-precision", fontsize=10)
+        kind = kinds[m]
+        ref = kind != "methodgen" or m.startswith("scipy")
+        style = _PEER_STYLES.get(kind, "^--" if ref else "o-")
+        axes[0].plot(s, e, style, lw=1, ms=4, label=m, color=color)
+        if energy:
+            # An energy error of exactly 0 is not drawable on a log axis: drawn at 1e-17.
+            de = np.where(de > 0, de, 1e-17)
+            axes[1].plot(s, de, style, lw=1, ms=4, label=m, color=color)
+    for ax, ylabel in zip(axes, ("error at the final time", "max relative energy error")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("CPU time of the integration [s]")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[0].set_title(title or "work-precision", fontsize=10)
+    if energy:
+        axes[1].set_title("energy", fontsize=10)
     return _save(fig, path, fmt)
+
+
+#: Line styles of the peers of ``methodgen bench --peers`` (by row ``kind``).
+_PEER_STYLES = {"heyoka": "s--", "rebound": "D--"}

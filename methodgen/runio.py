@@ -1,22 +1,203 @@
-"""Trajectories on disk: chunked ``.npz`` files written atomically.
+"""Trajectories on disk: chunked ``.npz`` files written atomically, and what a crash leaves.
 
 A long run need not fit in memory: :class:`ChunkWriter` appends arrays as
 separate entries (``chunk_00000``, ``chunk_00001``, …) of one ``.npz`` (a zip
 of ``.npy`` files), written to a temporary file and renamed into place when
 closed, so a crash never leaves a truncated file under the final name.
 :func:`load_trajectory` concatenates the chunks again.
+
+Faults lose nothing that was already written:
+
+* **Disk full (or any write error) during a run**: :meth:`ChunkWriter.rescue`
+  cuts the file after the last complete chunk (freeing the space of the
+  partial one), writes the metadata and the zip directory, and moves it into
+  place — every complete chunk stays readable.
+* **A killed run** (SIGKILL, power cut of the process) leaves its temporary
+  file ``.NAME.HOST-PID.XXXXXXXX.tmp``.  Each temporary file is locked
+  (``flock``) by its writer while it exists, so a later run can tell an
+  orphan (lock free: the writer is gone) from a file another run is still
+  writing.  :func:`recover_orphans` rebuilds the complete chunks of an
+  orphaned save into ``NAME.recovered.npz`` (entries are checked against
+  their CRC and ``.npy`` header; a cut-off last chunk is dropped) and removes
+  the temporary file.  The CLI does this at the start of every ``--save``.
 """
 
 from __future__ import annotations
 
+import errno as _errno
+import io
 import os
+import re
+import socket
+import struct
 import tempfile
+import time
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ChunkWriter", "load_trajectory"]
+from .errors import StorageError
+
+try:  # POSIX; elsewhere temporary files are not locked and orphans are only reported
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
+__all__ = ["ChunkWriter", "load_trajectory", "recover_orphans", "storage_error", "make_temp",
+           "find_orphans", "umask"]
+
+#: A temporary file younger than this and still empty may be between its creation
+#: and its lock (``mkstemp`` then ``flock``): never judged an orphan.
+_FRESH_SECONDS = 60.0
+
+_ZIP_LOCAL = 0x04034B50
+
+
+def storage_error(exc: OSError, action: str, path) -> StorageError:
+    """``exc`` as a one-line :class:`StorageError`: ``cannot ACTION PATH: cause``."""
+    if isinstance(exc, StorageError):
+        return exc
+    cause = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno in (_errno.ENOTDIR, _errno.EEXIST):
+        blocker = None
+        for parent in Path(path).parents:
+            try:
+                if parent.exists():
+                    blocker = None if parent.is_dir() else parent
+                    break
+            except OSError:
+                break
+        if blocker is not None:
+            cause = f"{blocker} is a file, not a folder"
+        elif exc.errno == _errno.ENOTDIR:
+            cause += " (a part of the path is a file, not a folder)"
+    elif exc.errno in (_errno.EACCES, _errno.EPERM):
+        cause += " (no permission)"
+    return StorageError(f"cannot {action} {path}: {cause}", path, exc.errno)
+
+
+# --- temporary files that say who wrote them ----------------------------------------------
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9_]", "_", socket.gethostname() or "host")[:40] or "host"
+
+
+def _temp_re(name: str | None = None) -> re.Pattern:
+    target = re.escape(name) if name is not None else r"(?P<name>.+)"
+    return re.compile(r"^\." + target + r"\.(?P<host>[A-Za-z0-9_]+)-(?P<pid>\d+)\.[A-Za-z0-9_]+\.tmp$")
+
+
+def umask() -> int:
+    """The process umask (read from /proc where possible: setting it to read it is not thread-safe)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def make_temp(folder: Path, name: str) -> tuple[int, str]:
+    """Create and lock a temporary file for ``folder/name``: ``(fd, path)``.
+
+    The name ``.NAME.HOST-PID.XXXXXXXX.tmp`` says which file it becomes and who
+    writes it; the ``flock`` held on ``fd`` until it is closed tells a later run
+    that the writer is alive (the kernel drops the lock when a process dies,
+    also on SIGKILL).  The file gets ordinary permissions (0644 less the umask;
+    ``mkstemp`` alone would leave it 0600).
+    """
+    fd, tmp = tempfile.mkstemp(prefix=f".{name}.{_host()}-{os.getpid()}.", suffix=".tmp", dir=str(folder))
+    try:
+        os.fchmod(fd, 0o644 & ~umask())
+    except (OSError, AttributeError):  # pragma: no cover - file systems or platforms without modes
+        pass
+    if fcntl is not None:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # pragma: no cover - a file system without locks: still usable
+            pass
+    return fd, tmp
+
+
+def find_orphans(folder: Path, name: str | None = None):
+    """Temporary files in ``folder`` whose writer is gone: yields ``(path, target name, fd)``.
+
+    ``fd`` is an open descriptor holding the file's lock (so no other run
+    claims the same orphan); the caller removes or rebuilds the file and
+    closes ``fd``.  Files of other hosts (a shared file system), files still
+    locked by their writer, and fresh empty files are left alone.
+    """
+    if fcntl is None:  # pragma: no cover - cannot tell orphans from live files
+        return
+    pattern = _temp_re(name)
+    try:
+        entries = sorted(Path(folder).iterdir())
+    except OSError:
+        return
+    host = _host()
+    for p in entries:
+        m = pattern.match(p.name)
+        if not m or m.group("host") != host:
+            continue
+        try:
+            fd = os.open(p, os.O_RDWR | getattr(os, "O_NOFOLLOW", 0))
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            st = os.fstat(fd)
+            if st.st_size == 0 and time.time() - st.st_mtime < _FRESH_SECONDS:
+                raise BlockingIOError  # maybe between mkstemp and flock
+            if not os.path.exists(p) or os.stat(p).st_ino != st.st_ino:
+                raise BlockingIOError  # renamed into place or replaced meanwhile
+        except OSError:
+            os.close(fd)
+            continue
+        yield p, (name if name is not None else m.group("name")), fd
+
+
+# --- npz files written chunk by chunk ---------------------------------------------------------
+
+def _npy_bytes(array) -> bytes:
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.asanyarray(array), allow_pickle=False)
+    return buf.getvalue()
+
+
+def _finish_zip(fd: int, entries: list, end: int, meta: dict) -> None:
+    """Cut the file at ``end`` (after the last complete entry) and write ``meta`` and the directory.
+
+    ``entries`` are the :class:`zipfile.ZipInfo` of the complete entries (their
+    data lies before ``end``); metadata keys already among them are not written again.
+    """
+    os.ftruncate(fd, end)
+    fh = os.fdopen(os.dup(fd), "r+b")
+    zf = None
+    try:
+        fh.seek(end)
+        zf = zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED, allowZip64=True)
+        zf.filelist[:] = list(entries)
+        zf.NameToInfo.update({e.filename: e for e in entries})
+        have = {e.filename for e in entries}
+        for key, value in meta.items():
+            if key + ".npy" not in have:
+                zf.writestr(key + ".npy", _npy_bytes(value))
+        zf.close()
+        fh.flush()
+        os.fsync(fh.fileno())
+    finally:
+        if zf is not None:
+            zf.fp = None  # after a failure: the ZipFile must not try again when collected
+        try:
+            fh.close()
+        except OSError:
+            pass
 
 
 class ChunkWriter:
@@ -26,44 +207,178 @@ class ChunkWriter:
     ----------
     path : path-like
         Final file name (``.npz`` is appended if missing).
+    meta : dict, optional
+        Metadata arrays written at once (a file rebuilt after a crash has them).
+        More can be given to :meth:`close`.
+
+    Raises
+    ------
+    StorageError
+        The folder cannot be created or written (``.bad_path``), or the disk is full.
     """
 
-    def __init__(self, path):
+    def __init__(self, path, meta: dict | None = None):
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_suffix(path.suffix + ".npz")
         self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, self._tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
-        os.close(fd)
-        self._zip = zipfile.ZipFile(self._tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True)
         self.chunks = 0
         self.rows = 0
+        self.failed: StorageError | None = None
+        self._good: list = []
+        self._good_end = 0
+        self._good_rows = 0
+        self._meta_keys: set[str] = set()
+        self._zip = self._fh = None
+        self._lock = None
+        self._tmp = None
+        self.recovered: list[str] = []
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # Messages about orphaned saves of killed runs found (and rebuilt) in the folder.
+            self.recovered = recover_orphans(path.parent)
+            self._lock, self._tmp = make_temp(path.parent, path.name)
+            # The zip gets its own descriptor: the lock stays on ``_lock`` whatever
+            # happens to the zip's buffered file after a failed write.
+            self._fh = open(self._tmp, "r+b")
+            self._zip = zipfile.ZipFile(self._fh, "w", compression=zipfile.ZIP_STORED, allowZip64=True)
+        except OSError as exc:
+            self._discard()
+            raise storage_error(exc, "write", path) from None
+        try:
+            for key, value in (meta or {}).items():
+                self._write(key, value, rows=0)
+                self._meta_keys.add(key)
+        except BaseException:
+            self._discard()
+            raise
 
-    def _put(self, name: str, array) -> None:
-        with self._zip.open(name + ".npy", "w", force_zip64=True) as fh:
-            np.lib.format.write_array(fh, np.asanyarray(array), allow_pickle=False)
+    def _write(self, name: str, array, rows: int) -> None:
+        if self.failed is not None:
+            raise self.failed
+        try:
+            with self._zip.open(name + ".npy", "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(array), allow_pickle=False)
+            self._fh.flush()  # the entry is in the kernel: a killed process keeps it
+        except OSError as exc:
+            self.failed = storage_error(exc, "write", self.path)
+            raise self.failed from None
+        except BaseException:
+            # Ctrl-C in the middle of an entry: the zip is unusable, the chunks before are not.
+            self.failed = StorageError(f"writing {self.path} was interrupted", self.path, _errno.EINTR)
+            raise
+        self._good = list(self._zip.filelist)
+        self._good_end = self._zip.start_dir
+        self._good_rows += rows
 
     def append(self, states: np.ndarray) -> None:
-        """Append consecutive states, shape (n, ...)."""
-        self._put(f"chunk_{self.chunks:05d}", states)
+        """Append consecutive states, shape (n, ...).
+
+        Raises
+        ------
+        StorageError
+            The write failed (e.g. disk full); :meth:`rescue` keeps the chunks before it.
+        """
+        self._write(f"chunk_{self.chunks:05d}", states, rows=len(states))
         self.chunks += 1
         self.rows += len(states)
 
+    @property
+    def saved_rows(self) -> int:
+        """Rows of the chunks written completely."""
+        return self._good_rows
+
     def close(self, **meta) -> Path:
-        """Write metadata arrays, close, and move the file into place; returns its path."""
-        for key, value in meta.items():
-            self._put(key, np.asarray(value))
-        self._zip.close()
-        os.replace(self._tmp, self.path)
+        """Write metadata arrays, close, and move the file into place; returns its path.
+
+        After a failed write (disk full) this is :meth:`rescue`.
+        """
+        if self.failed is not None:
+            return self.rescue(**meta)
+        try:
+            for key, value in meta.items():
+                if key not in self._meta_keys:
+                    self._write(key, value, rows=0)
+            self._zip.close()
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+            self._fh.close()
+            os.replace(self._tmp, self.path)
+        except OSError as exc:
+            if self.failed is None:
+                self.failed = storage_error(exc, "write", self.path)
+            return self.rescue(**meta)
+        self._release()
         return self.path
 
+    def rescue(self, **meta) -> Path:
+        """Keep every complete chunk after a failed write: cut, finish, move into place.
+
+        The partial chunk is cut off (which frees its space), then the metadata
+        (``meta``; dropped if even that does not fit) and the zip directory are
+        written and the file is renamed to :attr:`path`.
+
+        Returns
+        -------
+        Path
+            :attr:`path`, a readable ``.npz`` with :attr:`saved_rows` states.
+
+        Raises
+        ------
+        StorageError
+            Not even the directory could be written; the message says where the
+            temporary file with the complete chunks is (the next ``--save`` into
+            the same folder rebuilds it).
+        """
+        self._abandon_zip()
+        last = None
+        for extra in (meta, {}):
+            try:
+                _finish_zip(self._lock, self._good, self._good_end, extra)
+                os.replace(self._tmp, self.path)
+            except OSError as exc:
+                last = exc
+                continue
+            self._release()
+            return self.path
+        tmp = self._tmp
+        self._release()  # unlocked: a later run sees an orphan and rebuilds it
+        raise StorageError(f"cannot finish {self.path}: {last.strerror or last}; the {len(self._good)} "
+                           f"complete entries are in {tmp} (the next --save into {self.path.parent} "
+                           "rebuilds them)", self.path, last.errno)
+
     def abort(self) -> None:
-        try:
-            self._zip.close()
-        finally:
-            if os.path.exists(self._tmp):
-                os.unlink(self._tmp)
+        """Drop the file (nothing is kept)."""
+        self._discard()
+
+    def _abandon_zip(self) -> None:
+        if self._zip is not None:
+            self._zip.fp = None  # the ZipFile must never write its directory now
+            self._zip = None
+        if self._fh is not None:
+            try:
+                self._fh.close()  # may try (and fail) to flush a partial entry: cut off later
+            except OSError:
+                pass
+            self._fh = None
+
+    def _release(self) -> None:
+        self._abandon_zip()
+        if self._lock is not None:
+            try:
+                os.close(self._lock)
+            except OSError:  # pragma: no cover
+                pass
+            self._lock = None
+
+    def _discard(self) -> None:
+        tmp, self._tmp = self._tmp, None
+        self._release()
+        if tmp:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
 
 
 def load_trajectory(path) -> tuple[np.ndarray, dict]:
@@ -73,3 +388,150 @@ def load_trajectory(path) -> tuple[np.ndarray, dict]:
         states = np.concatenate([data[k] for k in keys]) if keys else np.zeros((0,))
         meta = {k: data[k] for k in data.files if not k.startswith("chunk_")}
     return states, meta
+
+
+# --- what a killed run leaves ------------------------------------------------------------------
+
+def _complete_entries(fd: int) -> tuple[list, int, int]:
+    """The complete ``.npy`` entries at the start of a zip without directory.
+
+    Reads local headers one after the other; an entry counts when its data is
+    all there, matches its CRC and is a well-formed ``.npy`` of exactly that
+    size.  Returns ``(entries, end offset, rows in chunk_* entries)``.
+    """
+    fh = os.fdopen(os.dup(fd), "rb")
+    entries, pos, rows = [], 0, 0
+    try:
+        size = os.fstat(fd).st_size
+        while pos + 30 <= size:
+            fh.seek(pos)
+            (sig, version, flags, method, mtime, mdate, crc, csize, usize, nlen, xlen) = \
+                struct.unpack("<IHHHHHIIIHH", fh.read(30))
+            if sig != _ZIP_LOCAL or method != zipfile.ZIP_STORED or flags & 0x8:
+                break
+            name = fh.read(nlen).decode("utf-8", "replace")
+            extra = fh.read(xlen)
+            if 0xFFFFFFFF in (csize, usize):  # zip64: sizes in the extra field (id 1)
+                i = 0
+                while i + 4 <= len(extra):
+                    tag, ln = struct.unpack("<HH", extra[i:i + 4])
+                    if tag == 1:
+                        vals = list(struct.unpack("<" + "Q" * (ln // 8), extra[i + 4:i + 4 + ln]))
+                        if usize == 0xFFFFFFFF and vals:
+                            usize = vals.pop(0)
+                        if csize == 0xFFFFFFFF and vals:
+                            csize = vals.pop(0)
+                    i += 4 + ln
+            start = pos + 30 + nlen + xlen
+            if csize != usize or start + csize > size or not name.endswith(".npy") or csize < 16:
+                break
+            fh.seek(start)
+            head = io.BytesIO(fh.read(min(csize, 1 << 16)))
+            try:
+                ver = np.lib.format.read_magic(head)
+                read = (np.lib.format.read_array_header_1_0 if ver == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read(head)
+            except Exception:  # noqa: BLE001 - anything malformed ends the usable part
+                break
+            if dtype.hasobject or head.tell() + int(np.prod(shape)) * dtype.itemsize != csize:
+                break
+            fh.seek(start)
+            c, left = 0, csize
+            while left:
+                block = fh.read(min(left, 1 << 20))
+                if not block:
+                    break
+                c = zlib.crc32(block, c)
+                left -= len(block)
+            if left or c != crc:
+                break
+            dt = (((mdate >> 9) & 0x7F) + 1980, max(1, (mdate >> 5) & 0xF), max(1, mdate & 0x1F),
+                  (mtime >> 11) & 0x1F, (mtime >> 5) & 0x3F, (mtime & 0x1F) * 2)
+            info = zipfile.ZipInfo(name, date_time=dt)
+            info.compress_type = zipfile.ZIP_STORED
+            info.CRC, info.compress_size, info.file_size = crc, csize, usize
+            info.header_offset, info.flag_bits = pos, flags
+            info.extract_version = max(version, info.extract_version)
+            info.external_attr = 0o600 << 16
+            entries.append(info)
+            if name.startswith("chunk_") and shape:
+                rows += int(shape[0])
+            pos = start + csize
+    finally:
+        fh.close()
+    return entries, pos, rows
+
+
+def _fmt_size(n: int) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n} B"  # pragma: no cover
+
+
+def recover_orphans(folder) -> list[str]:
+    """Rebuild or remove the temporary ``.npz`` files of killed runs in ``folder``.
+
+    The complete chunks of an orphan go to ``NAME.recovered.npz`` (or
+    ``NAME.recovered-2.npz``, …, never over an existing file), marked
+    ``complete = False`` and ``reason = "killed"``; an orphan without a
+    complete chunk is removed.  Temporary files of older methodgen versions
+    (no owner in the name, no lock) are only reported.
+
+    Returns
+    -------
+    list of str
+        One message per file found, for the user.
+    """
+    folder = Path(folder)
+    notes = []
+    for tmp, name, fd in find_orphans(folder):
+        size = 0
+        try:
+            if not name.endswith(".npz"):
+                continue
+            size = os.fstat(fd).st_size
+            entries, end, rows = _complete_entries(fd)
+            chunks = [e for e in entries if e.filename.startswith("chunk_")]
+            if not chunks:
+                os.unlink(tmp)
+                notes.append(f"removed {tmp} ({_fmt_size(size)}): the temporary file of a killed save "
+                             "with no complete chunk")
+                continue
+            steps = {"steps_done": max(rows - 1, 0), "complete": False, "reason": "killed"}
+            _finish_zip(fd, entries, end, steps)
+            stem = name[:-4]
+            for i in range(1, 1000):
+                target = folder / (f"{stem}.recovered.npz" if i == 1 else f"{stem}.recovered-{i}.npz")
+                try:
+                    os.link(tmp, target)
+                except FileExistsError:
+                    continue
+                os.unlink(tmp)
+                break
+            else:  # pragma: no cover
+                continue
+            notes.append(f"recovered {len(chunks)} complete chunks ({rows} states) of a killed save to "
+                         f"{name} into {target}; removed {tmp}")
+        except OSError as exc:
+            notes.append(f"found the temporary file of a killed save, {tmp} ({_fmt_size(size)}), "
+                         f"but could not rebuild it: {exc.strerror or exc}")
+        finally:
+            os.close(fd)
+    legacy = re.compile(r"^\.(?P<name>.+\.npz)\.[a-z0-9_]{8}\.tmp$")
+    try:
+        others = sorted(folder.iterdir())
+    except OSError:
+        others = []
+    for p in others:
+        if legacy.match(p.name) and not _temp_re().match(p.name):
+            try:
+                size = p.stat().st_size
+            except OSError:
+                continue
+            notes.append(f"{p} ({_fmt_size(size)}) looks like the temporary file of an unfinished save "
+                         "by an older methodgen; it is not readable as it is — delete it if no run is "
+                         "writing it")
+    return notes

@@ -13,6 +13,13 @@ Format (see DESIGN.md §3 and the built-in scenes in ``methodgen/scenes``)::
     h = 0.01
     steps = 10000
     y0 = [...]                   # q then p
+    [nbody]                      # optional: the scene is an N-body gravitational problem
+    G = "G"                      # a number or a [params] name
+    masses = ["m0", "m1"]        # one per body (3 coordinates each, in q order), p = m v
+    centre_mass = "M"            # optional: a fixed attracting centre at the origin (one body only)
+
+The ``[nbody]`` table is what ``methodgen bench --peers`` needs to hand the scene to
+REBOUND; it is a declaration, checked against H before use (:mod:`methodgen.peers`).
 
 A scene file is data: it is parsed with ``tomllib`` and validated key by key;
 unknown keys and wrong types are errors that name the key and what is valid.
@@ -33,11 +40,12 @@ else:  # pragma: no cover - Python 3.10
 from .errors import InputError, SceneError
 from .problem import Hamiltonian
 
-__all__ = ["Scene", "load_scene", "scene_names", "builtin_scene_dir"]
+__all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir"]
 
-_TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict}
+_TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict, "nbody": dict}
 _SYSTEM = {"H": str, "q": list, "p": list, "constraints": list}
 _RUN = {"method": (str, list), "h": (int, float), "steps": int, "y0": list}
+_NBODY = {"G": (int, float, str), "masses": list, "centre_mass": (int, float, str)}
 
 
 def builtin_scene_dir() -> Path:
@@ -47,6 +55,29 @@ def builtin_scene_dir() -> Path:
 def scene_names() -> list[str]:
     """Names of the built-in scenes, sorted."""
     return sorted(p.stem for p in builtin_scene_dir().glob("*.toml"))
+
+
+@dataclass(frozen=True)
+class NBody:
+    """A scene's declaration that it is an N-body gravitational problem (the ``[nbody]`` table).
+
+    Body ``b`` has coordinates ``q[3b:3b+3]`` and momenta ``p[3b:3b+3]`` (velocity
+    ``p/m_b``); the declared Hamiltonian is
+    ``Σ|p_b|²/(2m_b) − Σ_{a<b} G m_a m_b/|q_a − q_b| − Σ_b G M m_b/|q_b|`` (the last
+    sum only with a fixed centre of mass ``M``).  Values are numbers or names of
+    ``[params]`` (so parameter overrides carry over); :meth:`values` resolves them.
+    """
+
+    G: float | str
+    masses: tuple[float | str, ...]
+    centre_mass: float | str | None = None
+
+    def values(self, params: dict) -> tuple[float, tuple[float, ...], float | None]:
+        """``(G, masses, centre_mass)`` as numbers, names looked up in ``params``."""
+        def num(v):
+            return float(params[v]) if isinstance(v, str) else float(v)
+        return (num(self.G), tuple(num(m) for m in self.masses),
+                None if self.centre_mass is None else num(self.centre_mass))
 
 
 @dataclass(frozen=True)
@@ -64,6 +95,8 @@ class Scene:
     y0 : tuple of float, length 2d
     path : Path or None
     builtin : bool
+    nbody : NBody or None
+        The ``[nbody]`` declaration, if any.
     """
 
     name: str
@@ -75,6 +108,7 @@ class Scene:
     y0: tuple[float, ...]
     path: Path | None = None
     builtin: bool = False
+    nbody: NBody | None = None
 
     @property
     def method(self) -> str:
@@ -145,8 +179,38 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
     if len(y0) != 2 * system.dim:
         raise SceneError(f"[run].y0 has {len(y0)} values but the state ({', '.join(system.state_names)}) "
                          f"has {2 * system.dim}")
+    nbody = _parse_nbody(data["nbody"], system, params_t) if "nbody" in data else None
     return Scene(name=name, description=data.get("description", ""), system=system, methods=methods,
-                 h=h, steps=steps, y0=y0, path=path, builtin=builtin)
+                 h=h, steps=steps, y0=y0, path=path, builtin=builtin, nbody=nbody)
+
+
+def _parse_nbody(table: dict, system: Hamiltonian, params: dict) -> NBody:
+    """Validate ``[nbody]``: numbers or parameter names, one mass per 3 coordinates."""
+    _check_keys(table, _NBODY, "[nbody]")
+
+    def value(v, where):
+        if isinstance(v, str):
+            if v not in params:
+                raise SceneError(f"{where} names {v!r}, which is not in [params] ({', '.join(params) or 'none'})")
+            return v
+        if _number(v, where) <= 0:
+            raise SceneError(f"{where} must be positive, got {v!r}")
+        return float(v)
+
+    G = value(_require(table, "G", "[nbody]"), "[nbody].G")
+    masses = tuple(value(m, f"[nbody].masses[{i}]") for i, m in enumerate(_require(table, "masses", "[nbody]")))
+    if system.constraints:
+        raise SceneError("[nbody] describes free bodies; a constrained scene cannot have one")
+    if 3 * len(masses) != system.dim:
+        raise SceneError(f"[nbody].masses has {len(masses)} bodies (3 coordinates each) but the scene has "
+                         f"{system.dim} coordinates")
+    centre = table.get("centre_mass")
+    if centre is not None:
+        centre = value(centre, "[nbody].centre_mass")
+        if len(masses) != 1:
+            raise SceneError("[nbody].centre_mass (a fixed centre) needs exactly one body: with more, "
+                             "the bodies would pull the centre")
+    return NBody(G=G, masses=masses, centre_mass=centre)
 
 
 def load_scene(name_or_path: str | Path) -> Scene:

@@ -41,6 +41,7 @@ import csv
 import io
 import itertools
 import math
+import os
 import sys
 import threading
 import time
@@ -270,9 +271,62 @@ def parse_spec(data: Mapping, base: Path | None = None, source: str = "the sweep
     if batch < 1:
         raise SpecError(f"{source}: [initial].batch must be >= 1, got {batch}")
 
+    _check_memory(len(scene.y0), len(methods) * len(hs) * math.prod(len(v) for _, v in params),
+                  count, batch, source)
+
     return SweepSpec(scene=scene, scene_text=scene_text, methods=tuple(methods), h=hs, steps=steps,
                      t_final=t_final, params=params, count=count, spread=spread, seed=seed, batch=batch,
                      check_resolution=data.get("check_resolution", True))
+
+
+def memory_limit() -> int | None:
+    """Bytes of memory this process can have: physical memory, or a smaller cgroup limit (None: unknown)."""
+    limits = []
+    try:
+        limits.append(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):  # pragma: no cover - not POSIX
+        pass
+    for f in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(f).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit() and int(text) < 1 << 60:  # "max" or a huge number: no limit
+            limits.append(int(text))
+    return min(limits) if limits else None
+
+
+def memory_estimate(state_size: int, combos: int, count: int, batch: int) -> int:
+    """Bytes a sweep needs at once, roughly (an estimate to refuse impossible sizes, not a budget).
+
+    The ensemble of initial states is built on the driver (the draw, the
+    perturbed copy and a projection: 3 arrays of ``count × state`` doubles);
+    every task and its row take a few kB; one task's working set is its
+    integration chunk (≤ :data:`CHUNK_VALUES` doubles, a few copies) plus
+    Newton's per-trajectory vectors and Jacobians.
+    """
+    n = max(count, 1)
+    tasks = combos * -(-n // batch)
+    per_traj = 8 * (10 * state_size + 4 * state_size ** 2)
+    return 3 * 8 * n * state_size + 4096 * tasks + 4 * 8 * CHUNK_VALUES + 2 * min(batch, n) * per_traj
+
+
+def _fmt_bytes(n: float) -> str:
+    for unit in ("bytes", "kB", "MB", "GB", "TB", "PB"):
+        if n < 1000 or unit == "PB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} EB"  # pragma: no cover
+
+
+def _check_memory(state_size: int, combos: int, count: int, batch: int, source: str) -> None:
+    limit = memory_limit()
+    need = memory_estimate(state_size, combos, count, batch)
+    if limit is not None and need > limit:
+        raise SpecError(
+            f"{source}: this sweep needs about {_fmt_bytes(need)} of memory ({max(count, 1)} initial states "
+            f"of {state_size} values, {combos} method/h/parameter combinations in batches of {batch}), more "
+            f"than this machine has ({_fmt_bytes(limit)}); reduce [initial].count or split the sweep")
 
 
 def load_spec(path) -> SweepSpec:
@@ -416,6 +470,7 @@ def plan_sweep(spec: SweepSpec) -> Plan:
     instead of one failed row per task, and lets workers skip the derivation.
     """
     from .build import build, scene_module_path
+    from .emit import untagged
 
     scene = spec.scene
     modules: dict[str, ModuleSource] = {}
@@ -425,7 +480,8 @@ def plan_sweep(spec: SweepSpec) -> Plan:
         path = Path(module.__file__)
         modules[method] = ModuleSource(method=method, signature=module.SIGNATURE, path=str(path),
                                        filename=f"{path.stem}_{module.SIGNATURE[:12]}.py",
-                                       source=path.read_text(encoding="utf-8"))
+                                       # Without the cache's key line: keys are per user.
+                                       source=untagged(path.read_text(encoding="utf-8")))
     Y = initial_states(spec)
     projector = built[spec.methods[0]] if scene.system.constraints else None
     with_reference = spec.count <= 1
@@ -484,9 +540,9 @@ def load_shipped_module(src: ModuleSource):
     Uses the driver's file when it exists here and is intact with the right
     signature (workers on the driver's machine); otherwise writes the shipped
     source into this machine's cache (atomically, so workers sharing a cache
-    do not race) and imports that.
+    do not race; tagged with this user's key) and imports that.
     """
-    from .emit import cache_dir, file_status, load_module, write_atomic
+    from .emit import cache_dir, file_status, load_module, write_module
 
     with _MODULES_LOCK:  # threaded workers: import each module once
         module = _MODULES.get(src.signature)
@@ -495,7 +551,7 @@ def load_shipped_module(src: ModuleSource):
             if file_status(path, src.signature) != "ok":
                 path = cache_dir() / src.filename
                 if file_status(path, src.signature) != "ok":
-                    write_atomic(path, src.source)
+                    write_module(path, src.source)
             module = load_module(path)
             _MODULES[src.signature] = module
         return module

@@ -6,13 +6,14 @@ local Dask cluster with ``--workers N``, on a running Dask cluster with
 ``--csv FILE`` also writes the rows as CSV.  Exit status: 0 when every task
 produced a result (a numerical error such as a non-converging Newton iteration
 *is* a result), 1 when some task failed even after ``--retries`` re-runs, 2 for
-bad input (spec, options, dask not installed, scheduler unreachable).
+bad input (spec, options, a spec whose memory estimate exceeds the machine, dask
+not installed, scheduler unreachable, a ``--csv`` path that cannot be written),
+3 when the disk is full writing ``--csv``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
@@ -64,6 +65,7 @@ def _print_report(rep: dict) -> None:
 def cmd_sweep(args) -> int:
     """Run the sweep of ``args.spec``; return the exit status."""
     # Imported here: the other commands do not need the sweep layer.
+    from .cli import dump_json
     from .emit import write_atomic
     from .errors import InputError
     from .sweep import run_sweep, rows_to_csv
@@ -76,12 +78,11 @@ def cmd_sweep(args) -> int:
     rep = run_sweep(args.spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
                     progress=not args.json)
     if args.csv:
-        try:
-            write_atomic(args.csv, rows_to_csv(rep))
-        except OSError as exc:
-            raise InputError(f"cannot write {args.csv}: {exc}") from None
+        # A StorageError (one line naming the file and the cause) if it fails: exit 2 for a
+        # path that cannot be used, 3 for a full disk.
+        write_atomic(args.csv, rows_to_csv(rep))
     if args.json:
-        print(json.dumps(rep, allow_nan=False))
+        print(dump_json(rep))
     else:
         _print_report(rep)
         if args.csv:

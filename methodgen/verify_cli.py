@@ -12,7 +12,6 @@ group by claim group (never to stdout).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 
@@ -39,6 +38,7 @@ def _timeout(text: str) -> float:
 def cmd_verify(args) -> int:
     """Run the verification for a scene; return the exit status."""
     # Imported here: the verification layer is not needed by the other commands.
+    from .cli import dump_json
     from .errors import InputError
     from .scene import load_scene
     from .schemes import discretize
@@ -59,7 +59,7 @@ def cmd_verify(args) -> int:
         for r in reports:
             for c in r.certificates:
                 certs.append({**c.to_dict(), "method_name": r.title})
-        print(json.dumps({"ok": ok, "scene": scene.name, "certificates": certs,
+        print(dump_json({"ok": ok, "scene": scene.name, "certificates": certs,
                           "reports": [{"title": r.title, "ok": r.ok, "seconds": round(r.seconds, 3)}
                                       for r in reports]}))
     else:

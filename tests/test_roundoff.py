@@ -18,11 +18,12 @@ import methodgen as mg
 from methodgen.scene import scene_names
 from methodgen.build import scene_module_path
 from methodgen.emit import load_module
+from conftest import marked
 
 pytestmark = pytest.mark.skipif(np.finfo(np.longdouble).nmant <= 52,
                                 reason="numpy.longdouble is plain double on this platform")
 
-BUILTIN = [(name, method) for name in scene_names() for method in mg.load_scene(name).methods]
+BUILTIN = marked([(name, method) for name in scene_names() for method in mg.load_scene(name).methods])
 
 
 def _module(scene_name, method):

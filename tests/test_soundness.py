@@ -12,6 +12,7 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
+from conftest import HEAVY_SCENES
 from methodgen.special import atan_dd, safe_div, to_elementary
 from methodgen.verify.common import at, y1_symbols
 from methodgen.verify.exact import Domain, certify, guard_cases, reduce_to_zero
@@ -152,7 +153,8 @@ def test_angular_momentum_of_radial_terms_still_claimed_and_proved():
         assert c.status == "proved"
 
 
-@pytest.mark.parametrize("scene_method", [(s, m) for s in mg.scenes() for m in mg.load_scene(s).methods],
+@pytest.mark.parametrize("scene_method", [pytest.param((s, m), marks=pytest.mark.slow) if s in HEAVY_SCENES
+                                          else (s, m) for s in mg.scenes() for m in mg.load_scene(s).methods],
                          ids=lambda sm: "-".join(sm))
 def test_no_trait_of_a_built_in_scene_is_refuted(scene_method):
     scene, method = scene_method
