@@ -195,3 +195,22 @@ def test_linear_form_detection_and_its_limits():
     # not one affine form: refused
     assert linear_form_term(sp.cos(q1) * sp.cos(q2), ys) is None
     assert linear_form_term(1 / sp.sqrt(q1**2 + q2**2), ys) is None
+
+
+# --- midpoint: Cayley transform -----------------------------------------------------------
+
+def test_midpoint_symplectic_structurally_on_nonlinear_h():
+    from methodgen.verify.maps import midpoint_symplectic
+    scheme = mg.discretize(CALOGERO, "midpoint")
+    cert = symplectic_certificate(scheme)
+    assert cert.status == "proved" and cert.details["structural"] and "Cayley" in cert.claim
+    # Negative control: a gradient not taken at the midpoint is not this structure.
+    y0, y1 = CALOGERO.y, scheme.y1
+    at_y0 = mg.derive.gradient(CALOGERO)
+    assert midpoint_symplectic(replace(scheme, discrete_gradient=at_y0), "x") is None
+    # and the Cayley lemma needs a symmetric block: with a generic (non-symmetric) S it fails.
+    S = sp.Matrix(2, 2, sp.symbols("a b c d"))
+    J = sp.Matrix([[0, 1], [-1, 0]])
+    A = J * S / 2
+    I = sp.eye(2)
+    assert any(sp.expand(e) != 0 for e in ((I + A).T * J * (I + A) - (I - A).T * J * (I - A)))

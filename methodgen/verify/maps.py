@@ -123,6 +123,54 @@ def splitting_symplectic(scheme, claim: str) -> Certificate | None:
                        "symplecticity (section 1.2)", {"structural": True})
 
 
+def _cayley_lemma(n: int) -> bool:
+    """``(I + A)ᵀJ(I + A) = (I - A)ᵀJ(I - A)`` for ``A = JS/2``, S a generic symmetric n×n matrix."""
+    if n not in _CAYLEY:
+        S = sp.Matrix(n, n, lambda i, j: sp.Symbol(f"_S{min(i, j) + 1}_{max(i, j) + 1}", real=True))
+        J = symplectic_matrix(n)
+        A = J * S / 2
+        I = sp.eye(n)
+        _CAYLEY[n] = all(sp.expand(e) == 0 for e in ((I + A).T * J * (I + A) - (I - A).T * J * (I - A)))
+    return _CAYLEY[n]
+
+
+_CAYLEY: dict[int, bool] = {}
+
+
+def midpoint_symplectic(scheme, claim: str) -> Certificate | None:
+    """The midpoint rule ``y1 = y0 + hJ∇H(ȳ)`` is symplectic: Φ' is a Cayley transform (or None).
+
+    Checked: the scheme's ∇̄H is ∇H at ȳ = (y0 + y1)/2 (structurally) and its Hessian S is
+    symmetric.  Differentiating the equation gives ``(I - A) Φ' = I + A`` with
+    ``A = (h/2) J S(ȳ)``, so ``Φ' = (I + A)(I - A)⁻¹`` (the factors commute) and
+    ``Φ'ᵀJΦ' = (I - A)⁻ᵀ (I + A)ᵀJ(I + A) (I - A)⁻¹ = J`` by the lemma
+    ``(I + A)ᵀJ(I + A) = (I - A)ᵀJ(I - A)`` — proved for a generic symmetric S (h absorbed).
+    """
+    from ..derive import gradient
+    from .structural import _same
+    t0 = time.perf_counter()
+    if scheme.method != "midpoint" or scheme.discrete_gradient is None:
+        return None
+    system = scheme.system
+    y0, y1 = list(system.y), list(scheme.y1)
+    mid = {a: (a + b) / 2 for a, b in zip(y0, y1)}
+    grad = gradient(system)
+    if not all(_same(g, c.xreplace(mid)) for g, c in zip(scheme.discrete_gradient, grad)):
+        return None
+    Hs = sp.hessian(system.H, y0)
+    n = len(y0)
+    if any(sp.expand(Hs[i, j] - Hs[j, i]) != 0 for i in range(n) for j in range(i + 1, n)):
+        return None
+    if not _cayley_lemma(n):
+        return None
+    return Certificate(claim + " (Cayley transform)", "proved", "Φ'ᵀJΦ' - J", r"\Phi'^T J \Phi' - J",
+                       "structural: ∇̄H = ∇H(ȳ) (checked on the scheme), so (I - A)Φ' = I + A with "
+                       "A = (h/2)J∇²H(ȳ), ∇²H symmetric (checked); (I + A)ᵀJ(I + A) = (I - A)ᵀJ(I - A) "
+                       f"for a generic symmetric {n}×{n} S (expand), hence Φ'ᵀJΦ' = J where I - A is "
+                       "invertible (the step is defined)", time.perf_counter() - t0,
+                       "symplecticity (section 1.2)", {"structural": True})
+
+
 def symplectic_certificate(scheme, points: int = 3, seed: int = 3) -> Certificate:
     """``Φ'ᵀ J Φ' = J``: exact when Φ' is computable in closed form, else 60-digit numerical."""
     t0 = time.perf_counter()
@@ -130,7 +178,7 @@ def symplectic_certificate(scheme, points: int = 3, seed: int = 3) -> Certificat
     n = 2 * system.dim
     J = symplectic_matrix(n)
     claim = f"{scheme.method}: the step map is symplectic, Φ'ᵀ J Φ' = J"
-    cert = splitting_symplectic(scheme, claim)
+    cert = splitting_symplectic(scheme, claim) or midpoint_symplectic(scheme, claim)
     if cert is not None:
         return cert
     P = step_jacobian(scheme)
