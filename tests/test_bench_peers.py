@@ -34,6 +34,12 @@ centre_mass = "k"
 
 def _kepler_scene(tmp_path, nbody: str = KEPLER_NBODY, name: str = "kepler-nbody"):
     text = mg.load_scene("kepler").path.read_text().replace('name = "kepler"', f'name = "{name}"')
+    # kepler.toml declares its own [nbody] table: drop it, this helper supplies the one under test
+    # (every table after it is kept; the [run] table follows [nbody] in kepler.toml).
+    start = text.find("\n[nbody]")
+    if start >= 0:
+        end = text.find("\n[", start + 1)
+        text = text[:start] + text[end:]
     path = tmp_path / f"{name}.toml"
     path.write_text(text + nbody)
     return path
@@ -207,8 +213,8 @@ def test_missing_peers_are_a_note_and_exit_0(tmp_path, capsys, monkeypatch):
 
 def test_rebound_is_skipped_with_a_note_without_a_matching_nbody_table(tmp_path):
     pytest.importorskip("rebound")
-    kepler = mg.load_scene("kepler")
-    module = load_module(scene_module_path(kepler, "energy-momentum"))
+    module = load_module(scene_module_path(mg.load_scene("kepler"), "energy-momentum"))
+    kepler = mg.load_scene(_kepler_scene(tmp_path, nbody="", name="kepler-plain"))   # no [nbody]
     y0, T = np.array(kepler.y0), 1.0
     with pytest.raises(peers.PeerUnsupported, match=r"no \[nbody\] table"):
         peers.rebound_rows(kepler, module, y0, T, y0, lambda traj: {})
