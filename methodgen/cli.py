@@ -109,7 +109,7 @@ def dump_json(obj) -> str:
     return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
 
 
-def _invariant_stats(module, traj, acc: dict | None, offset: int = 0) -> dict:
+def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: dict | None = None) -> dict:
     """Update running max errors of every monitored invariant with ``traj`` (rows of states).
 
     ``offset`` is the step index of ``traj[0]``.  NaN never disappears into a
@@ -118,7 +118,7 @@ def _invariant_stats(module, traj, acc: dict | None, offset: int = 0) -> dict:
     finite values only, to be reported as null with a status.
     """
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN is tracked below
-        inv = module.invariants(traj)
+        inv = module.invariants(traj) if params is None else module.invariants(traj, params)
     acc = {} if acc is None else acc
     for name in module.INVARIANT_NAMES:
         vals = np.asarray(inv[name], dtype=float).reshape(len(traj), -1)
@@ -138,7 +138,7 @@ def _invariant_stats(module, traj, acc: dict | None, offset: int = 0) -> dict:
     return acc
 
 
-def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done) -> dict:
+def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done, params=None) -> dict:
     report_inv = {}
     problems = []
     for name, v in (inv_acc or {}).items():
@@ -166,6 +166,7 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "steps_done": steps_done,
         "t_final": h * steps_done,
         "y0": list(scene.y0),
+        "params": dict(scene.system.param_values) if params is None else dict(params),
         "y_final": y_final,
         "state_names": list(module.STATE_NAMES),
         "invariants": report_inv,
@@ -185,10 +186,71 @@ def _note(text: str) -> None:
     print(f"methodgen: note: {text}", file=sys.stderr)
 
 
+def _finite(text: str, what: str) -> float:
+    """A real number from command-line text (float(), never eval), finite."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise InputError(f"{what}: {text!r} is not finite")
+    return v
+
+
+def parse_y0(text: str, n: int) -> list[float]:
+    """``"v1,v2,..."`` → n finite floats (q then p)."""
+    parts = [t.strip() for t in text.split(",")]
+    if len(parts) != n:
+        raise InputError(f"--y0 needs {n} comma-separated values (q then p), got {len(parts)}")
+    return [_finite(t, f"--y0 entry {i + 1}") for i, t in enumerate(parts)]
+
+
+def parse_params(items, names) -> dict[str, float]:
+    """``["NAME=VALUE", ...]`` → {name: value}; unknown names and bad values are errors."""
+    out: dict[str, float] = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise InputError(f"--param {item!r}: expected NAME=VALUE")
+        if name not in names:
+            valid = ", ".join(names) or "none"
+            raise InputError(f"--param {name!r}: unknown parameter; this scene has: {valid}")
+        out[name] = _finite(value.strip(), f"--param {name}")
+    return out
+
+
+def _overrides(scene, y0, params):
+    """The scene with ``y0`` replaced, and the full parameter dict to pass at run time."""
+    import dataclasses
+    if y0 is not None:
+        y0 = [float(v) for v in y0]
+        if len(y0) != len(scene.y0) or not all(math.isfinite(v) for v in y0):
+            raise InputError(f"y0 needs {len(scene.y0)} finite values (q then p), got {y0}")
+        scene = dataclasses.replace(scene, y0=tuple(y0))
+    values = dict(scene.system.param_values)
+    for name, v in (params or {}).items():
+        if name not in values:
+            raise InputError(f"unknown parameter {name!r}; this scene has: {', '.join(values) or 'none'}")
+        values[name] = float(v)
+    return scene, (values if params else None)
+
+
+def _steps_for(t_final: float, h: float) -> int:
+    if not (math.isfinite(t_final) and t_final > 0):
+        raise InputError(f"--t-final must be a positive finite time, got {t_final!r}")
+    steps = t_final / abs(h)
+    n = round(steps)
+    if abs(steps - n) > 1e-9 * max(1.0, steps):
+        n = math.ceil(steps)   # the last step ends at or just after t_final; the report says where
+    return max(1, int(n))
+
+
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
               interrupted_path: str | None = None, plot: str | None = None,
-              backend: str = "numpy", extended: bool = False) -> dict:
+              backend: str = "numpy", extended: bool = False, y0=None, params: dict | None = None,
+              t_final: float | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -200,6 +262,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     the run is drawn (phase portrait, invariant errors, constraint residuals).
     With ``extended`` each step is refined in extended precision
     (``integrate(..., extended=True)``: round-off that follows Brouwer's law).
+    ``y0``, ``params`` ({name: value}) and ``t_final`` override the scene's initial
+    state, parameter values (passed to the module at run time: nothing is
+    re-derived) and final time (``steps = round(t_final / h)``; not with ``steps``).
     """
     if extended and backend != "numpy":
         raise InputError("--extended needs the numpy backend (numba has no long double)")
@@ -211,6 +276,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
     h = scene.h if h is None else h
+    scene, params = _overrides(scene, y0, params)
+    if t_final is not None:
+        if steps is not None:
+            raise InputError("give either --steps or --t-final, not both")
+        steps = _steps_for(t_final, h)
     steps = scene.steps if steps is None else steps
     module = build(scene.system, method, path=scene_module_path(scene, method, backend), backend=backend)
     if extended and module.EXTENDED_BITS <= 53:
@@ -220,7 +290,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if getattr(module, "BACKEND", "numpy") == "numba":
         # Compile (or load from numba's disk cache) before the timed region.
         try:
-            module.step(y, h)
+            module.step(y, h, params)
         except (RuntimeError, FloatingPointError, ValueError):
             pass
     chunk = steps if not chunk else chunk
@@ -244,12 +314,12 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             info: dict = {} if compensation is None else {"compensation": compensation}
             t0 = time.perf_counter()
             try:
-                part = module.integrate(y, h, n, info=info, extended=extended)
+                part = module.integrate(y, h, n, params, info=info, extended=extended)
             finally:
                 seconds += time.perf_counter() - t0
             compensation = info.get("compensation")
             rows = part if first else part[1:]
-            inv_acc = _invariant_stats(module, part, inv_acc, offset=done)
+            inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params)
             its_all.append(info.get("newton_iterations", np.zeros(0)))
             if writer is not None:
                 writer.append(rows)
@@ -271,13 +341,14 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             rows = np.zeros((0,) + y.shape)
         elif partial is not None and len(partial):
             rows = partial if first else partial[1:]
-            inv_acc = _invariant_stats(module, partial, inv_acc, offset=done)
+            inv_acc = _invariant_stats(module, partial, inv_acc, offset=done, params=params)
             done += len(partial) - 1
             y = partial[-1]
         else:
             rows = np.zeros((0,) + y.shape)
         if inv_acc is None:  # failed before a chunk was done (e.g. y0 outside the domain of H)
-            inv_acc = _invariant_stats(module, np.asarray(y, dtype=float)[None], None, offset=done)
+            inv_acc = _invariant_stats(module, np.asarray(y, dtype=float)[None], None, offset=done,
+                                       params=params)
         target = writer
         note = None
         if target is None and (interrupted_path or isinstance(exc, KeyboardInterrupt)):
@@ -305,11 +376,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             except OSError as cexc:
                 note, saved_rows = str(cexc), None
         its = np.concatenate(its_all) if its_all else np.zeros(0)
-        rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
+        rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params)
         code = 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL
         raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
     its = np.concatenate(its_all) if its_all else np.zeros(0)
-    rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done)
+    rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params)
     if writer is not None:
         complete = rep["status"] == "ok"
         rep["saved"] = str(writer.close(steps_done=done, complete=complete,
@@ -354,10 +425,22 @@ def _print_run(rep: dict) -> None:
     print("y_final: " + ", ".join(f"{n}={v:.15g}" for n, v in zip(names, rep["y_final"])))
 
 
+def _cli_overrides(args):
+    """--y0 and --param validated against the scene (one-line errors naming the bad item)."""
+    if args.y0 is None and not args.param:
+        return None, None
+    scene = load_scene(args.scene)
+    y0 = parse_y0(args.y0, len(scene.y0)) if args.y0 is not None else None
+    params = parse_params(args.param, list(scene.system.param_values)) or None
+    return y0, params
+
+
 def cmd_run(args) -> int:
     try:
+        y0, params = _cli_overrides(args)
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,
-                        plot=args.plot, backend=args.backend, extended=args.extended)
+                        plot=args.plot, backend=args.backend, extended=args.extended, y0=y0,
+                        params=params, t_final=args.t_final)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         if fail.saved:
@@ -568,6 +651,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", help="method (default: the scene's first method)")
     p.add_argument("--h", type=_step, help="step size (default: the scene's)")
     p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
+    p.add_argument("--t-final", type=float, metavar="T",
+                   help="final time instead of --steps (steps = T/h, rounded; the report gives t_final)")
+    p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="parameter value for this run (repeatable; passed at run time, nothing re-derived)")
     p.add_argument("--plot", metavar="FILE", help="draw phase portrait, invariant errors (log scale) and "
                                                   "constraint residuals to FILE (.png/.svg/.pdf; needs methodgen[plot])")
     p.add_argument("--backend", choices=BACKENDS, default="numpy",
