@@ -24,6 +24,7 @@ from ..derive import gradient, vector_field
 from ..schemes.base import STEP, is_quadratic_field
 from .common import REF_KAHAN, at, system_domain
 from .exact import Domain, certify
+from .maps import symplectic_matrix
 from .report import Certificate
 
 __all__ = ["forms_agree_generic", "forms_agree_user", "modified_energy", "modified_volume", "modified_energy_fast",
@@ -188,14 +189,6 @@ def modified_energy_fast(system) -> Certificate | None:
 # I + hK(y1), and det(I + hK) = det(J(I - hK)ᵀJ⁻¹) = det A by L1.  Every step holds
 # wherever the step is defined (I ± hK invertible at y0 and y1).
 
-def _canonical_J(d: int) -> sp.Matrix:
-    J = sp.zeros(2 * d, 2 * d)
-    for i in range(d):
-        J[i, d + i] = 1
-        J[d + i, i] = -1
-    return J
-
-
 def _zero(M) -> bool:
     return all(sp.expand(e) == 0 for e in (M if isinstance(M, (list, tuple)) else list(M)))
 
@@ -210,7 +203,7 @@ def _lemmas(system, which: tuple[str, ...], theta=sp.Rational(1, 2)) -> dict[str
     y = list(system.y)
     n, h = len(y), STEP
     Y = sp.Matrix(y)
-    J = _canonical_J(system.dim)
+    J = symplectic_matrix(2 * system.dim)
     f = vector_field(system)
     grad = gradient(system)
     K = f.jacobian(Y) / 2
