@@ -16,7 +16,7 @@ from types import ModuleType
 from .emit import (cache_dir, check_cache_folder, emit_source, file_status, load_module, module_filename,
                    resolve_backend, signature, warn_regenerating, write_module)
 from .problem import Hamiltonian
-from .schemes import discretize
+from .schemes import composition_for, discretize, method_key
 
 __all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path"]
 
@@ -83,11 +83,12 @@ def generate(scheme, path=None, backend: str = "numpy") -> ModuleType:
 
     backend = resolve_backend(backend)
     if path is None:
-        path = default_path(scheme.system, scheme.method, backend)
+        path = default_path(scheme.system, scheme.key, backend)
     return emit_generate(scheme, path, backend)
 
 
-def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy") -> ModuleType:
+def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *, order: int = 2,
+          composition: str | None = None) -> ModuleType:
     """Return the generated module for ``system`` and ``method``, generating it only if needed.
 
     A file in the per-user cache is imported only when it carries this user's
@@ -104,15 +105,19 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy") -
     backend : {"numpy", "numba"}
         See :func:`generate`; without numba installed, ``"numba"`` warns
         (RuntimeWarning) and builds the numpy module.
+    order : {2, 4, 6, 8, 10}
+    composition : str, optional
+        For ``order > 2``: the composition family (see :func:`methodgen.discretize`).
     """
     backend = resolve_backend(backend)
-    sig = signature(system, method, backend)
-    path = default_path(system, method, backend) if path is None else Path(path)
+    key = method_key(method, composition_for(order, composition))
+    sig = signature(system, key, backend)
+    path = default_path(system, key, backend) if path is None else Path(path)
     check_cache_folder(path)  # a cache others can write to is refused before any derivation
     status = file_status(path, sig)
     if status == "ok":
         return load_module(path)
     warn_regenerating(path, status)
-    scheme = discretize(system, method)
+    scheme = discretize(system, method, order=order, composition=composition)
     write_module(path, emit_source(scheme, sig, backend=backend))
     return load_module(path)

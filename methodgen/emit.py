@@ -606,10 +606,10 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
         The imported generated module.
     """
     backend = resolve_backend(backend)
-    sig = signature(scheme.system, scheme.method, backend)
+    sig = signature(scheme.system, scheme.key, backend)
     name = scheme.system.name or "system"
     if path is None:
-        path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.method, backend)
+        path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.key, backend)
     path = Path(path)
     check_cache_folder(path)
     status = file_status(path, sig)
@@ -623,6 +623,6 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
 def emit_source(scheme, sig: str | None = None, module_name: str | None = None,
                 backend: str = "numpy") -> str:
     """The full source text of the generated module for ``scheme`` (no fallback: any backend renders)."""
-    sig = sig or signature(scheme.system, scheme.method, backend)
-    name = module_name or module_filename(scheme.system.name or "system", scheme.method, backend)[:-3]
+    sig = sig or signature(scheme.system, scheme.key, backend)
+    name = module_name or module_filename(scheme.system.name or "system", scheme.key, backend)[:-3]
     return render(lower(scheme, sig, name), backend)

@@ -198,6 +198,20 @@ class ModuleIR:
     #: ``(kind, expression)``, kind ``"positive"`` (log, negative fractional power) or
     #: ``"nonnegative"`` (positive fractional power such as sqrt).
     domain: tuple[tuple[str, str], ...] = ()
+    #: Symmetric composition of the base step: family, order, stages, source (None: the base
+    #: method), and its coefficients γ_i as float64 reprs (``stages`` of them).
+    composition: dict | None = None
+    gammas: tuple[str, ...] = ("1.0",)
+
+    @property
+    def stages(self) -> int:
+        return len(self.gammas)
+
+    @property
+    def gamma_ratios(self) -> tuple[str, ...]:
+        """γ_i / γ_{i-1} (γ_0 / γ_{s-1} = 1 for i = 0: the sequence is palindromic), as reprs."""
+        g = [float(x) for x in self.gammas]
+        return tuple(repr(g[i] / g[i - 1]) if i else "1.0" for i in range(len(g)))
 
     @property
     def dim(self) -> int:
@@ -525,4 +539,14 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         lerr_scale=repr(float(plan.scale)) if plan else "1.0",
         lerr_partner=plan.partner if plan else "",
         domain=tuple((kind, str(u)) for kind, u in conds),
+        **_composition_fields(scheme),
     )
+
+
+def _composition_fields(scheme) -> dict:
+    comp = getattr(scheme, "composition", None)
+    if comp is None:
+        return {}
+    return {"composition": {"family": comp.family, "order": comp.order, "stages": comp.stages,
+                            "source": comp.source},
+            "gammas": tuple(repr(g) for g in comp.floats())}

@@ -12,11 +12,12 @@ from types import ModuleType
 from ..errors import InputError, MethodNotApplicable
 from ..problem import Hamiltonian
 from . import energy_momentum, kahan, midpoint, stormer_verlet, trapezoidal
-from .base import Scheme, Traits
+from .base import Scheme, Traits, method_key
 from .discrete_gradients import AVF, Gonzalez, ItohAbe
 from .rattle import Rattle, Shake
 
-__all__ = ["METHODS", "Scheme", "Traits", "discretize", "applicable_methods", "method_names"]
+__all__ = ["METHODS", "SYMMETRIC_METHODS", "Scheme", "Traits", "discretize", "applicable_methods",
+           "method_names", "composition_for", "method_key"]
 
 METHODS: dict[str, ModuleType] = {m.NAME: m for m in (
     midpoint, energy_momentum, trapezoidal, kahan, AVF, Gonzalez, ItohAbe, stormer_verlet,
@@ -32,7 +33,8 @@ def applicable_methods(system: Hamiltonian) -> list[str]:
     return [name for name, m in METHODS.items() if m.applies(system) is None]
 
 
-def discretize(system: Hamiltonian, method: str, **options) -> Scheme:
+def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition: str | None = None,
+               **options) -> Scheme:
     """Discretise ``system`` with ``method`` and return the symbolic :class:`Scheme`.
 
     Parameters
@@ -40,6 +42,15 @@ def discretize(system: Hamiltonian, method: str, **options) -> Scheme:
     system : Hamiltonian
     method : str
         One of :data:`METHODS` (``methodgen methods`` lists them).
+    order : {2, 4, 6, 8, 10}
+        Order of the method.  Above 2 the (symmetric, order-2) base method is
+        composed symmetrically, ``Ψ_h = Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h}``
+        (:mod:`methodgen.compositions`); exact invariants, symplecticity and
+        symmetry of the base method are kept.
+    composition : str, optional
+        Coefficient family for ``order > 2``: one of
+        :data:`methodgen.compositions.FAMILIES`; default
+        :data:`methodgen.compositions.DEFAULT_FAMILY` ``[order]``.
     **options
         Method options, e.g. ``form="rk"`` for Kahan, ``nodes=`` for AVF quadrature.
 
@@ -61,9 +72,52 @@ def discretize(system: Hamiltonian, method: str, **options) -> Scheme:
         ok = applicable_methods(system)
         raise MethodNotApplicable(f"{reason}. Methods that apply to this system: "
                                   f"{', '.join(ok) if ok else '(none)'}")
+    comp = composition_for(order, composition)
     try:
-        return mod.build(system, **options)
+        scheme = mod.build(system, **options)
     except TypeError as exc:
         if "unexpected keyword" in str(exc):
             raise InputError(f"method {method!r} does not take options {sorted(options)}") from None
         raise
+    if comp is None:
+        return scheme
+    t = scheme.traits
+    if not (t.symmetric and t.order == 2):
+        ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
+        raise MethodNotApplicable(
+            f"order {order} is built by symmetric composition, which needs a symmetric method of "
+            f"order 2; {method} is {'not symmetric' if not t.symmetric else f'of order {t.order}'} "
+            f"for this system. Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
+    return scheme.compose(comp)
+
+
+#: Methods that are symmetric of order 2 on every system they apply to (Itoh–Abe is not).
+SYMMETRIC_METHODS = ("midpoint", "energy-momentum", "trapezoidal", "kahan", "avf", "gonzalez",
+                     "stormer-verlet", "rattle", "shake")
+
+
+def composition_for(order, family: str | None = None):
+    """The :class:`~methodgen.compositions.Composition` for ``order`` (None for order 2).
+
+    Raises
+    ------
+    InputError
+        For an order not in :data:`~methodgen.compositions.ORDERS`, an unknown family,
+        or a family without that order (the message lists what is valid).
+    """
+    from ..compositions import DEFAULT_FAMILY, FAMILIES, ORDERS, composition as _composition
+
+    if isinstance(order, bool) or not isinstance(order, int) or order not in ORDERS:
+        raise InputError(f"order must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
+    if order == 2:
+        if family not in (None, "base"):
+            raise InputError(f"composition={family!r} needs order > 2 (order 2 is the base method)")
+        return None
+    if family is not None and family not in FAMILIES:
+        raise InputError(f"unknown composition family {family!r}; families: {', '.join(FAMILIES)} "
+                         f"(default for order {order}: {DEFAULT_FAMILY[order]})")
+    if family is not None and order not in FAMILIES[family]:
+        have = [f for f, orders in FAMILIES.items() if order in orders]
+        raise InputError(f"the {family} family has orders {', '.join(map(str, FAMILIES[family]))}, not "
+                         f"{order}; families with order {order}: {', '.join(have)}")
+    return _composition(order, family)

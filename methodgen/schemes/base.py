@@ -24,6 +24,7 @@ never collide with a user's coordinates or parameters:
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Callable
@@ -34,6 +35,13 @@ from ..derive import Invariant, gradient, invariants, separable_split, vector_fi
 from ..problem import Hamiltonian
 
 STEP = sp.Symbol("_h", real=True)
+
+
+def method_key(method: str, composition=None) -> str:
+    """``method``, or ``method-order<K>-<family>`` for a composed method (file names, signatures)."""
+    if composition is None or composition.order == 2:
+        return method
+    return f"{method}-order{composition.order}-{composition.family}"
 
 
 def increment_symbol(s: sp.Symbol) -> sp.Symbol:
@@ -152,8 +160,47 @@ class Scheme:
     #: How the discrete gradient was assembled (e.g. Gonzalez: ∇H(ȳ), the numerator N,
     #: Itoh–Abe components), in y0/y1 symbols, for structural proofs; None when not recorded.
     structure: dict | None = None
+    #: A symmetric composition Ψ_h = Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h} of this base step
+    #: (:class:`methodgen.compositions.Composition`), or None for the base method itself.
+    #: The residual, increment etc. above are always those of the base step Φ_h; ``traits``
+    #: are those of the composed method (order K).
+    composition: object | None = None
 
     h = STEP
+
+    @property
+    def key(self) -> str:
+        """The method's name in file names and signatures: ``method`` for the base
+        method, ``method-order<K>-<family>`` for a composition."""
+        return method_key(self.method, self.composition)
+
+    @property
+    def base_traits(self) -> Traits:
+        """Traits of the base step Φ_h (order 2) — equal to ``traits`` when not composed."""
+        if self.composition is None:
+            return self.traits
+        # compose() raised the order from 2 and appended one note; undo both
+        return Traits(**{**self.traits.__dict__, "order": 2, "notes": self.traits.notes[:-1]})
+
+    def compose(self, composition) -> "Scheme":
+        """This (symmetric, order-2) base scheme composed with ``composition``.
+
+        The base step's equations are kept as they are (a generated module runs
+        them once per stage with the step ``γ_i h``); the traits become those of
+        the composition: order K; symmetry, symplecticity and every exactly
+        preserved invariant are kept, because each stage is the base map with a
+        different (real, possibly negative) step and the base properties hold for
+        every h [HLW06, §II.4, §V.3].
+        """
+        if self.composition is not None:
+            raise ValueError("this scheme is already a composition")
+        if composition is None or composition.order == 2:
+            return self
+        t = self.traits
+        note = (f"order {composition.order}: symmetric composition, {composition.family} family "
+                f"({composition.stages} stages; {composition.source})")
+        traits = Traits(**{**t.__dict__, "order": composition.order, "notes": t.notes + (note,)})
+        return dataclasses.replace(self, traits=traits, composition=composition)
 
     @property
     def y0(self) -> tuple[sp.Symbol, ...]:
