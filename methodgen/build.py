@@ -16,9 +16,9 @@ from types import ModuleType
 from .emit import (cache_dir, check_cache_folder, emit_source, file_status, load_module, module_filename,
                    resolve_backend, signature, warn_regenerating, write_module)
 from .problem import Hamiltonian
-from .schemes import composition_for, discretize, method_key
+from .schemes import METHODS, composition_for, discretize, method_key
 
-__all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path"]
+__all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path", "scene_targets"]
 
 
 def generated_dir() -> Path | None:
@@ -29,15 +29,42 @@ def generated_dir() -> Path | None:
     return None
 
 
+def scene_targets(scene) -> list[tuple[str, int, str | None]]:
+    """``(method, order, composition)`` of every module ``methodgen generate`` keeps for ``scene``.
+
+    Each of the scene's methods as it is and, when ``[run] order`` is above 2, each
+    composed to that order.
+    """
+    out = [(m, 2, None) for m in scene.methods]
+    if getattr(scene, "order", 2) > 2:
+        out += [(m, scene.order, scene.composition) for m in scene.methods]
+    return out
+
+
+def _kept_in_generated(scene, key: str, gen: Path) -> bool:
+    """Whether the module ``key`` (a method key) of a built-in scene belongs in ``generated/``.
+
+    Base methods: yes (as always).  Composed keys only when the scene's ``[run] order``
+    declares them or the file is already there (``methodgen generate --order``);
+    otherwise they go to the cache, so that ``methodgen run kepler --order 8`` leaves
+    the committed folder alone.
+    """
+    if key in METHODS or (gen / module_filename(scene.name, key)).is_file():
+        return True
+    return key in {method_key(m, composition_for(o, c)) for m, o, c in scene_targets(scene)}
+
+
 def scene_module_path(scene, method: str, backend: str = "numpy") -> Path:
     """Where the module of ``scene`` × ``method`` lives: ``generated/`` for built-ins in a checkout, else the cache.
 
+    ``method`` is the method key (:func:`methodgen.schemes.method_key`).
     ``generated/`` holds numpy modules only (they are committed and sync-checked):
-    modules of other backends always live in the cache.
+    modules of other backends always live in the cache, and so do composed modules
+    the scene does not declare (see :func:`scene_targets`).
     """
     fname = module_filename(scene.name, method, backend)
     gen = generated_dir()
-    if scene.builtin and gen is not None and backend == "numpy":
+    if scene.builtin and gen is not None and backend == "numpy" and _kept_in_generated(scene, method, gen):
         return gen / fname
     sig = signature(scene.system, method, backend)
     return cache_dir() / module_filename(f"{scene.name}_{sig[:12]}", method, backend)
@@ -56,7 +83,7 @@ def default_path(system: Hamiltonian, method: str, backend: str = "numpy") -> Pa
     gen = generated_dir()
     if gen is not None and backend == "numpy" and system.name in scene_names():
         scene = load_scene(system.name)
-        if scene.system.fingerprint() == system.fingerprint():
+        if scene.system.fingerprint() == system.fingerprint() and _kept_in_generated(scene, method, gen):
             return gen / module_filename(scene.name, method)
     sig = signature(system, method, backend)
     return cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method, backend)

@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .build import build, generated_dir, scene_module_path
+from .build import build, generated_dir, scene_module_path, scene_targets
 from .emit import BACKENDS, emit_source, file_status, module_filename, signature, write_atomic
 from .errors import BAD_PATH_ERRNOS, InputError, MethodgenError, StorageError
-from .scene import load_scene, scene_names
+from .scene import check_order, load_scene, scene_names
 from .runio import ChunkWriter
-from .schemes import METHODS, discretize
+from .schemes import METHODS, SYMMETRIC_METHODS, composition_for, discretize, method_key
 
 EXIT_INPUT = 2
 EXIT_NUMERICAL = 3
@@ -159,6 +159,8 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
     return {
         "scene": scene.name,
         "method": method,
+        "order": int(getattr(module, "ORDER", 2)),
+        "composition": getattr(module, "COMPOSITION", None),   # {family, order, stages} or None
         "status": "non-finite" if problems else "ok",
         "status_detail": "; ".join(problems) or None,
         "h": h,
@@ -246,11 +248,31 @@ def _steps_for(t_final: float, h: float) -> int:
     return max(1, int(n))
 
 
+def resolve_order(scene, order=None, composition=None) -> tuple[int, str | None]:
+    """``(order, family or None)`` of a run: ``--order``/``--composition`` over the scene's ``[run]``.
+
+    ``order`` may be the command-line text (read with ``int()``, never evaluated).
+    An ``order`` other than the scene's drops the scene's family (the new order's
+    default is used unless ``composition`` is given).  Invalid values are an
+    :class:`InputError` naming the value and listing the valid ones.
+    """
+    if order is not None and not isinstance(order, int):
+        try:
+            order = int(str(order).strip())
+        except ValueError:
+            pass  # check_order names the text and the valid orders
+    if order is None:
+        order = scene.order
+    if composition is None and order == scene.order:
+        composition = scene.composition
+    return check_order(order, composition, order_name="--order", composition_name="--composition")
+
+
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
               interrupted_path: str | None = None, plot: str | None = None,
               backend: str = "numpy", extended: bool = False, y0=None, params: dict | None = None,
-              t_final: float | None = None) -> dict:
+              t_final: float | None = None, order=None, composition: str | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -265,6 +287,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     ``y0``, ``params`` ({name: value}) and ``t_final`` override the scene's initial
     state, parameter values (passed to the module at run time: nothing is
     re-derived) and final time (``steps = round(t_final / h)``; not with ``steps``).
+    ``order`` (2, 4, 6, 8, 10) and ``composition`` (a family) override the scene's
+    ``[run] order``/``composition`` (:func:`resolve_order`): above 2 the method is
+    composed symmetrically, its own module (and cache file) is used.
     """
     if extended and backend != "numpy":
         raise InputError("--extended needs the numpy backend (numba has no long double)")
@@ -275,6 +300,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     method = method or scene.method
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
+    order, composition = resolve_order(scene, order, composition)
+    key = method_key(method, composition_for(order, composition))
     h = scene.h if h is None else h
     scene, params = _overrides(scene, y0, params)
     if t_final is not None:
@@ -282,7 +309,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             raise InputError("give either --steps or --t-final, not both")
         steps = _steps_for(t_final, h)
     steps = scene.steps if steps is None else steps
-    module = build(scene.system, method, path=scene_module_path(scene, method, backend), backend=backend)
+    module = build(scene.system, method, path=scene_module_path(scene, key, backend), backend=backend,
+                   order=order, composition=composition)
     if extended and module.EXTENDED_BITS <= 53:
         raise InputError(f"--extended needs a long double wider than double; numpy.longdouble has "
                          f"{module.EXTENDED_BITS} bits on this platform")
@@ -295,7 +323,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             pass
     chunk = steps if not chunk else chunk
     writer = None
-    meta = dict(scene=scene.name, method=method, h=h, state_names=list(module.STATE_NAMES))
+    meta = dict(scene=scene.name, method=method, order=order, composition=composition or "", h=h,
+                state_names=list(module.STATE_NAMES))
     kept: list[np.ndarray] = []
     inv_acc = None
     its_all: list[np.ndarray] = []
@@ -353,7 +382,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         note = None
         if target is None and (interrupted_path or isinstance(exc, KeyboardInterrupt)):
             try:
-                target = ChunkWriter(interrupted_path or f"{scene.name}_{method}_partial.npz".replace("-", "_"),
+                target = ChunkWriter(interrupted_path or f"{scene.name}_{key}_partial.npz".replace("-", "_"),
                                      meta=meta)
                 for k in kept:
                     target.append(k)
@@ -393,7 +422,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         else:
             traj = np.concatenate(kept)
         cons = module.constraint_residuals(traj) if hasattr(module, "constraint_residuals") else None
-        rep["plot"] = str(plot_run(module, traj, plot, scene_name=scene.name, method=method, h=h,
+        rep["plot"] = str(plot_run(module, traj, plot, scene_name=scene.name, method=key, h=h,
                                    constraint_residuals=cons))
     return rep
 
@@ -404,9 +433,15 @@ def _num(x, spec: str, width: int) -> str:
     return format("nan" if x is None else str(x), f">{width}")
 
 
+def _order_text(rep: dict) -> str:
+    comp = rep.get("composition")
+    order = f"order {rep.get('order')}"
+    return f"{order} ({comp['family']} composition, {comp['stages']} stages)" if comp else order
+
+
 def _print_run(rep: dict) -> None:
-    print(f"scene {rep['scene']}  method {rep['method']}  h = {rep['h']:g}  steps = {rep['steps']}  "
-          f"(t = 0 .. {rep['t_final']:g})")
+    print(f"scene {rep['scene']}  method {rep['method']}  {_order_text(rep)}  h = {rep['h']:g}  "
+          f"steps = {rep['steps']}  (t = 0 .. {rep['t_final']:g})")
     print(f"module: {rep['module']}")
     print(f"{'invariant':>10} {'initial':>22} {'final':>22} {'max abs error':>14} {'max rel error':>14}")
     for name, v in rep["invariants"].items():
@@ -419,7 +454,8 @@ def _print_run(rep: dict) -> None:
             rel_s = f"{rel:14.3e}" if rel is not None else f"{'inf':>14}"
         print(f"{name:>10} {_num(v['initial'], '.15g', 22)} {_num(v['final'], '.15g', 22)} {err_s} {rel_s}")
     nw = rep["newton"]
-    print(f"Newton iterations per step: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
+    stages = f" ({rep['composition']['stages']} stages)" if rep.get("composition") else ""
+    print(f"Newton iterations per step{stages}: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
     print(f"wall time {rep['seconds']:.3f} s, {rep['us_per_step']:.2f} µs/step")
     names = rep["state_names"]
     print("y_final: " + ", ".join(f"{n}={v:.15g}" for n, v in zip(names, rep["y_final"])))
@@ -440,7 +476,8 @@ def cmd_run(args) -> int:
         y0, params = _cli_overrides(args)
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,
                         plot=args.plot, backend=args.backend, extended=args.extended, y0=y0,
-                        params=params, t_final=args.t_final)
+                        params=params, t_final=args.t_final, order=args.order,
+                        composition=args.composition)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         if fail.saved:
@@ -474,11 +511,35 @@ def cmd_run(args) -> int:
 
 # --- generate ------------------------------------------------------------------
 
-def _targets(names: list[str]):
+def _targets(names: list[str], order=None, composition=None):
+    """``(scene, method, order, family)`` to generate: the scenes' own (each method, and
+    composed to ``[run] order`` if declared), or each method at ``--order``/``--composition``."""
+    for name in names or scene_names():
+        scene = load_scene(name)
+        if order is None and composition is None:
+            for method, o, c in scene_targets(scene):
+                yield scene, method, o, c
+        else:
+            o, c = resolve_order(scene, order, composition)
+            for method in scene.methods:
+                yield scene, method, o, c
+
+
+def _composed_files(names: list[str], backend: str) -> dict:
+    """File name → ``(scene, method, order, family)`` of every composed module a built-in
+    scene could have (each method × family × order): such a file in ``generated/`` (from
+    ``methodgen generate --order``) is regenerated and checked like the scenes' own."""
+    from .compositions import FAMILIES
+
+    out = {}
     for name in names or scene_names():
         scene = load_scene(name)
         for method in scene.methods:
-            yield scene, method
+            for family, orders in FAMILIES.items():
+                for o in orders:
+                    key = method_key(method, composition_for(o, family))
+                    out[module_filename(scene.name, key, backend)] = (scene, method, o, family)
+    return out
 
 
 def cmd_generate(args) -> int:
@@ -489,14 +550,26 @@ def cmd_generate(args) -> int:
         raise InputError("no generated/ folder found (not a source checkout); pass --out DIR")
     expected = set()
     problems, written, same = [], [], []
-    for scene, method in _targets(args.scenes):
+    own_set = args.order is None and args.composition is None
+    targets = list(_targets(args.scenes, args.order, args.composition))
+    for scene, *_ in targets:
         if not scene.builtin:
             raise InputError(f"{scene.name} is not a built-in scene; use the Python API "
                              "methodgen.generate for your own scenes")
-        path = out / module_filename(scene.name, method, args.backend)
+    if own_set and out.is_dir():
+        # Composed modules written by `generate --order` stay in sync too.
+        names = {module_filename(s.name, method_key(m, composition_for(o, c)), args.backend)
+                 for s, m, o, c in targets}
+        composed = _composed_files(args.scenes, args.backend)
+        targets += [composed[f.name] for f in sorted(out.glob("*.py"))
+                    if f.name in composed and f.name not in names]
+    for scene, method, order, family in targets:
+        key = method_key(method, composition_for(order, family))
+        path = out / module_filename(scene.name, key, args.backend)
         expected.add(path.name)
-        sig = signature(scene.system, method, args.backend)
-        source = emit_source(discretize(scene.system, method), sig, backend=args.backend)
+        sig = signature(scene.system, key, args.backend)
+        source = emit_source(discretize(scene.system, method, order=order, composition=family), sig,
+                             backend=args.backend)
         current = path.read_text(encoding="utf-8") if path.is_file() else None
         if current == source:
             same.append(path)
@@ -506,7 +579,7 @@ def cmd_generate(args) -> int:
         else:
             write_atomic(path, source)
             written.append(path)
-    if args.check and not args.scenes:
+    if args.check and not args.scenes and own_set:
         for extra in sorted(out.glob("*.py")):
             other_backend = extra.name.endswith("_numba.py") != (args.backend == "numba")
             if extra.name not in expected and not other_backend:
@@ -632,13 +705,43 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_methods(args) -> int:
-    rows = [{"name": name, "summary": mod.SUMMARY} for name, mod in METHODS.items()]
+    from .compositions import DEFAULT_FAMILY, FAMILIES, ORDERS
+
+    # "composable": symmetric of order 2 on every system it applies to, so --order K works;
+    # the others only where the scheme is symmetric of order 2 for the system.
+    rows = [{"name": name, "summary": mod.SUMMARY, "composable": name in SYMMETRIC_METHODS}
+            for name, mod in METHODS.items()]
+    high = [o for o in ORDERS if o > 2]
+    comp = {"orders": list(ORDERS), "families": {f: list(o) for f, o in FAMILIES.items()},
+            "default_family": {str(o): DEFAULT_FAMILY[o] for o in high},
+            "composable": [r["name"] for r in rows if r["composable"]]}
     if args.json:
-        print(json.dumps({"methods": rows}))
+        print(json.dumps({"methods": rows, "compositions": comp}))
     else:
         for r in rows:
             print(f"{r['name']:<18} {r['summary']}")
+        others = [r["name"] for r in rows if not r["composable"]]
+        print(f"\nhigher order: --order {'/'.join(map(str, high))} (scene: [run] order) composes a "
+              f"symmetric order-2 method symmetrically; the method's exact invariants and symplecticity "
+              f"are kept")
+        print(f"  composable: {', '.join(comp['composable'])}"
+              + (f"; {', '.join(others)} only where symmetric of order 2 for the system" if others else ""))
+        print("  families (--composition, [run] composition): "
+              + ", ".join(f"{f} ({', '.join(map(str, o))})" for f, o in FAMILIES.items()))
+        print("  default: " + ", ".join(f"order {o} {DEFAULT_FAMILY[o]}" for o in high))
     return 0
+
+
+def _add_order_args(p, generate: bool = False) -> None:
+    """``--order K`` and ``--composition F`` (validated by the command: one-line errors, exit 2)."""
+    what = ("generate the scenes' methods composed to this order instead of the scenes' own modules"
+            if generate else "order: 2 (the method itself) or 4, 6, 8, 10, a symmetric composition of it "
+                             "(default: the scene's [run] order, else 2)")
+    p.add_argument("--order", metavar="K", help=what)
+    from .compositions import FAMILIES
+    p.add_argument("--composition", metavar="FAMILY",
+                   help=f"composition family for order > 2: {', '.join(FAMILIES)} (default: the scene's, "
+                        "else the default of the order; `methodgen methods` lists them)")
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -649,6 +752,7 @@ def make_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a scene and report invariants, Newton statistics and timing")
     p.add_argument("scene", help="built-in scene name or path to a scene TOML file")
     p.add_argument("--method", help="method (default: the scene's first method)")
+    _add_order_args(p)
     p.add_argument("--h", type=_step, help="step size (default: the scene's)")
     p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
     p.add_argument("--t-final", type=float, metavar="T",
@@ -716,6 +820,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default: the checkout's generated/)")
     p.add_argument("--backend", choices=BACKENDS, default="numpy",
                    help="numpy (the committed generated/ modules) or numba (needs --out)")
+    _add_order_args(p, generate=True)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_generate)
 

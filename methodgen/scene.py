@@ -13,6 +13,8 @@ Format (see DESIGN.md §3 and the built-in scenes in ``methodgen/scenes``)::
     h = 0.01
     steps = 10000
     y0 = [...]                   # q then p
+    order = 8                    # optional: 2 (default), 4, 6, 8 or 10 — above 2 the method
+    composition = "kahan-li"     #   is composed symmetrically; optional family (default per order)
     [nbody]                      # optional: the scene is an N-body gravitational problem
     G = "G"                      # a number or a [params] name
     masses = ["m0", "m1"]        # one per body (3 coordinates each, in q order), p = m v
@@ -40,11 +42,12 @@ else:  # pragma: no cover - Python 3.10
 from .errors import InputError, SceneError
 from .problem import Hamiltonian
 
-__all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir"]
+__all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir", "check_order"]
 
 _TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict, "nbody": dict}
 _SYSTEM = {"H": str, "q": list, "p": list, "constraints": list}
-_RUN = {"method": (str, list), "h": (int, float), "steps": int, "y0": list}
+_RUN = {"method": (str, list), "h": (int, float), "steps": int, "y0": list, "order": int,
+        "composition": str}
 _NBODY = {"G": (int, float, str), "masses": list, "centre_mass": (int, float, str)}
 
 
@@ -97,6 +100,11 @@ class Scene:
     builtin : bool
     nbody : NBody or None
         The ``[nbody]`` declaration, if any.
+    order : int
+        ``[run].order``: 2 (the method itself, default) or 4, 6, 8, 10 (a symmetric
+        composition of it, :func:`methodgen.discretize` ``order=``).
+    composition : str or None
+        ``[run].composition``: the composition family (None: the default for ``order``).
     """
 
     name: str
@@ -109,6 +117,8 @@ class Scene:
     path: Path | None = None
     builtin: bool = False
     nbody: NBody | None = None
+    order: int = 2
+    composition: str | None = None
 
     @property
     def method(self) -> str:
@@ -142,6 +152,50 @@ def _number(value, where: str) -> float:
     return value
 
 
+def _orders(family: str) -> str:
+    from .compositions import FAMILIES
+    o = FAMILIES[family]
+    return f"order{'s' if len(o) > 1 else ''} {', '.join(map(str, o))}"
+
+
+def _families_text() -> str:
+    from .compositions import FAMILIES
+    return ", ".join(f"{f} ({_orders(f)})" for f in FAMILIES)
+
+
+def check_order(order, composition=None, *, order_name: str = "order",
+                composition_name: str = "composition", error=InputError) -> tuple[int, str | None]:
+    """Validate an order and a composition family; return ``(order, family or None)``.
+
+    Order 2 is the method itself; 4, 6, 8, 10 compose it symmetrically
+    (:mod:`methodgen.compositions`).  Every error (``error``, an
+    :class:`~methodgen.errors.InputError` subclass) names the bad value, using
+    ``order_name``/``composition_name`` (``[run].order``, ``--order``), and lists what
+    is valid.  Whether the *method* can be composed (it must be symmetric of order 2
+    on the system) is decided when it is discretised.
+    """
+    from .compositions import DEFAULT_FAMILY, FAMILIES, ORDERS
+
+    orders = ", ".join(map(str, ORDERS))
+    if isinstance(order, bool) or not isinstance(order, int) or order not in ORDERS:
+        raise error(f"{order_name} must be one of {orders} (2: the method itself; above 2: a symmetric "
+                    f"composition of it), got {order!r}")
+    if composition is None or (order == 2 and composition == "base"):
+        return order, None
+    if not isinstance(composition, str) or composition not in FAMILIES:
+        raise error(f"{composition_name}: unknown composition family {composition!r}; families: "
+                    f"{_families_text()}")
+    if order == 2:
+        raise error(f"{composition_name} = {composition!r} needs {order_name} above 2 (order 2 is the "
+                    f"method itself, not composed); the {composition} family has {_orders(composition)}")
+    if order not in FAMILIES[composition]:
+        have = [f for f, o in FAMILIES.items() if order in o]
+        raise error(f"{composition_name}: the {composition} family has {_orders(composition)}, not "
+                    f"{order}; families with order "
+                    f"{order}: {', '.join(have)} (default {DEFAULT_FAMILY[order]})")
+    return order, composition
+
+
 def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool = False) -> Scene:
     """Validate a parsed TOML document and build the :class:`Scene`."""
     _check_keys(data, _TOP, "the scene")
@@ -152,6 +206,10 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
     for k, v in params_t.items():
         _number(v, f"[params].{k}")
     run_t = data.get("run", {})
+    # Before the type check, so that a wrong type also hears the valid orders and families.
+    order, composition = check_order(run_t.get("order", 2), run_t.get("composition"),
+                                     order_name="[run].order", composition_name="[run].composition",
+                                     error=SceneError)
     _check_keys(run_t, _RUN, "[run]")
     for key in ("q", "p", "constraints"):
         for item in system_t.get(key, []):
@@ -181,7 +239,8 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
                          f"has {2 * system.dim}")
     nbody = _parse_nbody(data["nbody"], system, params_t) if "nbody" in data else None
     return Scene(name=name, description=data.get("description", ""), system=system, methods=methods,
-                 h=h, steps=steps, y0=y0, path=path, builtin=builtin, nbody=nbody)
+                 h=h, steps=steps, y0=y0, path=path, builtin=builtin, nbody=nbody, order=order,
+                 composition=composition)
 
 
 def _parse_nbody(table: dict, system: Hamiltonian, params: dict) -> NBody:

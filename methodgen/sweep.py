@@ -471,12 +471,16 @@ def plan_sweep(spec: SweepSpec) -> Plan:
     """
     from .build import build, scene_module_path
     from .emit import untagged
+    from .schemes import composition_for, method_key
 
     scene = spec.scene
     modules: dict[str, ModuleSource] = {}
     built = {}
+    # The scene's [run] order/composition: composed methods use their own modules (issue 14).
+    comp = composition_for(scene.order, scene.composition)
     for method in spec.methods:
-        module = built[method] = build(scene.system, method, path=scene_module_path(scene, method))
+        module = built[method] = build(scene.system, method, path=scene_module_path(scene, method_key(method, comp)),
+                                       order=scene.order, composition=scene.composition)
         path = Path(module.__file__)
         modules[method] = ModuleSource(method=method, signature=module.SIGNATURE, path=str(path),
                                        filename=f"{path.stem}_{module.SIGNATURE[:12]}.py",

@@ -1,4 +1,4 @@
-"""``methodgen verify SCENE [--method M] [--json] [--format text|markdown|latex] [--timeout S]``.
+"""``methodgen verify SCENE [--method M] [--order K] [--composition F] [--json] [--format …] [--timeout S]``.
 
 Verifies every claim that applies to the scene's methods (or one method) and
 prints the certificates.  ``--json`` prints exactly one JSON object
@@ -38,20 +38,23 @@ def _timeout(text: str) -> float:
 def cmd_verify(args) -> int:
     """Run the verification for a scene; return the exit status."""
     # Imported here: the verification layer is not needed by the other commands.
-    from .cli import dump_json
+    from .cli import dump_json, resolve_order
     from .errors import InputError
     from .scene import load_scene
-    from .schemes import discretize
+    from .schemes import composition_for, discretize
     from .verify import verify
 
     scene = load_scene(args.scene)
+    # --order/--composition over the scene's [run] order (one-line errors, exit 2).
+    order, composition = resolve_order(scene, args.order, args.composition)
     methods = [args.method] if args.method else list(scene.methods)
     if args.method and args.method not in scene.methods:
         # Any applicable method may be verified, not only the scene's own.
         discretize(scene.system, args.method)  # raises InputError / MethodNotApplicable
     if not methods:
         raise InputError(f"scene {scene.name!r} lists no methods; pass --method")
-    reports = [verify(discretize(scene.system, m), conjugacy_dim=args.conjugacy_dim,
+    reports = [verify(discretize(scene.system, m, order=order, composition=composition),
+                      conjugacy_dim=args.conjugacy_dim,
                       timeout=args.timeout, progress=True) for m in methods]
     ok = all(r.ok for r in reports)
     if args.json:
@@ -59,9 +62,13 @@ def cmd_verify(args) -> int:
         for r in reports:
             for c in r.certificates:
                 certs.append({**c.to_dict(), "method_name": r.title})
-        print(dump_json({"ok": ok, "scene": scene.name, "certificates": certs,
-                          "reports": [{"title": r.title, "ok": r.ok, "seconds": round(r.seconds, 3)}
-                                      for r in reports]}))
+        comp = composition_for(order, composition)
+        print(dump_json({"ok": ok, "scene": scene.name, "order": order,
+                         "composition": None if comp is None else
+                         {"family": comp.family, "order": comp.order, "stages": comp.stages},
+                         "certificates": certs,
+                         "reports": [{"title": r.title, "ok": r.ok, "seconds": round(r.seconds, 3)}
+                                     for r in reports]}))
     else:
         for r in reports:
             if args.format == "markdown":
@@ -78,6 +85,10 @@ def add_parser(sub) -> None:
     p = sub.add_parser("verify", help="prove (or refute) the lecture notes' claims for a scene's methods")
     p.add_argument("scene", help="built-in scene name or path to a scene TOML file")
     p.add_argument("--method", help="verify only this method (default: all of the scene's methods)")
+    p.add_argument("--order", metavar="K",
+                   help="verify the method composed to order K (4, 6, 8, 10; default: the scene's [run] order)")
+    p.add_argument("--composition", metavar="FAMILY",
+                   help="composition family for order > 2 (default: the scene's, else the order's default)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--format", choices=("text", "markdown", "latex"), default="text",
                    help="output format without --json (default: text)")

@@ -27,7 +27,8 @@ from .numeric import DPS, Stepper, param_point
 from .report import NUMERICAL, PROVED, Certificate
 
 __all__ = ["position_constraint", "velocity_constraint", "velocity_structural", "rattle_equations_symmetric",
-           "numerical_symmetry", "manifold_point", "symplectic_on_manifold", "constrained_certificates"]
+           "numerical_symmetry", "manifold_point", "symplectic_on_manifold", "constrained_certificates",
+           "constrained_items"]
 
 REF = f"{REF_NOTES}, section 1.3 (RATTLE)"
 
@@ -288,13 +289,20 @@ def symplectic_on_manifold(scheme, points: int = 2, seed: int = 11) -> Certifica
                                "tangent basis from the SVD null space of the constraint Jacobian"})
 
 
-def constrained_certificates(scheme) -> list[Certificate]:
-    out = [position_constraint(scheme)]
+def constrained_items(scheme) -> list[tuple[str, Certificate]]:
+    """:func:`constrained_certificates` with what each is about: ``"constraint:position"``,
+    ``"constraint:velocity"``, ``"symmetry"``, ``"symplectic"``."""
+    out = [("constraint:position", position_constraint(scheme))]
     if any(n.endswith("_v") for n in scheme.traits.preserved):
-        out.append(velocity_constraint(scheme))
+        out.append(("constraint:velocity", velocity_constraint(scheme)))
     if scheme.traits.symmetric:
-        out.append(rattle_equations_symmetric(scheme.system))
-        out.append(numerical_symmetry(scheme))
+        out.append(("symmetry", rattle_equations_symmetric(scheme.system)))
+        out.append(("symmetry", numerical_symmetry(scheme)))
     if scheme.traits.symplectic:
-        out.append(symplectic_on_manifold(scheme))
+        out.append(("symplectic", symplectic_on_manifold(scheme)))
     return out
+
+
+def constrained_certificates(scheme) -> list[Certificate]:
+    """Constraints, symmetry and symplecticity on T*Q (see :func:`constrained_items`)."""
+    return [cert for _, cert in constrained_items(scheme)]

@@ -21,7 +21,7 @@ from .helpers import helper_certificates
 from .structural import gonzalez_symmetry_structural, identity_structural
 
 __all__ = ["dg_identity", "dg_consistency", "dg_symmetry", "kappa_midpoint_gradient",
-           "kappa_form", "kappa_applies", "dg_certificates"]
+           "kappa_form", "kappa_applies", "dg_certificates", "dg_items"]
 
 
 def dg_identity(system, dg: sp.Matrix, label: str, ref: str = "", scheme=None) -> "Certificate":
@@ -116,14 +116,25 @@ def kappa_applies(scheme) -> bool:
     return len(forms) == 1
 
 
-def dg_certificates(scheme) -> list:
-    """Identity and consistency for a discrete-gradient scheme; κ for energy-momentum where it is
-    the notes' κ; one certificate per generated helper the discrete gradient evaluates."""
+def dg_items(scheme) -> list[tuple[str, "Certificate"]]:
+    """:func:`dg_certificates` with what each certificate is about.
+
+    ``"invariant:H"`` (the identity: the step keeps H), ``"consistency"``,
+    ``"kappa"`` and ``"helper"`` (the generated helpers evaluate the functions the
+    identity's proof uses).
+    """
     system, dg, label = scheme.system, scheme.discrete_gradient, scheme.method
     ref = f"{REF_NOTES}, Ex. 1.1.2" if scheme.method == "energy-momentum" else \
         "discrete gradients (claim 4; McLachlan-Quispel-Robidoux 1999)"
-    out = [dg_identity(system, dg, label, ref, scheme=scheme), dg_consistency(system, dg, label, ref)]
+    out = [("invariant:H", dg_identity(system, dg, label, ref, scheme=scheme)),
+           ("consistency", dg_consistency(system, dg, label, ref))]
     if scheme.method == "energy-momentum" and kappa_applies(scheme):
-        out.append(kappa_form(scheme))
-    out += helper_certificates(list(dg))
+        out.append(("kappa", kappa_form(scheme)))
+    out += [("helper", c) for c in helper_certificates(list(dg))]
     return out
+
+
+def dg_certificates(scheme) -> list:
+    """Identity and consistency for a discrete-gradient scheme; κ for energy-momentum where it is
+    the notes' κ; one certificate per generated helper the discrete gradient evaluates."""
+    return [cert for _, cert in dg_items(scheme)]

@@ -20,7 +20,7 @@ from .exact import Domain, certify, fmt_point, guarded
 from .report import Certificate
 
 __all__ = ["angular_momentum_generic", "angular_momentum_user", "invariant_preserved",
-           "invariant_certificates"]
+           "invariant_certificates", "invariant_items"]
 
 
 def angular_momentum_generic(dim: int) -> list[Certificate]:
@@ -146,11 +146,13 @@ def invariant_numerical(scheme, name: str, expr: sp.Expr, points: int = 3, seed:
                        "preserved invariants (scheme traits)", det)
 
 
-def invariant_certificates(scheme) -> list[Certificate]:
-    """One certificate per invariant in ``traits.preserved`` that has an exact route.
+def invariant_items(scheme) -> list[tuple[str, Certificate]]:
+    """``(f"invariant:{name}", certificate)`` per invariant in ``traits.preserved``.
 
     H for discrete-gradient schemes is covered by the discrete-gradient identity,
-    constraint monitors by :mod:`methodgen.verify.constrained`.
+    constraint monitors by :mod:`methodgen.verify.constrained`.  The property
+    names let a composition's derived claims find the base certificate of each
+    invariant (:mod:`methodgen.verify.compositions`).
     """
     out = []
     invs = {inv.name: inv.expr for inv in scheme.invariants}
@@ -162,5 +164,11 @@ def invariant_certificates(scheme) -> list[Certificate]:
         cert = invariant_preserved(scheme, name, invs[name])
         # A claimed invariant is never left unchecked: without an exact route it is
         # checked numerically (and refuted where it visibly fails).
-        out.append(cert if cert is not None else invariant_numerical(scheme, name, invs[name]))
+        out.append((f"invariant:{name}",
+                    cert if cert is not None else invariant_numerical(scheme, name, invs[name])))
     return out
+
+
+def invariant_certificates(scheme) -> list[Certificate]:
+    """One certificate per invariant in ``traits.preserved`` (see :func:`invariant_items`)."""
+    return [cert for _, cert in invariant_items(scheme)]
