@@ -695,7 +695,8 @@ def cmd_scenes(args) -> int:
     for name in scene_names():
         s = load_scene(name)
         rows.append({"name": s.name, "description": s.description, "methods": list(s.methods),
-                     "dim": s.system.dim, "constraints": len(s.system.constraints)})
+                     "dim": s.system.dim, "constraints": len(s.system.constraints),
+                     "order": s.order, "composition": s.composition})
     if args.json:
         print(json.dumps({"scenes": rows}))
     else:
