@@ -115,7 +115,7 @@ def generate(scheme, path=None, backend: str = "numpy") -> ModuleType:
 
 
 def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *, order: int = 2,
-          composition: str | None = None) -> ModuleType:
+          composition: str | None = None, **options) -> ModuleType:
     """Return the generated module for ``system`` and ``method``, generating it only if needed.
 
     A file in the per-user cache is imported only when it carries this user's
@@ -135,9 +135,11 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     order : {2, 4, 6, 8, 10}
     composition : str, optional
         For ``order > 2``: the composition family (see :func:`methodgen.discretize`).
+    **options
+        Method options (e.g. ``stages=3`` for ``"gauss"``), passed to :func:`methodgen.discretize`.
     """
     backend = resolve_backend(backend)
-    key = method_key(method, composition_for(order, composition))
+    key = method_key(method, composition_for(order, composition), scheme_options(method, options))
     sig = signature(system, key, backend)
     path = default_path(system, key, backend) if path is None else Path(path)
     check_cache_folder(path)  # a cache others can write to is refused before any derivation
@@ -145,6 +147,6 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     if status == "ok":
         return load_module(path)
     warn_regenerating(path, status)
-    scheme = discretize(system, method, order=order, composition=composition)
+    scheme = discretize(system, method, order=order, composition=composition, **options)
     write_module(path, emit_source(scheme, sig, backend=backend))
     return load_module(path)

@@ -11,17 +11,17 @@ from types import ModuleType
 
 from ..errors import InputError, MethodNotApplicable
 from ..problem import Hamiltonian
-from . import energy_momentum, kahan, midpoint, stormer_verlet, trapezoidal
+from . import energy_momentum, gauss, kahan, midpoint, stormer_verlet, trapezoidal
 from .base import Scheme, Traits, method_key
 from .discrete_gradients import AVF, Gonzalez, ItohAbe
 from .rattle import Rattle, Shake
 
 __all__ = ["METHODS", "SYMMETRIC_METHODS", "Scheme", "Traits", "discretize", "applicable_methods",
-           "method_names", "composition_for", "method_key"]
+           "method_names", "composition_for", "method_key", "scheme_options"]
 
 METHODS: dict[str, ModuleType] = {m.NAME: m for m in (
     midpoint, energy_momentum, trapezoidal, kahan, AVF, Gonzalez, ItohAbe, stormer_verlet,
-    Rattle, Shake)}
+    Rattle, Shake, gauss)}
 
 
 def method_names() -> list[str]:
@@ -94,6 +94,20 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
 #: Methods that are symmetric of order 2 on every system they apply to (Itoh–Abe is not).
 SYMMETRIC_METHODS = ("midpoint", "energy-momentum", "trapezoidal", "kahan", "avf", "gonzalez",
                      "stormer-verlet", "rattle", "shake")
+
+
+def scheme_options(method: str, options: dict) -> tuple:
+    """The options that select a scheme variant, in the order the key lists them: those
+    that differ from the method's defaults (``stages=3`` for gauss; ``stages=2`` is the
+    default and so the plain ``"gauss"``)."""
+    import inspect
+
+    mod = METHODS.get(method)
+    if mod is None or not options:
+        return ()
+    params = inspect.signature(mod.build).parameters
+    return tuple((k, v) for k, v in sorted(options.items())
+                 if not (k in params and params[k].default == v))
 
 
 def composition_for(order, family: str | None = None):

@@ -37,11 +37,16 @@ from ..problem import Hamiltonian
 STEP = sp.Symbol("_h", real=True)
 
 
-def method_key(method: str, composition=None) -> str:
-    """``method``, or ``method-order<K>-<family>`` for a composed method (file names, signatures)."""
+def method_key(method: str, composition=None, options=()) -> str:
+    """The name of a method variant in file names and signatures.
+
+    ``method``, then ``-<option><value>`` for each option that selects a different
+    scheme (``gauss-stages3``), then ``-order<K>-<family>`` for a composition.
+    """
+    key = method + "".join(f"-{k}{v}" for k, v in options)
     if composition is None or composition.order == 2:
-        return method
-    return f"{method}-order{composition.order}-{composition.family}"
+        return key
+    return f"{key}-order{composition.order}-{composition.family}"
 
 
 def increment_symbol(s: sp.Symbol) -> sp.Symbol:
@@ -172,7 +177,7 @@ class Scheme:
     def key(self) -> str:
         """The method's name in file names and signatures: ``method`` for the base
         method, ``method-order<K>-<family>`` for a composition."""
-        return method_key(self.method, self.composition)
+        return method_key(self.method, self.composition, self.options)
 
     @property
     def base_traits(self) -> Traits:
