@@ -23,13 +23,14 @@ from .problem import Hamiltonian
 from .schemes import Scheme, Traits, applicable_methods, discretize, method_names
 from .build import build, generate
 from .scene import Scene, load_scene, scene_names
+from .timetransform import time_transform
 from .verify import verify
 
 __all__ = [
     "__version__", "Hamiltonian", "discretize", "generate", "build", "Scheme", "Traits",
     "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods", "verify",
     "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
-    "GenerationError",
+    "GenerationError", "time_transform",
 ]
 
 

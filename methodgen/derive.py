@@ -21,7 +21,7 @@ from .problem import Hamiltonian
 
 __all__ = [
     "Invariant", "Separable", "gradient", "vector_field", "separable_split", "radial_profile",
-    "angular_momenta", "invariants", "poisson_bracket",
+    "angular_momenta", "invariants", "poisson_bracket", "PHYSICAL_ENERGY",
 ]
 
 
@@ -256,5 +256,16 @@ def constraint_monitors(system: Hamiltonian) -> tuple[Invariant, ...]:
 @_cache
 def invariants(system: Hamiltonian) -> tuple[Invariant, ...]:
     """All monitored quantities: H first, then exact first integrals, then constraints."""
-    return ((Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)
-            + constraint_monitors(system))
+    out = ((Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)
+           + constraint_monitors(system))
+    tt = system.time_transform
+    if tt is not None:
+        # The original energy: constant on the level set K = 0 only ({H, K} = (H + e){H, g}),
+        # so monitored, never claimed exact.
+        out += (Invariant(PHYSICAL_ENERGY, tt.original.H, False,
+                          "the original Hamiltonian H(q, p): constant (= −e) on the level set K = 0"),)
+    return out
+
+
+#: Name of the original Hamiltonian among the monitored quantities of a time-transformed system.
+PHYSICAL_ENERGY = "H_phys"

@@ -202,6 +202,10 @@ class ModuleIR:
     #: method), and its coefficients γ_i as float64 reprs (``stages`` of them).
     composition: dict | None = None
     gammas: tuple[str, ...] = ("1.0",)
+    #: For a Poincaré time-transformed system: ``g``, the names of the physical time
+    #: coordinate and its momentum, the original H (text) and the index of its monitor
+    #: among the invariants.  None otherwise.
+    time_transform: dict | None = None
 
     @property
     def stages(self) -> int:
@@ -540,7 +544,19 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         lerr_partner=plan.partner if plan else "",
         domain=tuple((kind, str(u)) for kind, u in conds),
         **_composition_fields(scheme),
+        time_transform=_time_transform_fields(system, invs),
     )
+
+
+def _time_transform_fields(system, invs) -> dict | None:
+    tt = system.time_transform
+    if tt is None:
+        return None
+    from .derive import PHYSICAL_ENERGY
+
+    return {"g": " ".join(tt.g_source.split()), "time": tt.time.name, "energy": tt.energy.name,
+            "hamiltonian": " ".join(tt.original.source.split()),
+            "h_index": [inv.name for inv in invs].index(PHYSICAL_ENERGY)}
 
 
 def _composition_fields(scheme) -> dict:

@@ -75,7 +75,7 @@ class Hamiltonian:
     """
 
     __slots__ = ("H", "q", "p", "params", "param_values", "constraints", "source",
-                 "constraint_sources", "name", "_symbols")
+                 "constraint_sources", "name", "_symbols", "time_transform")
 
     def __init__(self, H, q: Sequence, p: Sequence, params: Mapping[str, float] | None = None,
                  constraints: Sequence = (), name: str | None = None):
@@ -139,6 +139,9 @@ class Hamiltonian:
         if name is not None:
             check_name(name.replace("-", "_"), "system")
         object.__setattr__(self, "name", name)
+        #: :class:`methodgen.timetransform.TimeTransform` when this system is the Poincaré
+        #: time transformation of another (set by :func:`methodgen.time_transform`), else None.
+        object.__setattr__(self, "time_transform", None)
 
     def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
         if isinstance(value, str):
@@ -202,6 +205,8 @@ class Hamiltonian:
             "g=" + ";".join(sp.srepr(g) for g in self.constraints),
             f"name={self.name}",
         ]
+        if self.time_transform is not None:
+            parts.append("time_transform=" + self.time_transform.fingerprint())
         return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
     def __repr__(self) -> str:

@@ -7,6 +7,7 @@ None`` (None when the method applies, else the reason it does not) and
 
 from __future__ import annotations
 
+import dataclasses
 from types import ModuleType
 
 from ..errors import InputError, MethodNotApplicable
@@ -79,6 +80,12 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         if "unexpected keyword" in str(exc):
             raise InputError(f"method {method!r} does not take options {sorted(options)}") from None
         raise
+    if system.time_transform is not None and scheme.resolution is not None:
+        # The Jacobian's h·ω reading is a norm, not an eigenvalue: after a time transformation
+        # the variables are badly scaled near the encounter (Kepler, g = |q|: ∂q'/∂p ~ r,
+        # ∂p'/∂q ~ 1/r², eigenvalues ~ r^(-1/2)), so it would refuse resolved steps.  The
+        # local error estimate, which is relative to the step, guards every step instead.
+        scheme = dataclasses.replace(scheme, resolution=None)
     if comp is None:
         return scheme
     t = scheme.traits

@@ -15,7 +15,17 @@ claim                                  module
 7  quadratic H: symplectic, re-timing  :mod:`.maps`, :mod:`.quadratic`
 8  RATTLE on T*Q                       :mod:`.constrained`
 9  symmetry of symmetric methods       :mod:`.discrete_gradients`, :mod:`.maps`
+10 symmetric compositions: order of    :mod:`.compositions`
+   the coefficients, float64 ones,
+   symmetry, inherited properties
 =====================================  ===============================================
+
+A composed scheme (``discretize(..., order=K)``, ``scheme.composition`` set)
+keeps the base step's equations: claims 2–9 then concern the base step Φ_h
+(their certificates are prefixed "base step Φ_h: "), and the claim-10 groups,
+which run last, certify the composition ``Ψ_h = Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h}`` —
+deriving its symmetry, invariants, constraints and symplecticity from the base
+certificates only where their proofs hold for every real (also negative) step.
 
 Statuses: ``proved`` (exact reduction to 0, no floats), ``refuted`` (a
 counterexample point), ``numerical`` (sample points and tolerance; never a
@@ -30,7 +40,8 @@ claim applies (``radial_profile``, ``is_quadratic_field``, ...) — becomes one
 ``undecided`` certificate named after the group; no exception escapes
 :func:`verify` (``KeyboardInterrupt`` still does).  The budget is enforced
 with ``SIGALRM`` and so only in the main thread on POSIX; elsewhere the claims
-run without a limit.  The worst case is thus about ten budgets per scheme.
+run without a limit.  The worst case is thus about ten budgets per scheme (four more
+for a composition).
 
 The module object is callable, so ``methodgen.verify(scheme)`` works once
 ``methodgen.verify`` has been imported.
@@ -50,9 +61,13 @@ from ..schemes.base import is_linear_field, is_quadratic_field
 from .budget import BudgetExceeded, budget
 from .common import REF_KAHAN, REF_NOTES
 from .conjugacy import conjugacy_certificate
-from .constrained import constrained_certificates
-from .discrete_gradients import dg_certificates, dg_symmetry
-from .invariants import angular_momentum_generic, angular_momentum_user, invariant_certificates
+from .compositions import (BASE_PREFIX, REF_HLW, BaseResults, float_coefficients_certificate,
+                           inherited_certificates, order_certificate, symmetry_certificate)
+from .collocation import REF as COLLOCATION_REF, gauss_certificates
+from .timetransform import REF as TIME_TRANSFORM_REF, time_transform_certificates
+from .constrained import constrained_certificates, constrained_items
+from .discrete_gradients import dg_certificates, dg_items, dg_symmetry
+from .invariants import angular_momentum_generic, angular_momentum_user, invariant_certificates, invariant_items
 from .kahan import (forms_agree_generic, forms_agree_user, modified_energy, modified_energy_fast,
                     modified_energy_structural, modified_volume, modified_volume_structural)
 from .maps import explicit_symmetry, residual_symmetry, symplectic_certificate
@@ -69,6 +84,16 @@ DEFAULT_TIMEOUT = 60.0
 PROGRESS_AFTER = 2.0
 
 _REASON_CHARS = 300
+#: Compositions with at most this many stages list their coefficients in the report.
+_LIST_STAGES = 35
+
+
+def _gauss(stages: int) -> list[Certificate]:
+    from ..schemes.gauss import coefficients
+
+    co = coefficients(stages)
+    return gauss_certificates(stages, A=[[float(a) for a in row] for row in co["A"]],
+                              b=[float(v) for v in co["b"]])
 
 
 def _symmetry(scheme) -> list[Certificate]:
@@ -154,10 +179,47 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
     quadratic = _Lazy("the quadratic-field test (is_quadratic_field)", lambda: is_quadratic_field(system))
     linear = _Lazy("the linear-field test (is_linear_field)", lambda: is_linear_field(system))
     claims: list[_Claim] = []
+    comp = scheme.composition
+    # A composition's other claim groups are about its base step Φ_h: say so, and keep their
+    # certificates for the composition's derived claims (claim 10, appended last).
+    base = BaseResults() if comp is not None else None
+    step = m if comp is None else f"{m}, base step Φ_h of {scheme.key}"
 
     def add(label, ref, run):
         claims.append(_Claim(label, ref, run))
 
+    def add_step(label, ref, items, certificates=None):
+        """A claim group about the step map.
+
+        ``items() -> [(property, certificate)]`` or None; ``certificates()``, when given, is
+        what a base method runs instead (the plain certificate functions, looked up at call
+        time so tests can replace them).
+        """
+        if base is None:
+            add(label, ref, certificates or (lambda: [c for _, c in (items() or []) if c is not None]))
+        else:
+            add(label, ref, base.recorder(label, items, BASE_PREFIX))
+
+    def tagged(tag, run):
+        """``run() -> Certificate | list | None`` as items tagged ``tag``."""
+        return lambda: [(tag, c) for c in _as_certificates(run())]
+
+    # Claim 10 (first the coefficients: they do not depend on the base step).
+    if comp is not None:
+        add(f"composition coefficients: order {comp.order} ({comp.family}, {scheme.key})", REF_HLW,
+            lambda: order_certificate(comp))
+        add(f"float64 coefficients of the generated module ({scheme.key})", REF_HLW,
+            lambda: float_coefficients_certificate(comp, key=scheme.key))
+
+    # Gauss collocation: the coefficients' order conditions and symplecticity, exactly.
+    if (scheme.structure or {}).get("kind") == "collocation":
+        stages = scheme.structure["stages"]
+        add(f"Gauss–Legendre coefficients, s = {stages}: B({2 * stages}), D({stages}), order "
+            f"{2 * stages}, symplectic, symmetric", COLLOCATION_REF, lambda: _gauss(stages))
+    # The Poincaré time transformation K = g(q)(H + e), when the system is one.
+    if system.time_transform is not None:
+        add(f"time transformation K = g(q)(H + e), g = {system.time_transform.g_source}", TIME_TRANSFORM_REF,
+            lambda: time_transform_certificates(system))
     # Claim 1: first integrals of the flow (system-level).
     if d >= 2 and not system.constraints:
         add(f"q × p first integrals for every radial potential V ({d}D)", f"{REF_NOTES}, Ex. 1.1.1",
@@ -167,17 +229,17 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
     # Claims 2, 4: discrete gradients.
     if traits.discrete_gradient and scheme.discrete_gradient is not None:
         what = "identity, consistency and κ" if m == "energy-momentum" else "identity and consistency"
-        add(f"discrete-gradient {what} ({m})", f"{REF_NOTES}, Ex. 1.1.2",
-            lambda: dg_certificates(scheme))
+        add_step(f"discrete-gradient {what} ({step})", f"{REF_NOTES}, Ex. 1.1.2",
+                 lambda: dg_items(scheme), lambda: dg_certificates(scheme))
     # Claim 3 and every other invariant the traits promise.
     if not system.constraints:
-        add(f"invariants kept by the step ({m})", f"{REF_NOTES}, Ex. 1.1.3",
-            lambda: invariant_certificates(scheme))
-    # Claim 5: Exercise 2.1.
+        add_step(f"invariants kept by the step ({step})", f"{REF_NOTES}, Ex. 1.1.3",
+                 lambda: invariant_items(scheme), lambda: invariant_certificates(scheme))
+    # Claim 5: Exercise 2.1 (the conjugating map depends on h: a base-step statement only).
     if m == "trapezoidal":
         n = conjugacy_dim or 2 * d
-        add(f"trapezoidal rule conjugate to the midpoint rule (n = {n})", f"{REF_NOTES}, Ex. 2.1",
-            lambda: conjugacy_certificate(n))
+        add_step(f"trapezoidal rule conjugate to the midpoint rule (n = {n})", f"{REF_NOTES}, Ex. 2.1",
+                 tagged("conjugacy", lambda: conjugacy_certificate(n)))
     # Claim 6: Kahan on quadratic vector fields.
     if m == "kahan":
         def _energy():
@@ -190,29 +252,44 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
             cert = modified_volume_structural(system)
             return cert if cert is not None else modified_volume(system)
 
+        # The modified energy and volume form depend on h: the stages of a composition use
+        # different steps, so these are claims about the base step only (none is inherited).
+        where = "" if comp is None else f" ({step})"
         for label, run in ((f"Kahan's two forms agree (generic quadratic field, n = {2 * d})",
                             lambda: forms_agree_generic(2 * d)),
                            ("Kahan's two forms agree on this field", lambda: forms_agree_user(system)),
                            ("Kahan preserves a modified energy", _energy),
                            ("Kahan preserves a modified volume form", _volume)):
-            add(label, REF_KAHAN, (lambda run=run: run() if quadratic() else []))
+            add_step(label + where, REF_KAHAN,
+                     tagged("kahan", lambda run=run: run() if quadratic() else []))
     # Claims 7, 8: symplecticity.
     if system.constraints:
-        add(f"constraints, symmetry and symplecticity on T*Q ({m})",
-            f"{REF_NOTES}, section 1.3 (RATTLE)", lambda: constrained_certificates(scheme))
+        add_step(f"constraints, symmetry and symplecticity on T*Q ({step})",
+                 f"{REF_NOTES}, section 1.3 (RATTLE)", lambda: constrained_items(scheme),
+                 lambda: constrained_certificates(scheme))
     elif traits.symplectic:
-        add(f"the step map is symplectic ({m})", "symplecticity (section 1.2)",
-            lambda: symplectic_certificate(scheme))
+        add_step(f"the step map is symplectic ({step})", "symplecticity (section 1.2)",
+                 tagged("symplectic", lambda: symplectic_certificate(scheme)))
         # Theorem 1.1 is about the Cayley transform (midpoint rule), which these methods
         # reduce to on a linear field; Störmer–Verlet does not (it is the exact flow of a
         # *modified* quadratic H, not of H at another time), so it makes no such claim.
+        # For a composition this is the base step's re-timing; the composed step's own
+        # (τ_Ψ = Σ τ(γ_i h)) is derived in claim 10.
         if m in CAYLEY_ON_LINEAR:
-            add(f"quadratic H: the step is the exact flow at a re-timed step ({m})",
-                f"{REF_NOTES}, section 1.2 (Theorem 1.1)",
-                lambda: retiming_certificate(scheme) if linear() else None)
+            add_step(f"quadratic H: the step is the exact flow at a re-timed step ({step})",
+                     f"{REF_NOTES}, section 1.2 (Theorem 1.1)",
+                     tagged("retiming", lambda: retiming_certificate(scheme) if linear() else None))
     # Claim 9: symmetry.
     if traits.symmetric and not system.constraints:
-        add(f"the step is symmetric ({m})", "symmetry (claim 9)", lambda: _symmetry(scheme))
+        add_step(f"the step is symmetric ({step})", "symmetry (claim 9)",
+                 tagged("symmetry", lambda: _symmetry(scheme)))
+    # Claim 10, derived from the base step's certificates above (so it runs after them).
+    if comp is not None:
+        if traits.symmetric:
+            add(f"the composition is symmetric ({scheme.key})", REF_HLW,
+                lambda: symmetry_certificate(scheme, base))
+        add(f"invariants, constraints and symplecticity kept by the composition ({scheme.key})", REF_HLW,
+            lambda: inherited_certificates(scheme, base))
     return claims
 
 
@@ -360,12 +437,35 @@ class _Progress:
 
 # --- verify -----------------------------------------------------------------------------
 
+def _key(scheme) -> str:
+    """The composed method's name (``method-order<K>-<family>``), or the method's."""
+    try:
+        return str(scheme.key)
+    except Exception:
+        return str(getattr(scheme, "method", "?"))
+
+
 def _title(scheme) -> str:
     try:
         system = scheme.system
-        return f"{scheme.method} on {system.name or 'H = ' + str(system.H)}"
+        return f"{_key(scheme)} on {system.name or 'H = ' + str(system.H)}"
     except Exception:
-        return f"{getattr(scheme, 'method', '?')} on an unprintable system"
+        return f"{_key(scheme)} on an unprintable system"
+
+
+def _composition_summary(scheme) -> dict | None:
+    """What was composed, for the report (None for a base method)."""
+    comp = getattr(scheme, "composition", None)
+    if comp is None:
+        return None
+    try:
+        out = {"family": comp.family, "order": comp.order, "stages": comp.stages, "exact": comp.exact,
+               "source": comp.source, "base_method": scheme.method}
+        if comp.stages <= _LIST_STAGES:   # Suzuki's 625 nested radicals would swamp the report
+            out.update(gammas=[str(g) for g in comp.gammas], floats=[repr(x) for x in comp.floats()])
+        return out
+    except Exception as exc:          # the report must never fail on its header
+        return {"error": _one_line(exc)}
 
 
 def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = None,
@@ -420,7 +520,7 @@ def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = 
             certs += _run_claim(claim, seconds)
     finally:
         bar.close()
-    return Report(title, certs)
+    return Report(title, certs, method=_key(scheme), composition=_composition_summary(scheme))
 
 
 class _CallableModule(types.ModuleType):

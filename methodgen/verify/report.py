@@ -105,10 +105,18 @@ class Report:
     ----------
     title : str
     certificates : list of Certificate
+    method : str
+        The verified method's name: ``scheme.key``, i.e. ``method-order<K>-<family>`` for a
+        symmetric composition (empty for reports not about one scheme).
+    composition : dict or None
+        For a composed method: family, order, stages, exact, source, base method,
+        coefficients (exact / decimal text) and the float64 values the module uses.
     """
 
     title: str
     certificates: list[Certificate] = field(default_factory=list)
+    method: str = ""
+    composition: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -149,8 +157,22 @@ class Report:
         return [c for c in self.certificates if text.lower() in c.claim.lower()]
 
     def to_dict(self) -> dict:
-        return {"ok": self.ok, "title": self.title, "seconds": round(self.seconds, 3),
-                "certificates": [c.to_dict() for c in self.certificates]}
+        out = {"ok": self.ok, "title": self.title, "seconds": round(self.seconds, 3)}
+        if self.method:
+            out["method"] = self.method
+        if self.composition is not None:
+            out["composition"] = self.composition
+        out["certificates"] = [c.to_dict() for c in self.certificates]
+        return out
+
+    def _composed_line(self) -> str:
+        """One line naming the composition (empty for a base method)."""
+        c = self.composition
+        if not c or "family" not in c:
+            return ""
+        return (f"{self.method}: {c['base_method']} composed symmetrically to order {c['order']} "
+                f"({c['family']}, {c['stages']} stages); certificates prefixed 'base step Φ_h' concern "
+                "the base step")
 
     def to_json(self, **kwargs) -> str:
         return json.dumps(self.to_dict(), **kwargs)
@@ -159,8 +181,10 @@ class Report:
         """A Markdown section: a summary table, then one paragraph per certificate."""
         lines = [f"### Verification: {_md_escape(self.title)}", "",
                  f"Overall: **{'ok' if self.ok else 'REFUTED CLAIMS'}** "
-                 f"({len(self.certificates)} claims{self._summary()}, {self.seconds:.2f} s)", "",
-                 "| # | claim | status | method | s |", "|---|---|---|---|---|"]
+                 f"({len(self.certificates)} claims{self._summary()}, {self.seconds:.2f} s)", ""]
+        if self._composed_line():
+            lines += [_md_escape(self._composed_line()), ""]
+        lines += ["| # | claim | status | method | s |", "|---|---|---|---|---|"]
         for i, c in enumerate(self.certificates, 1):
             how = _reason(c) if c.status == UNDECIDED else c.method
             lines.append(f"| {i} | {_md_escape(c.claim)} | **{c.status}** | {_md_escape(how)} "
@@ -180,7 +204,10 @@ class Report:
 
     def latex(self) -> str:
         """A LaTeX fragment (``description`` list) for a course handout."""
-        out = [rf"\subsection*{{Verification: {_tex_escape(self.title)}}}", r"\begin{description}"]
+        out = [rf"\subsection*{{Verification: {_tex_escape(self.title)}}}"]
+        if self._composed_line():
+            out.append(_tex_escape(self._composed_line()))
+        out.append(r"\begin{description}")
         for c in self.certificates:
             if c.status == UNDECIDED:
                 out.append(rf"\item[{_tex_escape(c.status)}] {_tex_escape(c.claim)} "
@@ -198,6 +225,8 @@ class Report:
     def __str__(self) -> str:
         rows = [f"{self.title}: {'ok' if self.ok else 'REFUTED'}"
                 + (f" ({len(self.undecided)} undecided)" if self.undecided else "")]
+        if self._composed_line():
+            rows.append(f"  {self._composed_line()}")
         for c in self.certificates:
             if c.status == UNDECIDED:
                 rows.append(f"  [{c.status:>9}] {c.claim}  ({_reason(c)})")
