@@ -12,7 +12,7 @@ from types import ModuleType
 
 from ..errors import InputError, MethodNotApplicable
 from ..problem import Hamiltonian
-from . import energy_momentum, gauss, kahan, midpoint, stormer_verlet, trapezoidal
+from . import energy_collocation, energy_momentum, gauss, kahan, midpoint, stormer_verlet, trapezoidal
 from .base import Scheme, Traits, method_key
 from .discrete_gradients import AVF, Gonzalez, ItohAbe
 from .rattle import Rattle, Shake
@@ -22,7 +22,7 @@ __all__ = ["METHODS", "SYMMETRIC_METHODS", "Scheme", "Traits", "discretize", "ap
 
 METHODS: dict[str, ModuleType] = {m.NAME: m for m in (
     midpoint, energy_momentum, trapezoidal, kahan, AVF, Gonzalez, ItohAbe, stormer_verlet,
-    Rattle, Shake, gauss)}
+    Rattle, Shake, gauss, energy_collocation)}
 
 
 def method_names() -> list[str]:

@@ -63,7 +63,8 @@ from .common import REF_KAHAN, REF_NOTES
 from .conjugacy import conjugacy_certificate
 from .compositions import (BASE_PREFIX, REF_HLW, BaseResults, float_coefficients_certificate,
                            inherited_certificates, order_certificate, symmetry_certificate)
-from .collocation import REF as COLLOCATION_REF, gauss_certificates
+from .collocation import REF as COLLOCATION_REF, REF_ENERGY as ENERGY_COLLOCATION_REF
+from .collocation import energy_collocation_certificates, gauss_certificates
 from .timetransform import REF as TIME_TRANSFORM_REF, time_transform_certificates
 from .constrained import constrained_certificates, constrained_items
 from .discrete_gradients import dg_certificates, dg_items, dg_symmetry
@@ -216,6 +217,9 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         stages = scheme.structure["stages"]
         add(f"Gauss–Legendre coefficients, s = {stages}: B({2 * stages}), D({stages}), order "
             f"{2 * stages}, symplectic, symmetric", COLLOCATION_REF, lambda: _gauss(stages))
+    if (scheme.structure or {}).get("kind") == "energy-collocation" and scheme.structure.get("exact"):
+        add(f"energy-preserving collocation keeps H exactly ({step})", ENERGY_COLLOCATION_REF,
+            lambda: energy_collocation_certificates(scheme))
     # The Poincaré time transformation K = g(q)(H + e), when the system is one.
     if system.time_transform is not None:
         add(f"time transformation K = g(q)(H + e), g = {system.time_transform.g_source}", TIME_TRANSFORM_REF,
