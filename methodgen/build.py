@@ -16,7 +16,7 @@ from types import ModuleType
 from .emit import (cache_dir, check_cache_folder, emit_source, file_status, load_module, module_filename,
                    resolve_backend, signature, warn_regenerating, write_module)
 from .problem import Hamiltonian
-from .schemes import METHODS, composition_for, discretize, method_key
+from .schemes import METHODS, composition_for, discretize, method_key, scheme_options
 
 __all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path", "scene_targets"]
 
