@@ -224,7 +224,7 @@ def test_methods_lists_what_composes(capsys):
     assert comp["orders"] == [2, 4, 6, 8, 10] and comp["families"]["kahan-li"] == [6, 8]
     assert comp["default_family"] == {"4": "suzuki", "6": "kahan-li", "8": "kahan-li", "10": "sofroniou-spaletta"}
     code, out, _ = _main(capsys, "methods")
-    assert code == 0 and "--order 4/6/8/10" in out and "itoh-abe only where symmetric of order 2" in out
+    assert code == 0 and "--order 4/6/8/10" in out and "itoh-abe, gauss, energy-collocation only where symmetric of order 2" in out
     assert "default: order 4 suzuki, order 6 kahan-li, order 8 kahan-li, order 10 sofroniou-spaletta" in out
 
 

@@ -19,7 +19,7 @@ from scipy.integrate import solve_ivp
 import methodgen as mg
 from methodgen.derive import separable_split, vector_field
 
-from conftest import SCENE_METHODS, marked
+from conftest import SCENE_METHODS, marked, scene_y0
 
 #: (eccentricity, step size) of the issue: one period from apocentre is round(2π/h) steps.
 KEPLER_CASES = [(0.9, 0.05), (0.97, 0.01), (0.99, 0.001), (0.999, 0.1)]
@@ -76,10 +76,12 @@ def test_kepler_close_encounters_are_refused_or_right(method, modules, kepler, k
         if exc.check == "local_error":
             assert exc.resolution > mod.MAX_LOCAL_ERROR
             assert "time transformation" in str(exc) and "close encounters" in str(exc)
-        # Negative control: with the guards off the same run is wrong (or Newton fails).
+        # Negative control: with the guards off the same run is wrong by the criterion an
+        # accepted run must meet (or Newton fails) -- the refusal was not a false alarm.
+        # (Second-order methods are off by > 0.3 here; the order-4 energy-collocation by 2-22%.)
         off, traj = _run(mod, _apocentre(e), h, steps, check_resolution=False)
         assert not isinstance(off, mod.ResolutionError)
-        assert isinstance(off, mod.ConvergenceError) or _rel_error(traj, ref) > 0.3, (method, e, h)
+        assert isinstance(off, mod.ConvergenceError) or _rel_error(traj, ref) > 1e-2, (method, e, h)
 
 
 @pytest.mark.parametrize("method", ["energy-momentum", "stormer-verlet"])
@@ -156,10 +158,11 @@ def test_linear_vector_fields_are_exempt(modules):
 @pytest.mark.parametrize("scene_name,method", marked(SCENE_METHODS))
 def test_no_false_alarm_on_the_built_in_scenes(scene_name, method, modules):
     """Every built-in scene with every method it lists, at its documented h (the first
-    3000 steps; the whole runs are in the slow sweep below)."""
+    3000 steps; the whole runs are in the slow sweep below).  A scene with a time
+    transformation runs its transformed system from its y0 on K = 0, in fictive time."""
     scene = mg.load_scene(scene_name)
-    _, mod = modules(scene.system, method)
-    mod.integrate(np.array(scene.y0), scene.h, min(scene.steps, 3000))
+    _, mod = modules(scene.run_system, method)
+    mod.integrate(scene_y0(scene, mod), scene.h, min(scene.steps, 3000))
 
 
 @pytest.mark.slow
@@ -172,11 +175,11 @@ def test_no_false_alarm_sweep(modules):
     root = Path(__file__).resolve().parents[2] / "shared" / "user-problems"
     for f in sorted(glob.glob(str(root / "*.toml"))):
         sc = mg.load_scene(f)
-        targets.append((sc, mg.applicable_methods(sc.system)))
+        targets.append((sc, mg.applicable_methods(sc.run_system)))
     for scene, methods in targets:
         for method in methods:
-            _, mod = modules(scene.system, method)
-            y0 = np.array(scene.y0)
+            _, mod = modules(scene.run_system, method)
+            y0 = scene_y0(scene, mod)
             mod.integrate(y0, scene.h, scene.steps)
             mod.integrate(np.stack([y0, y0]), scene.h, min(scene.steps, 500))
 
