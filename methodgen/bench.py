@@ -22,7 +22,12 @@ report come from one run on one machine.
   step-size ladder scaled from the scene's h, next to heyoka and REBOUND
   (:mod:`methodgen.peers`) on the same problem, all against one reference: CPU
   time of the integration call (min of 3 runs), final error, max relative energy
-  error, max invariant errors.
+  error, max invariant errors.  Every method runs at every order of ``orders``
+  (default :data:`PEER_ORDERS` = 2, 4, 6, 8, 10; above 2 the symmetric composition
+  of the order's default family, rows labelled ``method o8 (kahan-li)``), each order
+  over its own step-size ladder (:func:`composed_steps`: from the step of equal cost
+  to order 2 at 4h down until the final error is below 1e-12); ``targets`` names the
+  cheapest run of each method at final error ≤ 1e-10 and relative energy error ≤ 1e-14.
 
 References: the reference solution is exact where known (linear vector
 fields: ``expm``; circular Kepler orbits: a rotation), otherwise DOP853 at
@@ -50,12 +55,13 @@ import sympy as sp
 
 from .build import build, scene_module_path
 from .derive import constraint_jacobian, gradient, separable_split, vector_field
+from .errors import InputError, MethodgenError
 from .scene import Scene
-from .schemes import discretize
+from .schemes import SYMMETRIC_METHODS, composition_for, discretize, method_key
 from .schemes.base import is_linear_field
 
 __all__ = ["Reference", "reference", "work_precision", "long_run", "brouwer", "solver_variants",
-           "ode_rhs", "PEER_FACTORS"]
+           "ode_rhs", "PEER_FACTORS", "PEER_ORDERS", "composed_steps", "row_label", "targets"]
 
 TOLERANCES = [10.0 ** -k for k in range(3, 14)]
 QUICK_TOLERANCES = [1e-3, 1e-6, 1e-9]
@@ -64,6 +70,16 @@ PEER_FACTORS = (4.0, 2.0, 1.0, 0.5, 0.25, 0.125, 0.0625)
 QUICK_PEER_FACTORS = (2.0, 1.0)
 #: ``--peers``: finer step sizes of a method are skipped after a run longer than this (CPU s).
 PEER_RUN_BUDGET = 30.0
+#: ``--peers``: the orders of methodgen's rows (above 2: symmetric compositions of the base
+#: method, :data:`methodgen.compositions.DEFAULT_FAMILY`); ``work_precision(orders=...)``.
+PEER_ORDERS = (2, 4, 6, 8, 10)
+#: ``--peers``: a composed method's step-size ladder stops once the final error is below this.
+PEER_ERROR_FLOOR = 1e-12
+#: ``--peers``: at most this many step sizes per composed method and order.
+PEER_MAX_POINTS = 40
+#: The targets of issue 14 (``wp["targets"]``): final error and max relative energy error.
+TARGET_ERROR = 1e-10
+TARGET_ENERGY = 1e-14
 
 
 def _cpu() -> float:
@@ -265,7 +281,8 @@ def _ivp_row(system, module, solver, tol, y0, T, ref, rhs, jac):
 
 
 def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float | None = None,
-                   progress: bool = False, peers: bool = False, backend: str = "numpy") -> dict:
+                   progress: bool = False, peers: bool = False, backend: str = "numpy",
+                   orders=None, solver: str | None = None) -> dict:
     """Work-precision data for ``scene``: methodgen methods, fsolve and solve_ivp peers.
 
     Returns a dict with ``scene``, ``T``, ``reference`` and ``rows`` (one dict
@@ -273,16 +290,30 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     energy_rel_error, invariant_errors, …).
 
     ``backend``: of methodgen's rows (``"numba"``: the compiled loop, compiled before
-    the timed call).  ``peers=True``: methodgen's methods at ``scene.h`` ×
-    :data:`PEER_FACTORS` over ``T`` (default: the scene's own run, ``h·steps``),
-    next to heyoka and REBOUND where installed and applicable (:mod:`methodgen.peers`;
-    otherwise a line in ``notes``).  The fsolve and solve_ivp rows are left out there
-    (pure-Python right-hand sides over long runs); every row's CPU time is the
-    minimum of three runs.
+    the timed call).  ``peers=True``: methodgen's methods over ``T`` (default: the
+    scene's own run, ``h·steps``) at every order of ``orders`` (default
+    :data:`PEER_ORDERS` = 2, 4, 6, 8, 10; above 2 the symmetric composition of the
+    default family, :func:`methodgen.compositions.composition`), over the step sizes of
+    :func:`composed_steps`, next to heyoka and REBOUND where installed and applicable
+    (:mod:`methodgen.peers`; otherwise a line in ``notes``).  A run that raises
+    (no convergence, non-finite state at too large h) is a line in ``notes``, not a
+    row.  ``solver``: the nonlinear solver of methodgen's rows (default: the module's).
+    The fsolve and solve_ivp rows are left out there (pure-Python right-hand sides over
+    long runs); every row's CPU time is the minimum of three runs (one when a run takes
+    over 5 s: :func:`methodgen.peers.min_cpu`).  ``targets`` summarises the cheapest row
+    of each method at the issue-14 targets (:func:`targets`).
+
+    Without ``peers``, ``orders`` must be None or ``(2,)`` (the scipy comparison is of
+    the base methods).
     """
     methods = list(methods or scene.methods)
     if peers:
-        return _work_precision_peers(scene, methods, quick=quick, T=T, progress=progress, backend=backend)
+        return _work_precision_peers(scene, methods, quick=quick, T=T, progress=progress, backend=backend,
+                                     orders=orders, solver=solver)
+    if orders is not None and tuple(orders) != (2,):
+        raise InputError("orders above 2 (compositions) are benchmarked with peers=True (--peers) only")
+    if solver is not None:
+        raise InputError("solver= is for peers=True (--peers); the solver table compares them without it")
     from .emit import resolve_backend
     backend = resolve_backend(backend)
     T = T if T is not None else (2.0 if quick else 20.0)
@@ -318,12 +349,72 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     return {"scene": scene.name, "T": T, "reference": ref.kind, "rows": rows}
 
 
+def row_label(method: str, order: int = 2, family: str | None = None) -> str:
+    """A methodgen row's label: ``method`` at order 2, ``method o<K> (<family>)`` above."""
+    return method if order == 2 else f"{method} o{order} ({family})"
+
+
+def composed_steps(h: float, order: int, stages: int = 1, *, quick: bool = False) -> list[float]:
+    """Candidate step sizes (coarse to fine) of an order-``order`` row of ``--peers``.
+
+    Order 2: ``h`` × :data:`PEER_FACTORS` (``QUICK_PEER_FACTORS`` with ``quick``).
+    Above: a composition of ``stages`` substeps costs ``stages`` base steps, so the
+    ladder starts at the step of equal cost per unit time to order 2 at ``4h``
+    (``4·stages·h``) and shrinks by ``10^(1/order)`` per point — one decade of error
+    per point where the error is ``C·h^order`` — down to ``h/16`` (at most
+    :data:`PEER_MAX_POINTS`).  The bench stops a ladder early once the final error is
+    below :data:`PEER_ERROR_FLOOR`, on a round-off plateau, or after a run longer than
+    :data:`PEER_RUN_BUDGET`.  ``quick``: the two equal-cost steps ``stages·h·(1, ½)``.
+    """
+    h = abs(float(h))
+    if order == 2:
+        return [h * f for f in (QUICK_PEER_FACTORS if quick else PEER_FACTORS)]
+    if quick:
+        return [h * stages, h * stages / 2]
+    ratio = 10.0 ** (1.0 / order)
+    top, bottom = 4.0 * stages * h, h * PEER_FACTORS[-1]
+    n = min(PEER_MAX_POINTS, int(math.floor(math.log(top / bottom) / math.log(ratio))) + 1)
+    return [top / ratio ** j for j in range(n)]
+
+
+def targets(rows, error: float = TARGET_ERROR, energy: float = TARGET_ENERGY) -> dict:
+    """The cheapest row of each method with final error ≤ ``error`` and max relative energy
+    error ≤ ``energy`` (issue 14's targets), and the peers' reference rows.
+
+    Returns ``{"error", "energy_rel_error", "best": [...], "heyoka": row or None,
+    "ias15": row or None}``: ``best`` one entry per method label (methodgen rows; heyoka
+    and REBOUND rows too), cheapest first; ``heyoka`` is heyoka's row at tol 1e-15,
+    ``ias15`` IAS15's at ε = 1e-9 (REBOUND's default), whether or not they meet the targets.
+    """
+    def brief(r):
+        keep = ("method", "kind", "order", "h", "tol", "steps", "seconds", "error", "energy_rel_error",
+                "newton_mean")
+        return {k: r[k] for k in keep if k in r}
+
+    best: dict[str, dict] = {}
+    for r in rows:
+        if "seconds" not in r or "error" not in r:
+            continue
+        de = r.get("energy_rel_error")
+        if not (r["error"] <= error and de is not None and de <= energy):
+            continue
+        if r["method"] not in best or r["seconds"] < best[r["method"]]["seconds"]:
+            best[r["method"]] = r
+    heyoka = next((r for r in rows if r.get("kind") == "heyoka" and r.get("tol") == 1e-15 and "seconds" in r), None)
+    ias15 = next((r for r in rows if r.get("method") == "REBOUND IAS15" and r.get("tol") == 1e-9
+                  and "seconds" in r), None)
+    return {"error": error, "energy_rel_error": energy,
+            "best": [brief(r) for r in sorted(best.values(), key=lambda r: r["seconds"])],
+            "heyoka": brief(heyoka) if heyoka else None, "ias15": brief(ias15) if ias15 else None}
+
+
 def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None, progress: bool,
-                          backend: str) -> dict:
+                          backend: str, orders=None, solver: str | None = None) -> dict:
     """``work_precision(..., peers=True)``: see there and :mod:`methodgen.peers`."""
     from . import peers as pe
     from .emit import resolve_backend
 
+    orders = _check_orders(PEER_ORDERS if orders is None else orders)
     T = float(T if T is not None else scene.h * scene.steps)
     if not T > 0:
         raise ValueError(f"the bench needs a positive final time, got T = {T}")
@@ -341,32 +432,73 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     used = resolve_backend(backend)
     if used != backend:
         notes.append(f"backend {backend} is not available: methodgen rows use {used}")
-    hs = [abs(scene.h) * f for f in (QUICK_PEER_FACTORS if quick else PEER_FACTORS)]
     rows = []
-    for method in _progress(methods, progress, "methodgen"):
-        module = build(scene.system, method, path=scene_module_path(scene, method, used), backend=used)
-        module.integrate(y0, hs[0], 2, check_resolution=False)  # numba: compile outside the timed region
-        for h in hs:
+    jobs = []
+    for method in methods:
+        for order in orders:
+            if order > 2 and method not in SYMMETRIC_METHODS:
+                notes.append(f"{method}: not symmetric, so no composed rows (orders above 2 compose a "
+                             f"symmetric method: {', '.join(SYMMETRIC_METHODS)})")
+                break
+            jobs.append((method, order))
+    for method, order in _progress(jobs, progress, "methodgen"):
+        comp = composition_for(order)
+        family = comp.family if comp is not None else None
+        stages = comp.stages if comp is not None else 1
+        label = row_label(method, order, family)
+        key = method_key(method, comp)
+        try:
+            module = build(scene.system, method, path=scene_module_path(scene, key, used), backend=used,
+                           order=order, composition=family)
+        except MethodgenError as exc:
+            notes.append(f"{label}: not built ({' '.join(str(exc).split())})")
+            continue
+        use = solver if solver in getattr(module, "SOLVERS", ()) else None
+        if solver is not None and use is None:
+            notes.append(f"{label}: solver {solver!r} is not one of this module's "
+                         f"({', '.join(getattr(module, 'SOLVERS', ()))}): its default is used")
+        try:  # numba: compile outside the timed region (a failure at the scene's h is not the point)
+            module.integrate(y0, abs(scene.h), 1, check_resolution=False, **_solver_kw(use))
+        except (RuntimeError, FloatingPointError):
+            pass
+        best_error = math.inf
+        ladder = composed_steps(scene.h, order, stages, quick=quick)
+        for h in ladder:
             steps = max(1, int(round(T / h)))
             info = {}
 
             def run():
-                return module.integrate(y0, T / steps, steps, info=info, check_resolution=False)
+                return module.integrate(y0, T / steps, steps, info=info, check_resolution=False,
+                                        **_solver_kw(use))
 
             try:
                 sec, traj = pe.min_cpu(run)
             except (RuntimeError, FloatingPointError) as exc:
-                rows.append({"method": method, "kind": "methodgen", "h": T / steps, "backend": used,
-                             "failed": " ".join(str(exc).split())})
+                notes.append(f"{label}, h = {T / steps:.4g}: {type(exc).__name__}: "
+                             f"{' '.join(str(exc).split())[:160]}")
                 continue
             its = info["newton_iterations"]
-            rows.append({"method": method, "kind": "methodgen", "backend": used, "h": T / steps, "steps": steps,
-                         "seconds": sec, "us_per_step": sec / steps * 1e6,
-                         "newton_mean": float(its.mean()) if its.size else 0.0,
-                         **_errors(module, traj, ref.y, monitors)})
+            row = {"method": label, "kind": "methodgen", "base_method": method, "order": order,
+                   "composition": family, "stages": stages, "backend": used, "h": T / steps, "steps": steps,
+                   "seconds": sec, "us_per_step": sec / steps * 1e6,
+                   "newton_mean": float(its.mean()) if its.size else 0.0,
+                   **_errors(module, traj, ref.y, monitors)}
+            if use is not None:
+                row["solver"] = use
+            rows.append(row)
             del traj
-            if sec > PEER_RUN_BUDGET and h != hs[-1]:
-                notes.append(f"{method}: step sizes below h = {T / steps:.4g} skipped "
+            err = row["error"]
+            if not math.isfinite(err):
+                continue
+            if err <= PEER_ERROR_FLOOR:
+                break
+            if order > 2 and best_error < 1e-8 and err > 0.5 * best_error:
+                notes.append(f"{label}: stopped at h = {T / steps:.4g}, the error no longer decreases "
+                             f"({err:.1e}; round-off)")
+                break
+            best_error = min(best_error, err)
+            if sec > PEER_RUN_BUDGET and h != ladder[-1]:
+                notes.append(f"{label}: step sizes below h = {T / steps:.4g} skipped "
                              f"(that run took {sec:.0f} s CPU)")
                 break
     for name, fn in (("heyoka", pe.heyoka_rows), ("rebound", pe.rebound_rows)):
@@ -379,7 +511,25 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             notes.append(str(exc))
     notes.append("scipy solve_ivp and fsolve rows are left out with --peers (run without --peers for them)")
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
-            "rows": rows, "notes": notes}
+            "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "targets": targets(rows)}
+
+
+def _solver_kw(solver):
+    return {} if solver is None else {"solver": solver}
+
+
+def _check_orders(orders) -> tuple[int, ...]:
+    """``orders`` as a sorted tuple of distinct valid orders (an :class:`InputError` otherwise)."""
+    from .compositions import ORDERS
+
+    out = []
+    for o in orders:
+        if isinstance(o, bool) or not isinstance(o, (int, np.integer)) or int(o) not in ORDERS:
+            raise InputError(f"orders must be among {', '.join(map(str, ORDERS))}, got {o!r}")
+        out.append(int(o))
+    if not out:
+        raise InputError("no orders given")
+    return tuple(sorted(set(out)))
 
 
 # --- long runs --------------------------------------------------------------------------

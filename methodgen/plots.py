@@ -379,13 +379,15 @@ def plot_scene(scene_name: str, path, *, method: str | None = None, h: float | N
 
 
 def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = None,
-                        energy: bool | None = None) -> Path:
+                        energy: bool | None = None, targets: dict | None = None) -> Path:
     """Work-precision diagram: error against CPU time, log–log, one line per method.
 
     Parameters
     ----------
     rows : iterable of dict
-        Keys ``method``, ``seconds``, ``error`` (and ``kind``, ``energy_rel_error``).
+        Keys ``method``, ``seconds``, ``error`` (and ``kind``, ``energy_rel_error``;
+        ``base_method`` and ``order`` for methodgen's rows of ``bench --peers``: one
+        colour per base method, one marker per order).
         Rows without ``seconds`` or ``error`` (failed runs) and rows with
         non-positive or non-finite values (not drawable on log axes) are left out.
     path : path-like
@@ -393,12 +395,16 @@ def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = 
         Add a second panel, the max relative energy error against CPU time.  Default:
         when there are peer rows (``methodgen bench --peers``: kinds ``heyoka``,
         ``rebound``).  800 × 600 px with one panel, 1400 × 600 px with two.
+    targets : dict, optional
+        ``{"error": e, "energy_rel_error": de}`` (``bench``'s ``targets``): dotted
+        horizontal lines at these levels.
     """
     rows = list(rows)
     if energy is None:
         energy = any(r.get("kind") in _PEER_STYLES for r in rows)
     groups: dict[str, list] = {}
     kinds: dict[str, str] = {}
+    family: dict[str, tuple] = {}
     for r in rows:
         if r.get("seconds") is None or r.get("error") is None:  # a failed run (bench: "failed" rows)
             continue
@@ -408,39 +414,70 @@ def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = 
             de = float(de) if de is not None else float("nan")
             groups.setdefault(str(r["method"]), []).append((s, e, de))
             kinds[str(r["method"])] = str(r.get("kind", "methodgen"))
+            if r.get("order") is not None:
+                family[str(r["method"])] = (str(r.get("base_method", r["method"])), int(r["order"]))
     if not groups:
         raise InputError("no drawable rows (need positive, finite seconds and error)")
     fig = _figure((14, 6) if energy else (8, 6))
     axes = fig.subplots(1, 2) if energy else [fig.subplots()]
     # Distinct colours: the fixed method colours first, then unused tab10 colours;
     # reference solvers (scipy, fsolve: bench's "kind") dashed with other markers,
-    # peers (heyoka, REBOUND) dashed with their own markers.
+    # peers (heyoka, REBOUND) dashed with their own markers.  Composed methods (rows
+    # with an order): the colour of their base method, a marker per order.
+    fixed = {**_METHOD_COLORS, **_PEER_COLORS}
     spare = [c for c in (f"tab:{n}" for n in ("blue", "purple", "brown", "pink", "gray", "olive", "cyan"))
-             if c not in _METHOD_COLORS.values()]
-    for k, (m, pts) in enumerate(groups.items()):
+             if c not in fixed.values()]
+    colors: dict[str, str] = {}
+
+    def color_of(name):
+        if name not in colors:
+            colors[name] = fixed.get(name) or spare[sum(c in spare for c in colors.values()) % len(spare)]
+        return colors[name]
+
+    for m, pts in groups.items():
         pts.sort(key=lambda x: x[0])
         s, e, de = (np.array([p[i] for p in pts]) for i in range(3))
-        color = _METHOD_COLORS.get(m) or spare[k % len(spare)]
         kind = kinds[m]
-        ref = kind != "methodgen" or m.startswith("scipy")
-        style = _PEER_STYLES.get(kind, "^--" if ref else "o-")
+        if m in family:
+            base, order = family[m]
+            color = color_of(base)
+            style = _ORDER_MARKERS.get(order, "o") + "-"
+        else:
+            color = color_of(m)
+            ref = kind != "methodgen" or m.startswith("scipy")
+            style = _PEER_STYLES.get(kind, "^--" if ref else "o-")
         axes[0].plot(s, e, style, lw=1, ms=4, label=m, color=color)
         if energy:
             # An energy error of exactly 0 is not drawable on a log axis: drawn at 1e-17.
             de = np.where(de > 0, de, 1e-17)
             axes[1].plot(s, de, style, lw=1, ms=4, label=m, color=color)
-    for ax, ylabel in zip(axes, ("error at the final time", "max relative energy error")):
+    levels = (None, None) if not targets else (targets.get("error"), targets.get("energy_rel_error"))
+    for ax, ylabel, level in zip(axes, ("error at the final time", "max relative energy error"), levels):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("CPU time of the integration [s]")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+        if level:
+            ax.axhline(level, ls=":", lw=1, color="0.3", label=f"target {level:g}")
+        if len(groups) <= 12:
+            ax.legend(fontsize=8)
+    if len(groups) > 12:  # many curves (bench --peers --orders): one legend beside the panels
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside right upper", fontsize=7)
+    lo, hi = axes[0].get_ylim()
+    if hi > 1e2 and lo < 1e-2:  # unresolved runs (errors far above 1) would squeeze the curves
+        axes[0].set_ylim(lo, 1e2)
     axes[0].set_title(title or "work-precision", fontsize=10)
     if energy:
         axes[1].set_title("energy", fontsize=10)
     return _save(fig, path, fmt)
 
 
+#: Markers of methodgen's rows by order (``bench --peers --orders``); lines are solid.
+_ORDER_MARKERS = {2: "o", 4: "v", 6: "^", 8: "P", 10: "*"}
+
 #: Line styles of the peers of ``methodgen bench --peers`` (by row ``kind``).
 _PEER_STYLES = {"heyoka": "s--", "rebound": "D--"}
+#: Colours of the peers (by row ``method``): none of them is used for methodgen's methods.
+_PEER_COLORS = {"heyoka (Taylor)": "black", "REBOUND IAS15": "tab:olive", "REBOUND WHFast": "tab:gray"}
