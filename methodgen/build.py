@@ -16,9 +16,10 @@ from types import ModuleType
 from .emit import (cache_dir, check_cache_folder, emit_source, file_status, load_module, module_filename,
                    resolve_backend, signature, warn_regenerating, write_module)
 from .problem import Hamiltonian
-from .schemes import METHODS, composition_for, discretize, method_key, scheme_options
+from .schemes import composition_for, discretize, method_key, scheme_options
 
-__all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path", "scene_targets"]
+__all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path", "scene_targets",
+           "target_key", "scene_system_name"]
 
 
 def generated_dir() -> Path | None:
@@ -29,45 +30,76 @@ def generated_dir() -> Path | None:
     return None
 
 
-def scene_targets(scene) -> list[tuple[str, int, str | None]]:
-    """``(method, order, composition)`` of every module ``methodgen generate`` keeps for ``scene``.
+def scene_targets(scene) -> list[tuple[str, int, str | None, dict]]:
+    """``(method, order, composition, options)`` of every module ``methodgen generate`` keeps
+    for ``scene`` (modules of :attr:`Scene.run_system <methodgen.scene.Scene.run_system>`).
 
-    Each of the scene's methods as it is and, when ``[run] order`` is above 2, each
-    composed to that order.
+    Each of the scene's methods as it is (with the scene's ``[run] stages`` for the methods
+    that take them) and, when ``[run] order`` is above 2, each composed to that order.
     """
-    out = [(m, 2, None) for m in scene.methods]
+    def opts(m):
+        return scene.options(m) if hasattr(scene, "options") else {}
+    out = [(m, 2, None, opts(m)) for m in scene.methods]
     if getattr(scene, "order", 2) > 2:
-        out += [(m, scene.order, scene.composition) for m in scene.methods]
+        out += [(m, scene.order, scene.composition, opts(m)) for m in scene.methods]
     return out
 
 
-def _kept_in_generated(scene, key: str, gen: Path) -> bool:
-    """Whether the module ``key`` (a method key) of a built-in scene belongs in ``generated/``.
+def target_key(method: str, order: int, composition: str | None, options: dict) -> str:
+    """The method key (file names, signatures) of a ``scene_targets`` entry."""
+    return method_key(method, composition_for(order, composition), scheme_options(method, options))
 
-    Base methods: yes (as always).  Composed keys only when the scene's ``[run] order``
-    declares them or the file is already there (``methodgen generate --order``);
-    otherwise they go to the cache, so that ``methodgen run kepler --order 8`` leaves
-    the committed folder alone.
+
+def _run_system(scene) -> Hamiltonian:
+    return getattr(scene, "run_system", scene.system)
+
+
+def scene_system_name(scene, system=None) -> str:
+    """The name in the module file names of ``scene`` × ``system`` (default: the system the scene
+    integrates): the scene's name, or the time-transformed system's (``<scene>-tt``)."""
+    system = _run_system(scene) if system is None else system
+    return scene.name if system is scene.system else (system.name or scene.name)
+
+
+def _kept_in_generated(scene, key: str, gen: Path, system=None) -> bool:
+    """Whether the module ``key`` (a method key) of ``system`` (default: the scene's) belongs
+    in the built-in ``scene``'s folder ``generated/``.
+
+    Only modules of the system the scene integrates (its time transformation, if it
+    declares one) and only the variants the scene declares (:func:`scene_targets`: its
+    methods, ``[run] order``, ``[run] stages``) — or whose file is already there
+    (``methodgen generate --order``).  Everything else (another method, order, number of
+    stages or time transformation, or the untransformed system of a transformed scene)
+    goes to the cache, so that ``methodgen run kepler --method gauss --stages 3`` leaves the
+    committed folder alone.
     """
-    if key in METHODS or (gen / module_filename(scene.name, key)).is_file():
+    system = scene.system if system is None else system
+    declared = getattr(scene, "declared_fingerprint", None) or _run_system(scene).fingerprint()
+    if system.fingerprint() != declared:
+        return False
+    if (gen / module_filename(scene_system_name(scene, system), key)).is_file():
         return True
-    return key in {method_key(m, composition_for(o, c)) for m, o, c in scene_targets(scene)}
+    return key in {target_key(*t) for t in scene_targets(scene)}
 
 
-def scene_module_path(scene, method: str, backend: str = "numpy") -> Path:
+def scene_module_path(scene, method: str, backend: str = "numpy", system: Hamiltonian | None = None) -> Path:
     """Where the module of ``scene`` × ``method`` lives: ``generated/`` for built-ins in a checkout, else the cache.
 
-    ``method`` is the method key (:func:`methodgen.schemes.method_key`).
+    ``method`` is the method key (:func:`methodgen.schemes.method_key`); ``system`` the
+    system built (default ``scene.system``; pass ``scene.run_system`` for a scene with a
+    time transformation — its modules are named after it, ``<scene>-tt``).
     ``generated/`` holds numpy modules only (they are committed and sync-checked):
-    modules of other backends always live in the cache, and so do composed modules
-    the scene does not declare (see :func:`scene_targets`).
+    modules of other backends always live in the cache, and so do the variants the
+    scene does not declare (see :func:`_kept_in_generated`).
     """
-    fname = module_filename(scene.name, method, backend)
+    system = scene.system if system is None else system
+    name = scene_system_name(scene, system)
+    fname = module_filename(name, method, backend)
     gen = generated_dir()
-    if scene.builtin and gen is not None and backend == "numpy" and _kept_in_generated(scene, method, gen):
+    if scene.builtin and gen is not None and backend == "numpy" and _kept_in_generated(scene, method, gen, system):
         return gen / fname
-    sig = signature(scene.system, method, backend)
-    return cache_dir() / module_filename(f"{scene.name}_{sig[:12]}", method, backend)
+    sig = signature(system, method, backend)
+    return cache_dir() / module_filename(f"{name}_{sig[:12]}", method, backend)
 
 
 def default_path(system: Hamiltonian, method: str, backend: str = "numpy") -> Path:
@@ -81,10 +113,17 @@ def default_path(system: Hamiltonian, method: str, backend: str = "numpy") -> Pa
     from .scene import load_scene, scene_names
 
     gen = generated_dir()
-    if gen is not None and backend == "numpy" and system.name in scene_names():
-        scene = load_scene(system.name)
-        if scene.system.fingerprint() == system.fingerprint() and _kept_in_generated(scene, method, gen):
-            return gen / module_filename(scene.name, method)
+    if gen is not None and backend == "numpy":
+        # The scene is found by the system's name, or, for a time transformation, by its original's.
+        names = [system.name]
+        if system.time_transform is not None:
+            names.append(system.time_transform.original.name)
+        builtin = scene_names()
+        for name in dict.fromkeys(n for n in names if n in builtin):
+            scene = load_scene(name)
+            own = scene.run_system
+            if own.fingerprint() == system.fingerprint() and _kept_in_generated(scene, method, gen, own):
+                return gen / module_filename(scene_system_name(scene, own), method)
     sig = signature(system, method, backend)
     return cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method, backend)
 

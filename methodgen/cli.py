@@ -14,6 +14,7 @@ invariant) or a fault of the running system (disk full), 1 for a failed
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -25,12 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .build import build, generated_dir, scene_module_path, scene_targets
+from .build import build, generated_dir, scene_module_path, scene_system_name, scene_targets, target_key
 from .emit import BACKENDS, emit_source, file_status, module_filename, signature, write_atomic
-from .errors import BAD_PATH_ERRNOS, InputError, MethodgenError, StorageError
-from .scene import check_order, load_scene, scene_names
+from .errors import BAD_PATH_ERRNOS, InputError, MethodgenError, MethodNotApplicable, StorageError
+from .scene import check_g_positive, check_order, check_stages, load_scene, scene_names, with_time_transform
 from .runio import ChunkWriter
-from .schemes import METHODS, SYMMETRIC_METHODS, composition_for, discretize, method_key
+from .schemes import METHODS, SYMMETRIC_METHODS, composition_for, discretize, method_key, scheme_options
 
 EXIT_INPUT = 2
 EXIT_NUMERICAL = 3
@@ -138,7 +139,23 @@ def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: di
     return acc
 
 
-def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done, params=None) -> dict:
+def _time_transform_report(scene, module, h, y_final, steps_done, report_inv) -> dict | None:
+    """``{"g", "t0", "t_final", "tau_final", "H_phys_max_abs_error"}`` of a time-transformed run, else None.
+
+    ``t_final`` is the physical time reached (the state's t), ``tau_final = h * steps``
+    the fictive time; ``H_phys`` is the original Hamiltonian (on K = 0, H = −e).
+    """
+    tt = getattr(module, "TIME_TRANSFORM", None)
+    if not tt:
+        return None
+    t_end = float(y_final[list(module.STATE_NAMES).index(tt["time"])])
+    h_phys = report_inv.get("H_phys") or {}
+    return {"g": getattr(scene, "time_transform", None) or tt["g"], "t0": 0.0, "t_final": t_end,
+            "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
+
+
+def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done, params=None,
+            stages=None) -> dict:
     report_inv = {}
     problems = []
     for name, v in (inv_acc or {}).items():
@@ -156,17 +173,22 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
     y_final = [float(v) for v in y_final]
     if not all(math.isfinite(v) for v in y_final):
         problems.append("the final state is not finite")
+    tt = _time_transform_report(scene, module, h, y_final, steps_done, report_inv)
     return {
         "scene": scene.name,
         "method": method,
         "order": int(getattr(module, "ORDER", 2)),
         "composition": getattr(module, "COMPOSITION", None),   # {family, order, stages} or None
+        "stages": stages,                                      # gauss / energy-collocation, else None
+        # {g, t0, t_final (physical), tau_final (fictive), H_phys_max_abs_error} or None
+        "time_transform": tt,
         "status": "non-finite" if problems else "ok",
         "status_detail": "; ".join(problems) or None,
         "h": h,
         "steps": steps,
         "steps_done": steps_done,
-        "t_final": h * steps_done,
+        # The physical time reached: h * steps, or with a time transformation the state's t.
+        "t_final": h * steps_done if tt is None else tt["t_final"],
         "y0": list(scene.y0),
         "params": dict(scene.system.param_values) if params is None else dict(params),
         "y_final": y_final,
@@ -268,11 +290,51 @@ def resolve_order(scene, order=None, composition=None) -> tuple[int, str | None]
     return check_order(order, composition, order_name="--order", composition_name="--composition")
 
 
+def resolve_stages(scene, methods, stages=None) -> int | None:
+    """``--stages`` (command-line text, read with ``int()``, never evaluated) over the scene's
+    ``[run] stages``, validated for ``methods`` (:func:`methodgen.scene.check_stages`:
+    a one-line :class:`InputError` naming the value and what is valid)."""
+    if stages is None:
+        return scene.stages
+    if not isinstance(stages, int):
+        try:
+            stages = int(str(stages).strip())
+        except ValueError:
+            pass  # check_stages names the text and the valid values
+    return check_stages(stages, methods, name="--stages")
+
+
+def resolve_time_transform(scene, g=None):
+    """The scene with ``--time-transform G`` over its ``[run] time_transform`` (``none``: without)."""
+    return scene if g is None else with_time_transform(scene, g, name="--time-transform")
+
+
+@contextlib.contextmanager
+def transformed_context(scene):
+    """A method that does not apply to a time-transformed system says so: it was asked for K."""
+    try:
+        yield
+    except MethodNotApplicable as exc:
+        if scene.transformed is None:
+            raise
+        raise MethodNotApplicable(f"with the time transformation g = {scene.time_transform} the system is "
+                                  f"K = g(q)(H + e): {exc}") from None
+
+
+def effective_stages(method: str, options: dict) -> int | None:
+    """The number of stages a run of ``method`` uses (its default unless ``options`` say), or None."""
+    mod = METHODS.get(method)
+    if mod is None or not hasattr(mod, "STAGES"):
+        return None
+    return int(options.get("stages", mod.DEFAULT_STAGES))
+
+
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
               steps: int | None = None, save: str | None = None, chunk: int | None = None,
               interrupted_path: str | None = None, plot: str | None = None,
               backend: str = "numpy", extended: bool = False, y0=None, params: dict | None = None,
-              t_final: float | None = None, order=None, composition: str | None = None) -> dict:
+              t_final: float | None = None, order=None, composition: str | None = None,
+              stages=None, time_transform: str | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -290,31 +352,49 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     ``order`` (2, 4, 6, 8, 10) and ``composition`` (a family) override the scene's
     ``[run] order``/``composition`` (:func:`resolve_order`): above 2 the method is
     composed symmetrically, its own module (and cache file) is used.
+    ``stages`` overrides ``[run] stages`` (gauss, energy-collocation: :func:`resolve_stages`).
+    ``time_transform`` (text of g(q); ``"none"``: none) overrides ``[run] time_transform``:
+    the run integrates K = g(q)(H + e) from ``initial_state(y0)`` (y0 in the original
+    variables), ``h``/``steps`` in fictive time; ``t_final`` (a physical time) is then
+    refused, and the report's ``t_final`` is the physical time reached.
     """
     if extended and backend != "numpy":
         raise InputError("--extended needs the numpy backend (numba has no long double)")
     if plot:
         from .plots import check_available
         check_available()  # a missing matplotlib is reported before the run, not after
-    scene = load_scene(scene_name)
+    scene = resolve_time_transform(load_scene(scene_name), time_transform)
     method = method or scene.method
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
     order, composition = resolve_order(scene, order, composition)
-    key = method_key(method, composition_for(order, composition))
+    options = scene.options(method, resolve_stages(scene, [method], stages))
+    key = method_key(method, composition_for(order, composition), scheme_options(method, options))
     h = scene.h if h is None else h
     scene, params = _overrides(scene, y0, params)
     if t_final is not None:
         if steps is not None:
             raise InputError("give either --steps or --t-final, not both")
+        if scene.transformed is not None:
+            raise InputError(f"--t-final is a physical time, but with the time transformation g = "
+                             f"{scene.time_transform} h and steps are in fictive time τ (dt = g(q) dτ: the "
+                             "physical time is known only after the run); give --steps instead — the "
+                             "report gives the physical time reached")
         steps = _steps_for(t_final, h)
     steps = scene.steps if steps is None else steps
-    module = build(scene.system, method, path=scene_module_path(scene, key, backend), backend=backend,
-                   order=order, composition=composition)
+    system = scene.run_system
+    if scene.transformed is not None:
+        check_g_positive(system, scene.y0, params)
+    with transformed_context(scene):
+        module = build(system, method, path=scene_module_path(scene, key, backend, system=system),
+                       backend=backend, order=order, composition=composition, **options)
     if extended and module.EXTENDED_BITS <= 53:
         raise InputError(f"--extended needs a long double wider than double; numpy.longdouble has "
                          f"{module.EXTENDED_BITS} bits on this platform")
     y = np.array(scene.y0)
+    if getattr(module, "TIME_TRANSFORM", None):
+        y = module.initial_state(y, 0.0, params)   # the extended state on K = 0 (e = -H(y0))
+    n_stages = effective_stages(method, options)
     if getattr(module, "BACKEND", "numpy") == "numba":
         # Compile (or load from numba's disk cache) before the timed region.
         try:
@@ -324,7 +404,12 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     chunk = steps if not chunk else chunk
     writer = None
     meta = dict(scene=scene.name, method=method, order=order, composition=composition or "", h=h,
-                state_names=list(module.STATE_NAMES))
+                state_names=list(module.STATE_NAMES),
+                # g(q) of a time transformation ("" without): the states are then extended,
+                # (q, t, p, e), their column t the physical time; h is a fictive step.
+                time_transform=scene.time_transform or "")
+    if n_stages is not None:
+        meta["stages"] = n_stages
     kept: list[np.ndarray] = []
     inv_acc = None
     its_all: list[np.ndarray] = []
@@ -405,11 +490,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             except OSError as cexc:
                 note, saved_rows = str(cexc), None
         its = np.concatenate(its_all) if its_all else np.zeros(0)
-        rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params)
+        rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
         code = 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL
         raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
     its = np.concatenate(its_all) if its_all else np.zeros(0)
-    rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params)
+    rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
     if writer is not None:
         complete = rep["status"] == "ok"
         rep["saved"] = str(writer.close(steps_done=done, complete=complete,
@@ -440,8 +525,16 @@ def _order_text(rep: dict) -> str:
 
 
 def _print_run(rep: dict) -> None:
-    print(f"scene {rep['scene']}  method {rep['method']}  {_order_text(rep)}  h = {rep['h']:g}  "
-          f"steps = {rep['steps']}  (t = 0 .. {rep['t_final']:g})")
+    tt = rep.get("time_transform")
+    method = rep["method"] + (f" ({rep['stages']} stages)" if rep.get("stages") is not None else "")
+    span = (f"(t = 0 .. {rep['t_final']:g})" if tt is None else
+            f"(fictive τ = 0 .. {tt['tau_final']:g}, physical t = 0 .. {_num(tt['t_final'], 'g', 1)})")
+    print(f"scene {rep['scene']}  method {method}  {_order_text(rep)}  h = {rep['h']:g}  "
+          f"steps = {rep['steps']}  {span}")
+    if tt is not None:
+        print(f"time transformation on: g = {tt['g']}; integrates K = g(q)(H + e) (the H row below), "
+              f"h and steps in fictive time τ, dt = g dτ; physical time reached t = "
+              f"{_num(tt['t_final'], '.10g', 1)}")
     print(f"module: {rep['module']}")
     print(f"{'invariant':>10} {'initial':>22} {'final':>22} {'max abs error':>14} {'max rel error':>14}")
     for name, v in rep["invariants"].items():
@@ -453,6 +546,10 @@ def _print_run(rep: dict) -> None:
             rel = v["max_rel_error"]
             rel_s = f"{rel:14.3e}" if rel is not None else f"{'inf':>14}"
         print(f"{name:>10} {_num(v['initial'], '.15g', 22)} {_num(v['final'], '.15g', 22)} {err_s} {rel_s}")
+    if tt is not None:
+        err = tt.get("H_phys_max_abs_error")
+        print(f"max |ΔH_phys| = {_num(err, '.3e', 1)}  (H_phys: the original energy H(q, p); on K = 0, "
+              "H_phys = -e)")
     nw = rep["newton"]
     stages = f" ({rep['composition']['stages']} stages)" if rep.get("composition") else ""
     print(f"Newton iterations per step{stages}: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
@@ -477,7 +574,8 @@ def cmd_run(args) -> int:
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,
                         plot=args.plot, backend=args.backend, extended=args.extended, y0=y0,
                         params=params, t_final=args.t_final, order=args.order,
-                        composition=args.composition)
+                        composition=args.composition, stages=args.stages,
+                        time_transform=args.time_transform)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         if fail.saved:
@@ -511,23 +609,29 @@ def cmd_run(args) -> int:
 
 # --- generate ------------------------------------------------------------------
 
-def _targets(names: list[str], order=None, composition=None):
-    """``(scene, method, order, family)`` to generate: the scenes' own (each method, and
-    composed to ``[run] order`` if declared), or each method at ``--order``/``--composition``."""
+def _targets(names: list[str], order=None, composition=None, stages=None, time_transform=None):
+    """``(scene, method, order, family, options, declared)`` to generate: the scenes' own (each
+    method, with ``[run] stages``, and composed to ``[run] order`` if declared, of the scene's
+    system or its declared time transformation), or each method at ``--order``/``--composition``/
+    ``--stages``/``--time-transform``.  ``declared``: the scene declares this system and these
+    options (a time transformation or number of stages it does not declare is not ``generated/``'s)."""
     for name in names or scene_names():
-        scene = load_scene(name)
-        if order is None and composition is None:
-            for method, o, c in scene_targets(scene):
-                yield scene, method, o, c
+        own = load_scene(name)
+        scene = resolve_time_transform(own, time_transform)
+        same_system = scene.run_system.fingerprint() == own.run_system.fingerprint()
+        if order is None and composition is None and stages is None:
+            items = scene_targets(scene)
         else:
             o, c = resolve_order(scene, order, composition)
-            for method in scene.methods:
-                yield scene, method, o, c
+            s = resolve_stages(scene, scene.methods, stages)
+            items = [(method, o, c, scene.options(method, s)) for method in scene.methods]
+        for method, o, c, opts in items:
+            yield scene, method, o, c, opts, same_system and opts == own.options(method)
 
 
 def _composed_files(names: list[str], backend: str) -> dict:
-    """File name → ``(scene, method, order, family)`` of every composed module a built-in
-    scene could have (each method × family × order): such a file in ``generated/`` (from
+    """File name → ``(scene, method, order, family, options, True)`` of every composed module a
+    built-in scene could have (each method × family × order): such a file in ``generated/`` (from
     ``methodgen generate --order``) is regenerated and checked like the scenes' own."""
     from .compositions import FAMILIES
 
@@ -537,8 +641,10 @@ def _composed_files(names: list[str], backend: str) -> dict:
         for method in scene.methods:
             for family, orders in FAMILIES.items():
                 for o in orders:
-                    key = method_key(method, composition_for(o, family))
-                    out[module_filename(scene.name, key, backend)] = (scene, method, o, family)
+                    opts = scene.options(method)
+                    key = target_key(method, o, family, opts)
+                    out[module_filename(scene_system_name(scene), key, backend)] = (scene, method, o, family,
+                                                                                    opts, True)
     return out
 
 
@@ -550,26 +656,45 @@ def cmd_generate(args) -> int:
         raise InputError("no generated/ folder found (not a source checkout); pass --out DIR")
     expected = set()
     problems, written, same = [], [], []
-    own_set = args.order is None and args.composition is None
-    targets = list(_targets(args.scenes, args.order, args.composition))
+    stages, g = getattr(args, "stages", None), getattr(args, "time_transform", None)
+    own_set = args.order is None and args.composition is None and stages is None and g is None
+    targets = list(_targets(args.scenes, args.order, args.composition, stages, g))
     for scene, *_ in targets:
         if not scene.builtin:
             raise InputError(f"{scene.name} is not a built-in scene; use the Python API "
                              "methodgen.generate for your own scenes")
     if own_set and out.is_dir():
         # Composed modules written by `generate --order` stay in sync too.
-        names = {module_filename(s.name, method_key(m, composition_for(o, c)), args.backend)
-                 for s, m, o, c in targets}
+        names = {module_filename(scene_system_name(s), target_key(m, o, c, opts), args.backend)
+                 for s, m, o, c, opts, _ in targets}
         composed = _composed_files(args.scenes, args.backend)
         targets += [composed[f.name] for f in sorted(out.glob("*.py"))
                     if f.name in composed and f.name not in names]
-    for scene, method, order, family in targets:
-        key = method_key(method, composition_for(order, family))
-        path = out / module_filename(scene.name, key, args.backend)
+    for scene, method, order, family, opts, declared in targets:
+        key = target_key(method, order, family, opts)
+        system = scene.run_system
+        sig = signature(system, key, args.backend)
+        if args.out is None and not declared:
+            # A time transformation or number of stages the scene does not declare: the module
+            # belongs to the per-user cache (as for `run`), never to the committed generated/.
+            path = scene_module_path(scene, key, args.backend, system=system)
+            status = file_status(path, sig)
+            if status == "ok":
+                same.append(path)
+            elif args.check:
+                problems.append(f"{path}: {status} (the scene does not declare this variant: its module "
+                                "lives in the cache)")
+            else:
+                with transformed_context(scene):
+                    build(system, method, path=path, backend=args.backend, order=order, composition=family,
+                          **opts)
+                written.append(path)
+            continue
+        path = out / module_filename(scene_system_name(scene), key, args.backend)
         expected.add(path.name)
-        sig = signature(scene.system, key, args.backend)
-        source = emit_source(discretize(scene.system, method, order=order, composition=family), sig,
-                             backend=args.backend)
+        with transformed_context(scene):
+            scheme = discretize(system, method, order=order, composition=family, **opts)
+        source = emit_source(scheme, sig, backend=args.backend)
         current = path.read_text(encoding="utf-8") if path.is_file() else None
         if current == source:
             same.append(path)
@@ -609,19 +734,33 @@ def _print_bench(rep: dict) -> None:
         print(f"work-precision on {wp['scene']}, t = 0 .. {wp['T']:g}; reference: {wp['reference']}")
         for note in wp.get("notes", []):  # bench --peers: a peer missing or not applicable
             print(f"  note: {note}")
-        print(f"{'method':<28} {'h / tol':>9} {'steps':>7} {'CPU s':>9} {'error':>10} {'energy err':>10} "
+        w = max([28] + [len(str(r["method"])) for r in wp["rows"]])  # composed rows: "em o10 (family)"
+        print(f"{'method':<{w}} {'h / tol':>9} {'steps':>7} {'CPU s':>9} {'error':>10} {'energy err':>10} "
               f"{'rel. dE':>9} {'inv/constr':>10} {'Newton':>6}")
         for r in wp["rows"]:
             if "failed" in r:
-                print(f"{r['method']:<28} {r.get('h', 0):9.3g}  failed: {r['failed'][:60]}")
+                print(f"{r['method']:<{w}} {r.get('h', r.get('tol', 0)):9.3g}  failed: {r['failed'][:60]}")
                 continue
             par = r.get("h", r.get("tol"))
             others = [v for k, v in r["invariant_errors"].items() if k != "H"]
             if "constraint_error" in r:
                 others.append(r["constraint_error"])
-            print(f"{r['method']:<28} {par:9.3g} {r['steps']:7d} {r['seconds']:9.4f} {_fmt(r['error']):>10} "
+            print(f"{r['method']:<{w}} {par:9.3g} {r['steps']:7d} {r['seconds']:9.4f} {_fmt(r['error']):>10} "
                   f"{_fmt(r['energy_error']):>10} {_fmt(r.get('energy_rel_error'), '.1e'):>9} "
                   f"{_fmt(max(others) if others else None):>10} {_fmt(r.get('newton_mean'), '.2f'):>6}")
+        tg = wp.get("targets")
+        if tg:  # bench --peers: the cheapest run of each method at the issue-14 targets
+            print(f"\ncheapest run with final error <= {tg['error']:g} and rel. dE <= {tg['energy_rel_error']:g}:")
+            for r in tg["best"] or []:
+                par = r.get("h", r.get("tol"))
+                print(f"  {r['method']:<{w}} {par:9.3g} {r['seconds']:9.4f} s  error {_fmt(r['error'])}  "
+                      f"rel. dE {_fmt(r.get('energy_rel_error'), '.1e')}")
+            if not tg["best"]:
+                print("  (none)")
+            for name, r in (("heyoka tol 1e-15", tg.get("heyoka")), ("IAS15 eps 1e-9", tg.get("ias15"))):
+                if r:
+                    print(f"  for comparison, {name}: {r['seconds']:.4f} s, error {_fmt(r['error'])}, "
+                          f"rel. dE {_fmt(r.get('energy_rel_error'), '.1e')}")
     sv = rep.get("solvers")
     if sv:
         print(f"\nnonlinear solvers on {sv['scene']} (h = {sv['h']:g}, {sv['steps']} steps)")
@@ -650,10 +789,37 @@ def _print_bench(rep: dict) -> None:
                   f"(final {r['rms_energy_error'][-1]:.2e}, {r['seconds']:.1f} s)")
 
 
+def _bench_orders(text: str) -> tuple[int, ...]:
+    """``bench --orders``: comma-separated orders among 2, 4, 6, 8, 10 (an argparse error otherwise)."""
+    from .compositions import ORDERS
+
+    out = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            k = int(part)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected comma-separated orders among {','.join(map(str, ORDERS))}, got {part!r}") from None
+        if k not in ORDERS:
+            raise argparse.ArgumentTypeError(
+                f"order {k} is not available: orders are {','.join(map(str, ORDERS))} "
+                "(2: the base method; above: symmetric compositions)")
+        out.append(k)
+    return tuple(sorted(set(out)))
+
+
 def cmd_bench(args) -> int:
     from . import bench
 
     scene = load_scene(args.scene)
+    orders = getattr(args, "orders", None)
+    if orders is not None and not args.peers and orders != (2,):
+        raise InputError("--orders above 2 (compositions) are benchmarked with --peers; "
+                         "without --peers the base methods are compared with scipy")
+    solver = getattr(args, "solver", None)
+    if solver is not None and not args.peers:
+        raise InputError("--solver applies to the --peers rows; without --peers the solver table compares them")
     methods = args.methods or list(scene.methods)
     for m in methods:
         if m not in METHODS:
@@ -664,7 +830,8 @@ def cmd_bench(args) -> int:
         if args.t_final is not None and not (math.isfinite(args.t_final) and args.t_final > 0):
             raise InputError(f"--t-final must be a positive number, got {args.t_final}")
         rep["work_precision"] = bench.work_precision(scene, methods, quick=args.quick, progress=progress,
-                                                     peers=args.peers, backend=args.backend, T=args.t_final)
+                                                     peers=args.peers, backend=args.backend, T=args.t_final,
+                                                     orders=orders, solver=solver)
         rep["solvers"] = bench.solver_variants(scene, methods, steps=300 if args.quick else 2000)
     if args.long:
         rep["long"] = bench.long_run(scene, methods, steps=args.long_steps or (20_000 if args.quick else 1_000_000),
@@ -677,8 +844,11 @@ def cmd_bench(args) -> int:
         if "work_precision" not in rep:
             raise InputError("--plot draws the work-precision diagram; drop --only-extras")
         from .plots import plot_work_precision
-        rep["plot"] = str(plot_work_precision(rep["work_precision"]["rows"], args.plot,
-                                              title=f"{scene.name}: work-precision"))
+        wp = rep["work_precision"]
+        title = f"{scene.name}: work-precision"
+        if args.peers:
+            title += f", t = 0 .. {wp['T']:g}, methodgen backend {wp.get('backend', args.backend)}"
+        rep["plot"] = str(plot_work_precision(wp["rows"], args.plot, title=title, targets=wp.get("targets")))
     if args.json:
         print(dump_json(rep))
     else:
@@ -696,7 +866,8 @@ def cmd_scenes(args) -> int:
         s = load_scene(name)
         rows.append({"name": s.name, "description": s.description, "methods": list(s.methods),
                      "dim": s.system.dim, "constraints": len(s.system.constraints),
-                     "order": s.order, "composition": s.composition})
+                     "order": s.order, "composition": s.composition, "stages": s.stages,
+                     "time_transform": s.time_transform})
     if args.json:
         print(json.dumps({"scenes": rows}))
     else:
@@ -745,6 +916,18 @@ def _add_order_args(p, generate: bool = False) -> None:
                         "else the default of the order; `methodgen methods` lists them)")
 
 
+def add_variant_args(p, command: str = "run") -> None:
+    """``--stages S`` and ``--time-transform G`` (validated by the command: one-line errors, exit 2)."""
+    p.add_argument("--stages", metavar="S",
+                   help="stages of gauss (1..6, order 2S) and energy-collocation (1..4, order 2S) "
+                        "(default: the scene's [run] stages, else 2); an error for other methods")
+    where = {"run": "the run integrates", "verify": "verify", "generate": "generate"}[command]
+    p.add_argument("--time-transform", metavar="G",
+                   help=f"{where} K = g(q)(H + e), the Poincaré time transformation with g = G, e.g. "
+                        "'sqrt(x**2 + y**2 + z**2)' (default: the scene's [run] time_transform; 'none': "
+                        "without); y0 stays in the original variables, h and steps are in fictive time")
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="methodgen", description="Geometric integrators generated from your Hamiltonian.")
     parser.add_argument("--version", action="version", version=f"methodgen {__version__}")
@@ -754,10 +937,12 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="built-in scene name or path to a scene TOML file")
     p.add_argument("--method", help="method (default: the scene's first method)")
     _add_order_args(p)
+    add_variant_args(p, "run")
     p.add_argument("--h", type=_step, help="step size (default: the scene's)")
     p.add_argument("--steps", type=_positive_int, help="number of steps (default: the scene's)")
     p.add_argument("--t-final", type=float, metavar="T",
-                   help="final time instead of --steps (steps = T/h, rounded; the report gives t_final)")
+                   help="final time instead of --steps (steps = T/h, rounded; the report gives t_final); "
+                        "not with a time transformation (its steps are in fictive time)")
     p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE",
                    help="parameter value for this run (repeatable; passed at run time, nothing re-derived)")
@@ -812,6 +997,12 @@ def make_parser() -> argparse.ArgumentParser:
                    help="backend of methodgen's rows (numba: compiled loop, compiled before timing)")
     p.add_argument("--t-final", type=float, metavar="T",
                    help="final time of the work-precision runs (default 20; with --peers the scene's h*steps)")
+    p.add_argument("--orders", type=_bench_orders, metavar="K,K,...",
+                   help="with --peers: orders of methodgen's rows, each method at each order (default 2,4,6,8,10; "
+                        "above 2 the symmetric composition of the order's default family, step sizes per order "
+                        "down to a final error of 1e-12); without --peers only 2")
+    p.add_argument("--solver", choices=("newton", "simplified", "fixed-point"),
+                   help="with --peers: nonlinear solver of methodgen's rows (default: the module's)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_bench)
 
@@ -822,6 +1013,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=BACKENDS, default="numpy",
                    help="numpy (the committed generated/ modules) or numba (needs --out)")
     _add_order_args(p, generate=True)
+    add_variant_args(p, "generate")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_generate)
 

@@ -15,6 +15,11 @@ Format (see DESIGN.md §3 and the built-in scenes in ``methodgen/scenes``)::
     y0 = [...]                   # q then p
     order = 8                    # optional: 2 (default), 4, 6, 8 or 10 — above 2 the method
     composition = "kahan-li"     #   is composed symmetrically; optional family (default per order)
+    stages = 3                   # optional: stages of gauss / energy-collocation (the methods
+                                 #   that take it; a scene without one of them is an error)
+    time_transform = "sqrt(x**2 + y**2 + z**2)"   # optional: integrate K = g(q)(H + e) instead
+                                 #   (methodgen.time_transform); y0 stays in the original variables,
+                                 #   h and steps are in fictive time
     [nbody]                      # optional: the scene is an N-body gravitational problem
     G = "G"                      # a number or a [params] name
     masses = ["m0", "m1"]        # one per body (3 coordinates each, in q order), p = m v
@@ -31,7 +36,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 if sys.version_info >= (3, 11):
@@ -42,12 +47,13 @@ else:  # pragma: no cover - Python 3.10
 from .errors import InputError, SceneError
 from .problem import Hamiltonian
 
-__all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir", "check_order"]
+__all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir", "check_order",
+           "check_stages", "stage_methods", "with_time_transform", "check_g_positive"]
 
 _TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict, "nbody": dict}
 _SYSTEM = {"H": str, "q": list, "p": list, "constraints": list}
 _RUN = {"method": (str, list), "h": (int, float), "steps": int, "y0": list, "order": int,
-        "composition": str}
+        "composition": str, "stages": int, "time_transform": str}
 _NBODY = {"G": (int, float, str), "masses": list, "centre_mass": (int, float, str)}
 
 
@@ -105,6 +111,20 @@ class Scene:
         composition of it, :func:`methodgen.discretize` ``order=``).
     composition : str or None
         ``[run].composition``: the composition family (None: the default for ``order``).
+    stages : int or None
+        ``[run].stages``: the stages of the scene's methods that take them (``gauss``,
+        ``energy-collocation``); None: their default.  See :func:`check_stages`.
+    time_transform : str or None
+        ``[run].time_transform``: the text of g(q).  The scene's methods then integrate
+        :attr:`run_system`, ``K = g(q)(H + e)`` (:func:`methodgen.time_transform`); ``y0``
+        stays in the original variables (``module.initial_state(y0)`` maps it), ``h`` and
+        ``steps`` are in fictive time.
+    transformed : Hamiltonian or None
+        ``K``, the time-transformed system (named ``<name>-tt``), when ``time_transform`` is set.
+    declared_fingerprint : str or None
+        Fingerprint of the system the scene *file* integrates (its ``[run] time_transform``
+        or none): a built-in scene's ``generated/`` modules are of that system only, a
+        ``--time-transform`` override's live in the cache.
     """
 
     name: str
@@ -119,10 +139,26 @@ class Scene:
     nbody: NBody | None = None
     order: int = 2
     composition: str | None = None
+    stages: int | None = None
+    time_transform: str | None = None
+    transformed: Hamiltonian | None = field(default=None, repr=False, compare=False)
+    declared_fingerprint: str | None = field(default=None, repr=False, compare=False)
 
     @property
     def method(self) -> str:
         return self.methods[0]
+
+    @property
+    def run_system(self) -> Hamiltonian:
+        """The system the scene's methods integrate: :attr:`transformed` if the scene has a
+        time transformation, else :attr:`system` (``y0`` always belongs to :attr:`system`)."""
+        return self.system if self.transformed is None else self.transformed
+
+    def options(self, method: str, stages: int | None = None) -> dict:
+        """Method options of ``method`` in this scene: ``{"stages": s}`` for a method that
+        takes stages when ``stages`` (or the scene's ``[run] stages``) is set, else ``{}``."""
+        s = self.stages if stages is None else stages
+        return {"stages": s} if s is not None and method in stage_methods() else {}
 
 
 def _check_keys(table: dict, allowed: dict, where: str) -> None:
@@ -196,6 +232,94 @@ def check_order(order, composition=None, *, order_name: str = "order",
     return order, composition
 
 
+def stage_methods() -> dict[str, tuple[int, ...]]:
+    """The methods that take ``stages``, each with its valid values (``gauss``: 1..6, …)."""
+    from .schemes import METHODS
+    return {name: tuple(mod.STAGES) for name, mod in METHODS.items() if hasattr(mod, "STAGES")}
+
+
+def _stages_text(takers: dict) -> str:
+    from .schemes import METHODS
+    return ", ".join(f"{m} (stages {v[0]}..{v[-1]}, default {METHODS[m].DEFAULT_STAGES})"
+                     for m, v in takers.items())
+
+
+def check_stages(stages, methods, *, name: str = "stages", error=InputError) -> int | None:
+    """Validate a number of stages for ``methods``; return it (None when ``stages`` is None).
+
+    ``stages`` applies to those of ``methods`` that take it (``gauss``: 1..6,
+    ``energy-collocation``: 1..4); it must be valid for each of them, and at least one
+    of ``methods`` must take it.  Every error (``error``) names ``name``, the value and
+    what is valid.
+    """
+    if stages is None:
+        return None
+    takers = stage_methods()
+    if isinstance(stages, bool) or not isinstance(stages, int):
+        raise error(f"{name} must be a whole number of stages, got {stages!r}; valid: {_stages_text(takers)}")
+    methods = tuple(methods)
+    mine = {m: v for m, v in takers.items() if m in methods}
+    if not mine:
+        listed = ", ".join(methods) or "(none)"
+        raise error(f"{name}: {listed} take{'s' if len(methods) == 1 else ''} no stages; stages apply "
+                    f"to {_stages_text(takers)}")
+    for m, valid in mine.items():
+        if stages not in valid:
+            raise error(f"{name} = {stages}: {m} takes stages {', '.join(map(str, valid))}, got {stages}")
+    return stages
+
+
+def with_time_transform(scene: Scene, g: str | None, *, error=InputError, name: str = "--time-transform"
+                        ) -> Scene:
+    """``scene`` with the time transformation ``g`` (text of g(q)); ``None`` or ``"none"``: none.
+
+    ``g`` is parsed with the whitelist parser (:func:`methodgen.time_transform`), never
+    evaluated; a bad g is ``error`` naming ``name``.  The transformed system is named
+    ``<scene>-tt`` (its own module files and fingerprint).
+    """
+    import dataclasses
+
+    from .timetransform import time_transform
+
+    if g is None or (isinstance(g, str) and g.strip().lower() == "none"):
+        return dataclasses.replace(scene, time_transform=None, transformed=None)
+    if not isinstance(g, str) or not g.strip():
+        raise error(f"{name} must be a function g(q) of the coordinates "
+                    f"({', '.join(s.name for s in scene.system.q)}), got {g!r}")
+    try:
+        K = time_transform(scene.system, g, name=f"{scene.name}-tt")
+    except InputError as exc:
+        raise error(f"{name}: {exc}") from None
+    return dataclasses.replace(scene, time_transform=g.strip(), transformed=K)
+
+
+def check_g_positive(system: Hamiltonian, y0, params: dict | None = None, *, error=InputError,
+                     name: str = "the time transformation") -> float:
+    """``g(q0)`` of a time-transformed ``system`` at the original state ``y0``; an error unless
+    it is finite and positive (dt/dτ = g: g ≤ 0 stops or reverses physical time)."""
+    import sympy as sp
+
+    tt = system.time_transform
+    values = dict(system.param_values)
+    values.update(params or {})
+    subs = {s: sp.Float(float(v)) for s, v in zip(tt.original.y, y0)}
+    subs.update({s: sp.Float(values[s.name]) for s in system.params})
+    try:
+        v = complex(sp.N(tt.g.xreplace(subs)))
+    except (TypeError, ValueError, ZeroDivisionError):
+        v = complex(math.nan)
+    if not (math.isfinite(v.real) and math.isfinite(v.imag)):
+        shown = "not finite"
+    elif v.imag != 0:
+        shown = "not real"
+    else:
+        shown = f"{v.real:g}"
+    if shown != f"{v.real:g}" or v.real <= 0:
+        raise error(f"{name} g = {tt.g_source} is {shown} at y0; it must be positive along the motion "
+                    "(dt/dτ = g)")
+    return v.real
+
+
 def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool = False) -> Scene:
     """Validate a parsed TOML document and build the :class:`Scene`."""
     _check_keys(data, _TOP, "the scene")
@@ -210,6 +334,8 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
     order, composition = check_order(run_t.get("order", 2), run_t.get("composition"),
                                      order_name="[run].order", composition_name="[run].composition",
                                      error=SceneError)
+    if "stages" in run_t and (isinstance(run_t["stages"], bool) or not isinstance(run_t["stages"], int)):
+        check_stages(run_t["stages"], (), name="[run].stages", error=SceneError)  # names what is valid
     _check_keys(run_t, _RUN, "[run]")
     for key in ("q", "p", "constraints"):
         for item in system_t.get(key, []):
@@ -238,9 +364,18 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
         raise SceneError(f"[run].y0 has {len(y0)} values but the state ({', '.join(system.state_names)}) "
                          f"has {2 * system.dim}")
     nbody = _parse_nbody(data["nbody"], system, params_t) if "nbody" in data else None
-    return Scene(name=name, description=data.get("description", ""), system=system, methods=methods,
-                 h=h, steps=steps, y0=y0, path=path, builtin=builtin, nbody=nbody, order=order,
-                 composition=composition)
+    stages = check_stages(run_t.get("stages"), methods, name="[run].stages", error=SceneError)
+    scene = Scene(name=name, description=data.get("description", ""), system=system, methods=methods,
+                  h=h, steps=steps, y0=y0, path=path, builtin=builtin, nbody=nbody, order=order,
+                  composition=composition, stages=stages)
+    if "time_transform" in run_t:
+        scene = with_time_transform(scene, run_t["time_transform"], error=SceneError,
+                                    name="[run].time_transform")
+        if scene.transformed is None:
+            raise SceneError('[run].time_transform = "none": leave the key out for no transformation')
+        check_g_positive(scene.transformed, y0, error=SceneError, name="[run].time_transform:")
+    import dataclasses
+    return dataclasses.replace(scene, declared_fingerprint=scene.run_system.fingerprint())
 
 
 def _parse_nbody(table: dict, system: Hamiltonian, params: dict) -> NBody:

@@ -1,4 +1,4 @@
-"""``methodgen verify SCENE [--method M] [--order K] [--composition F] [--json] [--format …] [--timeout S]``.
+"""``methodgen verify SCENE [--method M] [--order K] [--composition F] [--stages S] [--time-transform G] [--json] [--format …] [--timeout S]``.
 
 Verifies every claim that applies to the scene's methods (or one method) and
 prints the certificates.  ``--json`` prints exactly one JSON object
@@ -38,24 +38,31 @@ def _timeout(text: str) -> float:
 def cmd_verify(args) -> int:
     """Run the verification for a scene; return the exit status."""
     # Imported here: the verification layer is not needed by the other commands.
-    from .cli import dump_json, resolve_order
+    from .cli import (dump_json, effective_stages, resolve_order, resolve_stages, resolve_time_transform,
+                      transformed_context)
     from .errors import InputError
     from .scene import load_scene
     from .schemes import composition_for, discretize
     from .verify import verify
 
-    scene = load_scene(args.scene)
+    # --time-transform over the scene's [run] time_transform: the transformed system K is verified.
+    scene = resolve_time_transform(load_scene(args.scene), getattr(args, "time_transform", None))
+    system = scene.run_system
     # --order/--composition over the scene's [run] order (one-line errors, exit 2).
     order, composition = resolve_order(scene, args.order, args.composition)
     methods = [args.method] if args.method else list(scene.methods)
     if args.method and args.method not in scene.methods:
         # Any applicable method may be verified, not only the scene's own.
-        discretize(scene.system, args.method)  # raises InputError / MethodNotApplicable
+        with transformed_context(scene):
+            discretize(system, args.method)  # raises InputError / MethodNotApplicable
     if not methods:
         raise InputError(f"scene {scene.name!r} lists no methods; pass --method")
-    reports = [verify(discretize(scene.system, m, order=order, composition=composition),
-                      conjugacy_dim=args.conjugacy_dim,
-                      timeout=args.timeout, progress=True) for m in methods]
+    # --stages over [run] stages, for the methods that take it (an error if none does).
+    stages = resolve_stages(scene, methods, getattr(args, "stages", None))
+    options = {m: scene.options(m, stages) for m in methods}
+    with transformed_context(scene):
+        schemes = [discretize(system, m, order=order, composition=composition, **options[m]) for m in methods]
+    reports = [verify(s, conjugacy_dim=args.conjugacy_dim, timeout=args.timeout, progress=True) for s in schemes]
     ok = all(r.ok for r in reports)
     if args.json:
         certs = []
@@ -66,6 +73,10 @@ def cmd_verify(args) -> int:
         print(dump_json({"ok": ok, "scene": scene.name, "order": order,
                          "composition": None if comp is None else
                          {"family": comp.family, "order": comp.order, "stages": comp.stages},
+                         "stages": {m: effective_stages(m, options[m]) for m in methods
+                                    if effective_stages(m, options[m]) is not None} or None,
+                         "time_transform": None if scene.transformed is None else
+                         {"g": scene.time_transform, "system": system.name},
                          "certificates": certs,
                          "reports": [{"title": r.title, "ok": r.ok, "seconds": round(r.seconds, 3)}
                                      for r in reports]}))
@@ -89,6 +100,8 @@ def add_parser(sub) -> None:
                    help="verify the method composed to order K (4, 6, 8, 10; default: the scene's [run] order)")
     p.add_argument("--composition", metavar="FAMILY",
                    help="composition family for order > 2 (default: the scene's, else the order's default)")
+    from .cli import add_variant_args
+    add_variant_args(p, "verify")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--format", choices=("text", "markdown", "latex"), default="text",
                    help="output format without --json (default: text)")

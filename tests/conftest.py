@@ -28,6 +28,19 @@ def marked(pairs):
 KEPLER_Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
 
 
+def scene_system(name):
+    """The system a built-in scene's modules integrate: its time transformation K when the
+    scene declares one (``[run] time_transform``), else its Hamiltonian."""
+    return mg.load_scene(name).run_system
+
+
+def scene_y0(scene, module):
+    """The scene's ``y0`` as ``module``'s state: mapped onto K = 0 (``initial_state``) when the
+    module integrates a time transformation (the scene's y0 is in the original variables)."""
+    y0 = np.array(scene.y0, dtype=float)
+    return module.initial_state(y0) if getattr(module, "TIME_TRANSFORM", None) else y0
+
+
 @pytest.fixture(scope="session")
 def kepler():
     return mg.load_scene("kepler").system
