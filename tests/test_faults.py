@@ -194,7 +194,8 @@ def _full_disk_from_call(monkeypatch, n_ok: int, n_fail: int = 1):
 
     def write_array(fh, array, *a, **k):
         calls["n"] += 1
-        if n_ok < calls["n"] <= n_ok + n_fail:
+        ok = n_ok() if callable(n_ok) else n_ok
+        if ok < calls["n"] <= ok + n_fail:
             fh.write(b"\x93NUMPY partial")
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return real(fh, array, *a, **k)
@@ -203,8 +204,16 @@ def _full_disk_from_call(monkeypatch, n_ok: int, n_fail: int = 1):
 
 
 def test_disk_full_during_save_keeps_every_written_chunk(osc, tmp_path, capsys, monkeypatch):
-    """Was: chained tracebacks and nothing saved.  4 metadata entries, then chunks 0..2 fit."""
-    _full_disk_from_call(monkeypatch, n_ok=4 + 3)
+    """Was: chained tracebacks and nothing saved.  The metadata entries, then chunks 0..2 fit."""
+    written = {}
+    real_init = runio.ChunkWriter.__init__
+
+    def init(self, path, meta=None):      # count the metadata entries the run writes first
+        written["meta"] = len(meta or {})
+        real_init(self, path, meta)
+
+    monkeypatch.setattr(runio.ChunkWriter, "__init__", init)
+    _full_disk_from_call(monkeypatch, n_ok=lambda: written["meta"] + 3)
     target = tmp_path / "out" / "F.npz"
     code, out, err = main(capsys, "run", osc, "--steps", "1000", "--save", target, "--chunk", "100")
     assert code == cli.EXIT_NUMERICAL
