@@ -20,7 +20,7 @@ from collections import Counter
 from pathlib import Path
 
 ALL_METHODS = ["midpoint", "trapezoidal", "kahan", "energy-momentum", "avf", "gonzalez", "itoh-abe",
-               "stormer-verlet", "rattle", "shake"]
+               "stormer-verlet", "rattle", "shake", "gauss", "energy-collocation"]
 
 
 def applicable(scene_path: Path) -> list[str]:

@@ -100,3 +100,13 @@ def test_one_stage_composes(module, hh):
     assert sc.traits.order == 4 and sc.key == "energy-collocation-stages1-order4-suzuki"
     with pytest.raises(mg.MethodNotApplicable, match="symmetric method of order 2"):
         mg.discretize(hh, "energy-collocation", stages=2, order=6)
+
+
+def test_too_few_quadrature_nodes_are_refuted(hh):
+    """Negative control: with fewer nodes than the integrand's degree needs, the rule is not
+    exact and the energy claim must fail (and the method really drifts then)."""
+    sc = mg.discretize(hh, "energy-collocation", stages=2)
+    assert sc.structure["nodes"] == 3                     # f quadratic: degree (s - 1) + 2s = 5 needs 3 nodes
+    st = dict(sc.structure, nodes=2)
+    cert = energy_collocation_certificates(dataclasses.replace(sc, structure=st))[0]
+    assert cert.status == REFUTED and cert.details["integrand_degree"] == 5
