@@ -7,7 +7,7 @@ Pipeline (data flows one way)::
 
 Public API
 ----------
-Hamiltonian(H, q, p, params=None, constraints=(), name=None)
+Hamiltonian(H, q, p, params=None, constraints=(), name=None, invariants=None)
 discretize(system, method) -> Scheme
 generate(scheme, path=None, backend="numpy") -> module   (backend="numba": compiled loop)
 build(system, method, path=None, backend="numpy") -> module  (reuses an up-to-date file without deriving)

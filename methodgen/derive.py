@@ -13,6 +13,7 @@ References
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import sympy as sp
@@ -21,7 +22,8 @@ from .problem import Hamiltonian
 
 __all__ = [
     "Invariant", "Separable", "gradient", "vector_field", "separable_split", "radial_profile",
-    "angular_momenta", "invariants", "poisson_bracket", "PHYSICAL_ENERGY",
+    "angular_momenta", "invariants", "poisson_bracket", "PHYSICAL_ENERGY", "detected_momenta",
+    "declared", "first_integrals", "constraint_monitors", "DETECT_MAX_DIM",
 ]
 
 
@@ -168,27 +170,40 @@ def _angular_bracket(system: Hamiltonian, i: int, j: int, F: sp.Expr) -> sp.Expr
     return pj * Fp_i - pi * Fp_j - qi * Fq_j + qj * Fq_i
 
 
-def _is_zero(expr: sp.Expr, system: Hamiltonian) -> bool:
-    """Exact zero test with a cheap numerical rejection first.
+def _zero_status(expr: sp.Expr, system: Hamiltonian, simplify_limit: int | None = None) -> str:
+    """``"zero"`` (shown exactly), ``"nonzero"`` (clearly nonzero at a sample point) or ``"unknown"``.
 
     ``expr`` is evaluated at two fixed points (floats); a clearly nonzero value
     rejects at once — most candidate invariants fail here, which keeps large
     systems (N bodies) fast.  Only survivors go to the exact test: ``expand``,
-    then ``cancel``, then ``simplify``; the answer "zero" is always symbolic.
+    then ``cancel``, then ``simplify`` (skipped above ``simplify_limit`` operations);
+    the answer "zero" is always symbolic.
     """
+    if expr == 0:
+        return "zero"
+    from .special import to_elementary
+
     syms = sorted(expr.free_symbols, key=lambda s: s.name)
+    screen = to_elementary(expr)     # removable-singularity helpers as their quotients (for evaluation)
     for k in (3, 7):
         point = {s: sp.Float(0.37 + 0.11 * ((i * k) % 13), 30) for i, s in enumerate(syms)}
         try:
-            val = complex(expr.xreplace(point).evalf(30))
+            val = complex(screen.xreplace(point).evalf(30))
         except (TypeError, ValueError, ZeroDivisionError):
             break
         if abs(val) > 1e-20:
-            return False
+            return "nonzero"
     for reduce in (sp.expand, sp.cancel, sp.simplify):
+        if reduce is sp.simplify and simplify_limit is not None and sp.count_ops(expr) > simplify_limit:
+            break
         if reduce(expr) == 0:
-            return True
-    return False
+            return "zero"
+    return "unknown"
+
+
+def _is_zero(expr: sp.Expr, system: Hamiltonian) -> bool:
+    """Exact zero test with a cheap numerical rejection first (:func:`_zero_status`)."""
+    return _zero_status(expr, system) == "zero"
 
 
 def _angular_name(system: Hamiltonian, i: int, j: int) -> str:
@@ -253,11 +268,203 @@ def constraint_monitors(system: Hamiltonian) -> tuple[Invariant, ...]:
     return tuple(out)
 
 
+#: Largest number of degrees of freedom for which :func:`detected_momenta` looks for
+#: total linear and angular momenta (the search samples a d-column matrix and tests a
+#: few candidates exactly; above this it is skipped).
+DETECT_MAX_DIM = 60
+_AXES = ("x", "y", "z")
+
+
+def _momentum_names(vectors: list[list[int]]) -> list[str]:
+    """``P`` for one vector; ``P_x, P_y(, P_z)`` for 2–3 vectors with disjoint supports of
+    equal size ≥ 2 (components of a total momentum); ``P1, P2, …`` otherwise."""
+    if len(vectors) == 1:
+        return ["P"]
+    supports = [frozenset(k for k, c in enumerate(v) if c != 0) for v in vectors]
+    sizes = {len(sp_) for sp_ in supports}
+    disjoint = sum(len(sp_) for sp_ in supports) == len(frozenset().union(*supports))
+    if len(vectors) <= 3 and disjoint and len(sizes) == 1 and min(sizes) >= 2:
+        return [f"P_{_AXES[i]}" for i in range(len(vectors))]
+    return [f"P{i + 1}" for i in range(len(vectors))]
+
+
+def _linear_candidates(system: Hamiltonian) -> list[list[sp.Rational]]:
+    """Rational vectors c (reduced row-echelon basis) with ``Σ c_k ∂H/∂q_k ≈ 0`` (and the same
+    for every constraint g) at random points: a numerical nullspace, to be proved exactly."""
+    import random
+
+    import numpy as np
+    from fractions import Fraction
+
+    d = system.dim
+    g = gradient(system)
+    rows = [list(g[:d])] + [[sp.diff(c, qk) for qk in system.q] for c in system.constraints]
+    args = list(system.y) + list(system.params)
+    try:
+        fns = [sp.lambdify(args, r, modules="math") for r in rows]
+    except Exception:   # pragma: no cover - lambdify of whitelisted functions
+        return []
+    rng = random.Random(20240515)
+    pv = [system.param_values[s.name] for s in system.params]
+    A = []
+    for _ in range(2 * d + 8):
+        point = [rng.uniform(0.2, 1.4) for _ in system.y] + pv
+        for f in fns:
+            try:
+                row = [float(v) for v in f(*point)]
+            except (ValueError, ZeroDivisionError, OverflowError, TypeError):
+                continue
+            if all(np.isfinite(row)):
+                n = max(abs(v) for v in row)
+                A.append([v / n for v in row] if n > 0 else row)
+    if len(A) < d:
+        return []
+    A = np.array(A)
+    _, sv, vh = np.linalg.svd(A)
+    smax = sv[0] if len(sv) else 0.0
+    rank = int(np.sum(sv > 1e-9 * smax)) if smax > 0 else 0
+    N = vh[rank:].copy()
+    if len(N) == 0:
+        return []
+    # reduced row-echelon form: small rational entries (1, -1, masses ...) show up as such
+    r = 0
+    for col in range(d):
+        if r == len(N):
+            break
+        piv = r + int(np.argmax(np.abs(N[r:, col])))
+        if abs(N[piv, col]) < 1e-8:
+            continue
+        N[[r, piv]] = N[[piv, r]]
+        N[r] /= N[r, col]
+        for i in range(len(N)):
+            if i != r:
+                N[i] -= N[i, col] * N[r]
+        r += 1
+    out = []
+    for vec in N[:r]:
+        fr = [Fraction(float(x)).limit_denominator(1000) for x in vec]
+        if any(abs(float(f) - x) > 1e-7 for f, x in zip(fr, vec)):
+            continue
+        den = 1
+        for f in fr:
+            den = den * f.denominator // math.gcd(den, f.denominator)
+        ints = [int(f * den) for f in fr]
+        out.append([sp.Integer(v) for v in ints])
+    return out
+
+
+def _total_angular_candidates(system: Hamiltonian):
+    """Body layouts (k coordinates per body, N ≥ 2 bodies, interleaved ``x0 y0 z0 x1 …`` or
+    blocked ``x0 x1 … y0 y1 …``) and their total angular momenta ``Σ_b q_b × p_b``."""
+    d = system.dim
+    q, p = system.q, system.p
+    for k in (3, 2):
+        if d % k or d // k < 2:
+            continue
+        n = d // k
+        for layout in ("interleaved", "blocked"):
+            idx = [[b * k + j if layout == "interleaved" else j * n + b for j in range(k)] for b in range(n)]
+            planes = [(1, 2, "L_x"), (2, 0, "L_y"), (0, 1, "L_z")] if k == 3 else [(0, 1, "L")]
+            comps = []
+            for i, j, name in planes:
+                terms = [q[body[i]] * p[body[j]] - q[body[j]] * p[body[i]] for body in idx]
+                comps.append((name, sp.Add(*terms), terms))
+            yield comps
+
+
+def _commutes(system: Hamiltonian, I: sp.Expr) -> bool:
+    """``{I, H} = 0`` and ``{I, g_i} = 0`` for every constraint, shown exactly."""
+    return all(_is_zero(poisson_bracket(system, I, F), system) for F in [system.H, *system.constraints])
+
+
+@_cache
+def detected_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
+    """Total linear and angular momenta found automatically (proved first integrals).
+
+    * **Linear**: ``I = Σ c_k p_k`` with ``{I, H} = -Σ c_k ∂H/∂q_k ≡ 0`` (and the same for
+      every constraint g).  Candidates ``c`` come from the numerical nullspace of ∂H/∂q
+      sampled at random points (rational, reduced row-echelon basis); each is then proved
+      exactly (no floats) or dropped.  Names: ``P`` for one; ``P_x, P_y, P_z`` for 2–3
+      vectors with disjoint supports of equal size (an N-body total momentum); else
+      ``P1, P2, …``.
+    * **Angular**: for N ≥ 2 bodies of k = 3 (or 2) coordinates each, laid out as
+      ``x0 y0 z0 x1 …`` or ``x0 x1 … y0 y1 …``, the components of ``Σ_b q_b × p_b``
+      (``L_x, L_y, L_z``; ``L`` for k = 2) that are proved first integrals.
+
+    A name already used (state, parameter, declared invariant) gets the suffix ``_auto``;
+    a detected quantity equal to a declared one is left out.  Skipped (empty) above
+    :data:`DETECT_MAX_DIM` degrees of freedom and for time-transformed systems.
+    """
+    d = system.dim
+    if d > DETECT_MAX_DIM or system.time_transform is not None:
+        return ()
+    out: list[Invariant] = []
+    vecs = [c for c in _linear_candidates(system)
+            if _commutes(system, sp.Add(*[ck * pk for ck, pk in zip(c, system.p)]))]
+    for name, c in zip(_momentum_names(vecs), vecs):
+        out.append(Invariant(name, sp.Add(*[ck * pk for ck, pk in zip(c, system.p)]), True,
+                             f"total momentum: {{{name}, H}} = 0 exactly (detected)"))
+    # a total whose every body term is already a monitored angular momentum adds nothing
+    single = {sp.expand(s * inv.expr) for inv in angular_momenta(system) for s in (1, -1)}
+    for comps in _total_angular_candidates(system):
+        found = [Invariant(name, L, True, f"total angular momentum: {{{name}, H}} = 0 exactly (detected)")
+                 for name, L, terms in comps
+                 if not all(sp.expand(t) in single for t in terms) and _commutes(system, L)]
+        if found:
+            out.extend(found)
+            break
+    declared = system.declared_invariants
+    taken = set(system.state_names) | set(system.param_names) | {inv.name for inv in declared}
+    kept = []
+    for inv in out:
+        if any(sp.expand(inv.expr - dec.expr) == 0 for dec in declared):
+            continue
+        if inv.name in taken:
+            inv = Invariant(inv.name + "_auto", inv.expr, inv.exact, inv.why)
+        kept.append(inv)
+    return tuple(kept)
+
+
+@_cache
+def declared(system: Hamiltonian) -> tuple[Invariant, ...]:
+    """The user's declared invariants; ``exact`` only where ``{I, H} = 0`` (and ``{I, g_i} = 0``
+    for every constraint) is shown symbolically — else ``why`` says what failed."""
+    out = []
+    others = [("H", system.H)] + [(f"g{i + 1}", g) for i, g in enumerate(system.constraints)]
+    for dec in system.declared_invariants:
+        failed, unknown = [], []
+        for label, F in others:
+            status = _zero_status(poisson_bracket(system, dec.expr, F), system, simplify_limit=400)
+            if status == "nonzero":
+                failed.append(label)
+            elif status == "unknown":
+                unknown.append(label)
+        if not failed and not unknown:
+            why = "declared; {%s, H} = 0 exactly" % dec.name + (
+                " and it commutes with every constraint" if system.constraints else "")
+            out.append(Invariant(dec.name, dec.expr, True, why))
+            continue
+        parts = []
+        if failed:
+            parts.append(", ".join("{%s, %s} ≠ 0" % (dec.name, f) for f in failed))
+        if unknown:
+            parts.append(", ".join("{%s, %s} = 0 not shown exactly" % (dec.name, f) for f in unknown))
+        out.append(Invariant(dec.name, dec.expr, False,
+                             "declared, but " + "; ".join(parts)
+                             + (" (`methodgen verify` gives a counterexample point)" if failed else "")))
+    return tuple(out)
+
+
 @_cache
 def invariants(system: Hamiltonian) -> tuple[Invariant, ...]:
-    """All monitored quantities: H first, then exact first integrals, then constraints."""
+    """All monitored quantities, in this order: H; the angular momenta (:func:`angular_momenta`);
+    detected total momenta (:func:`detected_momenta`); the declared invariants (:func:`declared`,
+    exact or not); the constraint monitors; ``H_phys`` for a time-transformed system.
+
+    Only those with ``exact=True`` are first integrals a method may claim to keep.
+    """
     out = ((Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)
-           + constraint_monitors(system))
+           + detected_momenta(system) + declared(system) + constraint_monitors(system))
     tt = system.time_transform
     if tt is not None:
         # The original energy: constant on the level set K = 0 only ({H, K} = (H + e){H, g}),
@@ -265,6 +472,12 @@ def invariants(system: Hamiltonian) -> tuple[Invariant, ...]:
         out += (Invariant(PHYSICAL_ENERGY, tt.original.H, False,
                           "the original Hamiltonian H(q, p): constant (= −e) on the level set K = 0"),)
     return out
+
+
+def first_integrals(system: Hamiltonian) -> tuple[Invariant, ...]:
+    """The monitored quantities shown to be first integrals (``exact``), constraint monitors excluded."""
+    cons = {inv.name for inv in constraint_monitors(system)}
+    return tuple(inv for inv in invariants(system) if inv.exact and inv.name not in cons)
 
 
 #: Name of the original Hamiltonian among the monitored quantities of a time-transformed system.

@@ -11,14 +11,43 @@ from __future__ import annotations
 
 import hashlib
 import math
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Mapping, NamedTuple, Sequence
 
 import sympy as sp
 
 from .errors import InputError, ParseError
 from .parse import check_name, check_smooth, parse_expr
 
-__all__ = ["Hamiltonian"]
+__all__ = ["Hamiltonian", "DeclaredInvariant", "builtin_monitor_names"]
+
+
+class DeclaredInvariant(NamedTuple):
+    """A quantity the user declared as a first integral: ``name``, ``expr``, ``source`` text.
+
+    Declaring does not make it one: :func:`methodgen.derive.invariants` marks it exact
+    only when ``{I, H} = 0`` is shown symbolically, and ``methodgen verify`` proves or
+    refutes it.
+    """
+
+    name: str
+    expr: sp.Expr
+    source: str
+
+
+def builtin_monitor_names(dim: int, n_constraints: int) -> set[str]:
+    """Names :mod:`methodgen.derive` may give its own monitored quantities (a declared
+    invariant may not use them): ``H``, ``H_phys``, the angular-momentum names of every
+    coordinate plane (``L`` in 2D, ``Lx Ly Lz`` in 3D, ``L_<qi>_<qj>`` otherwise, see
+    :func:`methodgen.derive.angular_momenta`) and the constraint monitors ``g<i>``, ``g<i>_v``.
+    """
+    out = {"H", "H_phys"}
+    if dim == 2:
+        out.add("L")
+    elif dim == 3:
+        out.update({"Lx", "Ly", "Lz"})
+    for i in range(n_constraints):
+        out.update({f"g{i + 1}", f"g{i + 1}_v"})
+    return out
 
 
 def _names(items: Iterable, what: str) -> tuple[str, ...]:
@@ -54,6 +83,14 @@ class Hamiltonian:
         Holonomic constraints ``g_i(q) = 0`` (functions of ``q`` and parameters).
     name : str, optional
         A label used in generated file names and reports.
+    invariants : mapping of str to (str or sympy.Expr), optional
+        Quantities to monitor as first integrals, ``{"P": "p1 + p2 + p3"}``: text is parsed
+        with the same whitelist parser as H (never evaluated), SymPy expressions are
+        checked like H (declared symbols only, smooth).  Names follow the rules of the
+        other names and must differ from the state, parameter and built-in monitor names
+        (:func:`builtin_monitor_names`).  Monitored after H and the angular momenta;
+        ``{I, H} = 0`` is proved or refuted by ``methodgen verify``, and a method claims
+        to keep I only where that is a theorem for it (``Traits.preserved``).
 
     Attributes
     ----------
@@ -64,6 +101,8 @@ class Hamiltonian:
     constraints : tuple of sympy.Expr
     source : str
         The Hamiltonian as the user wrote it (text) or ``str(H)``.
+    declared_invariants : tuple of DeclaredInvariant
+        The declared invariants, in the order given (empty when none).
 
     Examples
     --------
@@ -75,10 +114,12 @@ class Hamiltonian:
     """
 
     __slots__ = ("H", "q", "p", "params", "param_values", "constraints", "source",
-                 "constraint_sources", "name", "_symbols", "time_transform")
+                 "constraint_sources", "name", "_symbols", "time_transform",
+                 "declared_invariants")
 
     def __init__(self, H, q: Sequence, p: Sequence, params: Mapping[str, float] | None = None,
-                 constraints: Sequence = (), name: str | None = None):
+                 constraints: Sequence = (), name: str | None = None,
+                 invariants: Mapping | None = None):
         qn = _names(q, "coordinate")
         pn = _names(p, "momentum")
         if len(qn) == 0:
@@ -142,6 +183,39 @@ class Hamiltonian:
         #: :class:`methodgen.timetransform.TimeTransform` when this system is the Poincaré
         #: time transformation of another (set by :func:`methodgen.time_transform`), else None.
         object.__setattr__(self, "time_transform", None)
+        object.__setattr__(self, "declared_invariants", self._declared(invariants, allnames))
+
+    def _declared(self, invariants, allnames) -> tuple[DeclaredInvariant, ...]:
+        if invariants is None:
+            return ()
+        if not isinstance(invariants, Mapping):
+            raise InputError("invariants must be a mapping name -> expression, e.g. "
+                             f"{{'P': 'p1 + p2'}}, got {type(invariants).__name__}")
+        taken = set(allnames)
+        builtin = builtin_monitor_names(len(self.q), len(self.constraints))
+        qd = [s.name for s in self.q]
+        for i in range(len(qd)):          # the angular-momentum names of d > 3 (derive.angular_momenta)
+            for j in range(i + 1, len(qd)):
+                if len(qd) > 3:
+                    builtin.add(f"L_{qd[i]}_{qd[j]}")
+        out = []
+        for key, value in invariants.items():
+            key = key.name if isinstance(key, sp.Symbol) else key
+            name = check_name(key, "invariant")
+            if name in taken:
+                raise InputError(f"invariant name {name!r} is already a coordinate, momentum or "
+                                 "parameter name; choose another name")
+            if name in builtin:
+                raise InputError(f"invariant name {name!r} is the name of a quantity methodgen monitors "
+                                 f"itself ({', '.join(sorted(builtin))}); choose another name")
+            if name in {inv.name for inv in out}:   # pragma: no cover - a mapping has unique keys
+                raise InputError(f"invariant {name!r} is declared twice")
+            expr, source = self._expr(value, f"invariant {name!r}")
+            if not expr.free_symbols & set(self.q + self.p):
+                raise InputError(f"invariant {name!r} ({source}) does not depend on the state "
+                                 f"({', '.join(self.state_names)}); it would be a constant")
+            out.append(DeclaredInvariant(name, expr, source))
+        return tuple(out)
 
     def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
         if isinstance(value, str):
@@ -207,10 +281,15 @@ class Hamiltonian:
         ]
         if self.time_transform is not None:
             parts.append("time_transform=" + self.time_transform.fingerprint())
+        if self.declared_invariants:   # only when declared, so other systems keep their fingerprint
+            parts.append("invariants=" + ";".join(f"{inv.name}:{sp.srepr(inv.expr)}"
+                                                  for inv in self.declared_invariants))
         return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
     def __repr__(self) -> str:
         extra = f", constraints={list(self.constraint_sources)}" if self.constraints else ""
+        if self.declared_invariants:
+            extra += f", invariants={ {inv.name: inv.source for inv in self.declared_invariants} }"
         return (f"Hamiltonian({self.source!r}, q={[s.name for s in self.q]}, "
                 f"p={[s.name for s in self.p]}, params={self.param_values}{extra})")
 

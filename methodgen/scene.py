@@ -20,6 +20,9 @@ Format (see DESIGN.md §3 and the built-in scenes in ``methodgen/scenes``)::
     time_transform = "sqrt(x**2 + y**2 + z**2)"   # optional: integrate K = g(q)(H + e) instead
                                  #   (methodgen.time_transform); y0 stays in the original variables,
                                  #   h and steps are in fictive time
+    [invariants]                 # optional: quantities to monitor as first integrals
+    P = "p1 + p2 + p3"           #   NAME = "expression" (whitelist parser; verify proves or
+                                 #   refutes {I, H} = 0; methods claim only what they keep)
     [nbody]                      # optional: the scene is an N-body gravitational problem
     G = "G"                      # a number or a [params] name
     masses = ["m0", "m1"]        # one per body (3 coordinates each, in q order), p = m v
@@ -50,7 +53,8 @@ from .problem import Hamiltonian
 __all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir", "check_order",
            "check_stages", "stage_methods", "with_time_transform", "check_g_positive"]
 
-_TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict, "nbody": dict}
+_TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict, "nbody": dict,
+        "invariants": dict}
 _SYSTEM = {"H": str, "q": list, "p": list, "constraints": list}
 _RUN = {"method": (str, list), "h": (int, float), "steps": int, "y0": list, "order": int,
         "composition": str, "stages": int, "time_transform": str}
@@ -344,7 +348,8 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
     try:
         system = Hamiltonian(_require(system_t, "H", "[system]"), q=_require(system_t, "q", "[system]"),
                              p=_require(system_t, "p", "[system]"), params=params_t,
-                             constraints=system_t.get("constraints", []), name=name)
+                             constraints=system_t.get("constraints", []), name=name,
+                             invariants=_invariants_table(data.get("invariants")))
     except SceneError:
         raise
     except InputError as exc:
@@ -376,6 +381,17 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
         check_g_positive(scene.transformed, y0, error=SceneError, name="[run].time_transform:")
     import dataclasses
     return dataclasses.replace(scene, declared_fingerprint=scene.run_system.fingerprint())
+
+
+def _invariants_table(table: dict | None) -> dict | None:
+    """``[invariants]``: ``NAME = "expression"`` (strings only; checked by :class:`Hamiltonian`)."""
+    if table is None:
+        return None
+    for key, value in table.items():
+        if not isinstance(value, str):
+            raise SceneError(f'[invariants].{key} must be a string expression (NAME = "p1 + p2"), '
+                             f"got {type(value).__name__} {value!r}")
+    return dict(table)
 
 
 def _parse_nbody(table: dict, system: Hamiltonian, params: dict) -> NBody:

@@ -124,13 +124,17 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
     if not g_expr.free_symbols & set(system.q):
         raise InputError(f"the time transformation g = {g_source} does not depend on q: a constant g "
                          "only rescales time (use a different step size instead)")
-    taken = set(symbols)
+    taken = set(symbols) | {inv.name for inv in system.declared_invariants}
     t_name = _free_name(_TIME_NAMES, taken, "physical time coordinate")
     e_name = _free_name(_ENERGY_NAMES, taken | {t_name}, "energy momentum")
     t, e = sp.Symbol(t_name, real=True), sp.Symbol(e_name, real=True)
     K = g_expr * (system.H + e)
+    # Declared invariants are carried over (monitored on the extended phase space).  On the
+    # level set K = 0, {I, K} = g{I, H}: a first integral of H stays constant along the
+    # motion, but it is *claimed* (exact) for K only where {I, K} = 0 identically.
     out = Hamiltonian(K, q=[*system.q, t], p=[*system.p, e], params=system.param_values,
-                      constraints=system.constraints, name=name or f"{system.name or 'system'}-tt")
+                      constraints=system.constraints, name=name or f"{system.name or 'system'}-tt",
+                      invariants={inv.name: inv.expr for inv in system.declared_invariants} or None)
     object.__setattr__(out, "time_transform",
                        TimeTransform(g_expr, g_source, system, out.symbol(t_name), out.symbol(e_name)))
     # the source text a user reads in generated modules and reports

@@ -31,7 +31,8 @@ from typing import Callable
 
 import sympy as sp
 
-from ..derive import Invariant, gradient, invariants, separable_split, vector_field
+from ..derive import (Invariant, _zero_status, first_integrals, gradient, invariants, separable_split,
+                      vector_field)
 from ..problem import Hamiltonian
 
 STEP = sp.Symbol("_h", real=True)
@@ -272,12 +273,122 @@ def _is_quadratic(expr: sp.Expr, syms) -> bool:
 
 
 def quadratic_invariants(system: Hamiltonian) -> tuple[str, ...]:
-    """Names of monitored invariants that are quadratic polynomials in y.
+    """Names of the first integrals (``exact`` monitored invariants) that are quadratic
+    (or linear) polynomials in y.
 
-    Symplectic Runge–Kutta methods (the midpoint rule) preserve every
-    quadratic first integral exactly [HLW06, Thm IV.2.2].
+    Symplectic Runge–Kutta methods (the midpoint rule, Gauss collocation) preserve every
+    quadratic first integral exactly [HLW06, Thm IV.2.2].  Monitored quantities that are
+    not shown to be first integrals (a declared invariant with {I, H} ≠ 0, ``H_phys`` of a
+    time-transformed system) are never listed.
     """
-    return tuple(inv.name for inv in invariants(system) if _is_quadratic(inv.expr, system.y))
+    return tuple(inv.name for inv in first_integrals(system) if _is_quadratic(inv.expr, system.y))
+
+
+def _is_linear(expr: sp.Expr, syms) -> bool:
+    try:
+        poly = sp.Poly(expr, *syms)
+    except sp.PolynomialError:
+        return False
+    return poly.total_degree() <= 1 and not (poly.free_symbols_in_domain & set(syms))
+
+
+def linear_invariants(system: Hamiltonian) -> tuple[str, ...]:
+    """Names of the first integrals that are linear in y, ``I = cᵀy`` (total momentum).
+
+    ``cᵀf(y) ≡ 0`` then, so every method whose increment is a combination of values of
+    f (Runge–Kutta methods: trapezoidal, Kahan's two forms) keeps I [HLW06, Thm IV.1.5].
+    """
+    return tuple(inv.name for inv in first_integrals(system) if _is_linear(inv.expr, system.y))
+
+
+#: Expressions larger than this (count_ops) are not reduced when deciding a claim of the
+#: traits: a claim that cannot be shown cheaply is not made (``verify`` never sees it).
+CLAIM_OPS_LIMIT = 20000
+#: Seconds a scheme may spend proving one such claim (where a budget can be enforced).
+CLAIM_SECONDS = 20.0
+
+
+def _claim_zero(expr: sp.Expr, system: Hamiltonian) -> bool:
+    """``expr ≡ 0`` shown exactly (no floats), cheaply: a numerical rejection first, then
+    ``expand``/``cancel`` (``simplify`` only for small expressions), under a size limit and
+    a time budget.  False when not shown — the claim is then not made."""
+    if expr == 0:
+        return True
+    if expr.has(sp.Float):
+        return False
+    try:
+        if sp.count_ops(expr) > CLAIM_OPS_LIMIT:
+            return False
+    except Exception:   # pragma: no cover - count_ops on odd objects
+        return False
+    from ..verify.budget import BudgetExceeded, budget
+
+    b = budget(CLAIM_SECONDS)
+    try:
+        with b:
+            status = _zero_status(expr, system, simplify_limit=400)
+            if status == "unknown":
+                from ..special import to_elementary
+                elementary = to_elementary(expr)
+                if elementary != expr:
+                    status = _zero_status(elementary, system, simplify_limit=400)
+            return status == "zero"
+    except BudgetExceeded as exc:
+        if exc.budget is not b:
+            raise
+        return False
+    except Exception:
+        return False
+
+
+def splitting_invariants(system: Hamiltonian) -> tuple[str, ...]:
+    """First integrals kept by a kick–drift splitting of ``H = T(p) + U(q)`` (Störmer–Verlet).
+
+    For I affine in q (p fixed) and affine in p (q fixed) — ``qᵀDp + aᵀq + cᵀp``, so
+    angular and linear momenta — a drift ``q += τ∇T(p)`` changes I by exactly
+    ``τ ∂I/∂q · ∇T`` and a kick ``p -= τ∇U(q)`` by ``-τ ∂I/∂p · ∇U``.  I is claimed when
+    both vanish identically (shown exactly); for ``qᵀDp`` this is HLW06 Thm IV.2.4, for
+    ``cᵀp`` it says that c annihilates ∇U.
+    """
+    sep = separable_split(system)
+    if sep is None:
+        return ()
+    d = system.dim
+    q, p = list(system.q), list(system.p)
+    gradT = [sp.diff(sep.T, s) for s in p]
+    gradU = [sp.diff(sep.U, s) for s in q]
+    out = []
+    for inv in first_integrals(system):
+        try:
+            poly = sp.Poly(inv.expr, *system.y)
+        except sp.PolynomialError:
+            continue
+        if poly.free_symbols_in_domain & set(system.y):
+            continue
+        if not all(sum(m[:d]) <= 1 and sum(m[d:]) <= 1 for m in poly.monoms()):
+            continue
+        drift = sp.Add(*[sp.diff(inv.expr, s) * g for s, g in zip(q, gradT)])
+        kick = sp.Add(*[sp.diff(inv.expr, s) * g for s, g in zip(p, gradU)])
+        if _claim_zero(drift, system) and _claim_zero(kick, system):
+            out.append(inv.name)
+    return tuple(out)
+
+
+def dg_linear_invariants(system: Hamiltonian, grad_bar: sp.Matrix, exclude=()) -> tuple[str, ...]:
+    """Linear first integrals ``I = cᵀy`` kept by ``y1 = y0 + h J ∇̄H``: those with
+    ``cᵀJ∇̄H(y0, y1) ≡ 0``, shown exactly on this discrete gradient (within
+    :data:`CLAIM_OPS_LIMIT` and :data:`CLAIM_SECONDS`; otherwise not claimed)."""
+    d = system.dim
+    out = []
+    for inv in first_integrals(system):
+        if inv.name in exclude or not _is_linear(inv.expr, system.y):
+            continue
+        c = [sp.diff(inv.expr, s) for s in system.y]
+        # cᵀJ g = c_q · g_p − c_p · g_q
+        e = sp.Add(*[c[i] * grad_bar[d + i] - c[d + i] * grad_bar[i] for i in range(d)])
+        if _claim_zero(e, system):
+            out.append(inv.name)
+    return tuple(out)
 
 
 def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple], sp.Matrix],
@@ -338,7 +449,12 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
         # Linear f: the symmetric methods here are exact up to a phase error for
         # every h (Figure 1 of the notes uses h·ω ≈ 5 on purpose): no guard.
         resolution = None
-    traits = Traits(**{**traits.__dict__, "notes": traits.notes + notes})
+    preserved = traits.preserved
+    if traits.discrete_gradient:
+        # A discrete-gradient method keeps a linear first integral cᵀy exactly when its
+        # ∇̄H respects it: cᵀ(y1 - y0) = h cᵀJ∇̄H ≡ 0 (checked on this ∇̄H).
+        preserved += dg_linear_invariants(system, grad_bar, exclude=preserved)
+    traits = Traits(**{**traits.__dict__, "notes": traits.notes + notes, "preserved": preserved})
     return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
                   invariants=invariants(system), description=description, resolution=resolution,
@@ -346,13 +462,13 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
 
 
 def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:
-    """Monitored invariants of the form ``qᵀ D p`` (angular momentum).
+    """First integrals (``exact`` monitored invariants) of the form ``qᵀ D p`` (angular momentum).
 
     Symplectic partitioned RK methods such as Störmer–Verlet preserve exactly
     these quadratic first integrals [HLW06, Thm IV.2.4].
     """
     out = []
-    for inv in invariants(system):
+    for inv in first_integrals(system):
         try:
             poly = sp.Poly(inv.expr, *system.y)
         except sp.PolynomialError:

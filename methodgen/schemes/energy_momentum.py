@@ -48,10 +48,10 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from ..derive import angular_momenta, separable_split
+from ..derive import first_integrals, separable_split
 from ..divdiff import divided_difference
 from ..problem import Hamiltonian
-from .base import Scheme, Traits, gradient_scheme
+from .base import Scheme, Traits, bilinear_invariants, gradient_scheme
 
 NAME = "energy-momentum"
 SUMMARY = "Exercise 1.1 discrete gradient: preserves H and, for U = V(|q|), q × p"
@@ -146,7 +146,8 @@ def applies(system: Hamiltonian) -> str | None:
 
 
 def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
-    """The angular momenta L (first integrals of H) that the term-wise discrete gradient keeps.
+    """The first integrals ``L = qᵀDp`` (angular momenta — of one particle, total, or declared)
+    that the term-wise discrete gradient keeps.
 
     L is quadratic, so ``L(y1) - L(y0) = ∇L(ȳ)ᵀ(y1 - y0) = h ∇L(ȳ)ᵀ J ∇̄H``.  With
     ``∇̄H = [Σ V_t[E0, E1] ∇E_t(q̄); M⁻¹ p̄]`` this is ``h (Σ V_t[·] {L, E_t} + {L, T})(ȳ)``,
@@ -158,7 +159,10 @@ def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
         return ()
     q, p = list(system.q), list(system.p)
     out = []
-    for inv in angular_momenta(system):
+    bilinear = set(bilinear_invariants(system))
+    for inv in first_integrals(system):
+        if inv.name not in bilinear:
+            continue
         L = inv.expr
         # {L, E(q)} = -Σ_k ∂L/∂p_k ∂E/∂q_k
         if all(sp.expand(sum(sp.diff(L, pk) * sp.diff(t.E, qk) for qk, pk in zip(q, p))) == 0
@@ -210,6 +214,8 @@ def build(system: Hamiltonian) -> Scheme:
         notes.append("one-coordinate terms: U[q0, q1], the cancelled divided difference (κU'(q̄) in 1 DOF)")
     if "polynomial" in kinds:
         notes.append("polynomial coupling terms: exact average-vector-field integral")
+    # Linear first integrals (total momentum) are added by gradient_scheme where this ∇̄H
+    # respects them (cᵀJ∇̄H ≡ 0, shown exactly): where the terms are translation invariant.
     traits = Traits(order=2, symmetric=True, symplectic=False, energy_preserving=True,
                     preserved=("H",) + momenta, solve="newton", discrete_gradient=True,
                     notes=tuple(notes))

@@ -22,7 +22,7 @@ import sympy as sp
 from ..derive import gradient, invariants, vector_field
 from ..problem import Hamiltonian
 from .base import (STEP, Scheme, Traits, gradient_scheme, increment_symbol, is_linear_field,
-                   is_quadratic_field, quadratic_invariants)
+                   is_quadratic_field, linear_invariants, quadratic_invariants)
 
 NAME = "kahan"
 SUMMARY = "Kahan's method (linearly implicit for quadratic f: one linear solve per step)"
@@ -53,7 +53,8 @@ def build(system: Hamiltonian, form: str | None = None) -> Scheme:
         raise MethodNotApplicable("Kahan's Jacobian form needs a quadratic vector field (cubic H); "
                                   "use form='rk' (Newton on the one-step form)")
     linear = is_linear_field(system)
-    preserved = quadratic_invariants(system) if linear else ()
+    # linear first integrals cᵀy: cᵀf ≡ 0 (so cᵀf' ≡ 0) and both forms give cᵀΔy = 0
+    preserved = quadratic_invariants(system) if linear else linear_invariants(system)
     base = dict(order=2, symmetric=True, symplectic=linear, energy_preserving="H" in preserved,
                 preserved=preserved)
     if form == "jacobian":

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from ..derive import constraint_jacobian, invariants, separable_split
+from ..derive import constraint_jacobian, constraint_monitors, invariants, separable_split
 from ..problem import Hamiltonian
 from .base import STEP, Scheme, Traits
 
@@ -105,8 +105,8 @@ def _build(system: Hamiltonian, name: str, project: bool) -> Scheme:
     scale = sp.Max(*[sp.Abs(s) for s in system.q]) if len(system.q) > 1 else sp.Abs(system.q[0])
     traits = Traits(
         order=2, symmetric=project, symplectic=project, energy_preserving=False,
-        preserved=tuple(inv.name for inv in invariants(system)
-                        if inv.name.startswith("g") and (project or not inv.name.endswith("_v"))),
+        preserved=tuple(inv.name for inv in constraint_monitors(system)
+                        if project or not inv.name.endswith("_v")),
         solve="newton",
         notes=(("Newton on the scaled multipliers ν = h²λ/2 only (q1 is explicit in λ); "
                 "velocity multipliers μ by a symbolic projection") if project else

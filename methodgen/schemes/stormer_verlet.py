@@ -3,7 +3,9 @@
     p½ = p0 - h/2 ∇U(q0),   q1 = q0 + h ∇T(p½),   p1 = p½ - h/2 ∇U(q1)
 
 Symmetric, symplectic, order 2; preserves first integrals of the form
-``qᵀ D p`` (angular momentum) exactly [HLW06, Thm IV.2.4].  The reference
+``qᵀ D p`` (angular momentum) exactly [HLW06, Thm IV.2.4], and linear ones ``cᵀp``
+whose c annihilates ∇U (total momentum) — see
+:func:`methodgen.schemes.base.splitting_invariants`.  The reference
 point for cost: no solve at all.
 """
 
@@ -13,7 +15,7 @@ import sympy as sp
 
 from ..derive import invariants, separable_split
 from ..problem import Hamiltonian
-from .base import STEP, Scheme, Traits, bilinear_invariants
+from .base import STEP, Scheme, Traits, splitting_invariants
 
 NAME = "stormer-verlet"
 SUMMARY = "explicit Störmer–Verlet for separable H (symplectic, symmetric, order 2, no solve)"
@@ -37,7 +39,7 @@ def build(system: Hamiltonian) -> Scheme:
     dq = h * gradT.xreplace(dict(zip(p0, phalf)))
     q1 = sp.Matrix(q0) + dq
     dp = -h / 2 * gradU - h / 2 * gradU.xreplace(dict(zip(q0, q1)))
-    preserved = bilinear_invariants(system)
+    preserved = splitting_invariants(system)
     traits = Traits(order=2, symmetric=True, symplectic=True, energy_preserving=False,
                     preserved=preserved, solve="explicit")
     return Scheme(system=system, method=NAME, traits=traits, unknowns=(), residual=sp.zeros(0, 1),

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from ..derive import gradient
 from ..problem import Hamiltonian
-from .base import Scheme, Traits, gradient_scheme, is_linear_field, quadratic_invariants
+from .base import Scheme, Traits, gradient_scheme, is_linear_field, linear_invariants, quadratic_invariants
 
 NAME = "trapezoidal"
 SUMMARY = "trapezoidal rule (symmetric, order 2, conjugate to the midpoint rule)"
@@ -28,7 +28,8 @@ def build(system: Hamiltonian) -> Scheme:
         return (grad + grad.xreplace(dict(zip(y0, y1)))) / 2
 
     linear = is_linear_field(system)
-    preserved = quadratic_invariants(system) if linear else ()
+    # linear first integrals cᵀy: cᵀf ≡ 0, so cᵀ(y1 - y0) = h/2 cᵀ(f(y0) + f(y1)) = 0
+    preserved = quadratic_invariants(system) if linear else linear_invariants(system)
     traits = Traits(order=2, symmetric=True, symplectic=linear, energy_preserving="H" in preserved,
                     preserved=preserved, solve="newton",
                     notes=("linear vector field: identical to the midpoint rule",) if linear else ())

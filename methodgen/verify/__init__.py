@@ -7,6 +7,8 @@ one per claim that applies to the scheme and its system:
 claim                                  module
 =====================================  ===============================================
 1  q × p first integral (generic V)    :mod:`.invariants`
+1b detected total momenta and declared :mod:`.invariants`
+   invariants: {I, H} = 0
 2, 4  discrete-gradient identity,      :mod:`.discrete_gradients`
       consistency, κ of Ex. 1.1
 3  invariants kept by the step         :mod:`.invariants`
@@ -68,7 +70,8 @@ from .collocation import energy_collocation_certificates, gauss_certificates
 from .timetransform import REF as TIME_TRANSFORM_REF, time_transform_certificates
 from .constrained import constrained_certificates, constrained_items
 from .discrete_gradients import dg_certificates, dg_items, dg_symmetry
-from .invariants import angular_momentum_generic, angular_momentum_user, invariant_certificates, invariant_items
+from .invariants import (REF_FIRST_INTEGRALS, angular_momentum_generic, angular_momentum_user,
+                         first_integral_certificates, invariant_certificates, invariant_items)
 from .kahan import (forms_agree_generic, forms_agree_user, modified_energy, modified_energy_fast,
                     modified_energy_structural, modified_volume, modified_volume_structural)
 from .maps import explicit_symmetry, residual_symmetry, symplectic_certificate
@@ -230,6 +233,11 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
             lambda: angular_momentum_generic(d) if radial() and isotropic() else [])
         add("q × p first integrals of this H", f"{REF_NOTES}, Ex. 1.1.1",
             lambda: angular_momentum_user(system) if radial() else [])
+    # Detected total momenta and declared invariants: {I, H} = 0 proved or refuted.  (One degree
+    # of freedom has no momentum to detect: a linear c·p commutes with H only if H is free of q.)
+    if system.declared_invariants or d >= 2:
+        add("detected and declared invariants are first integrals of this H: {I, H} = 0", REF_FIRST_INTEGRALS,
+            lambda: first_integral_certificates(system))
     # Claims 2, 4: discrete gradients.
     if traits.discrete_gradient and scheme.discrete_gradient is not None:
         what = "identity, consistency and κ" if m == "energy-momentum" else "identity and consistency"

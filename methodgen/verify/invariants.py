@@ -15,14 +15,18 @@ import time
 
 import sympy as sp
 
-from ..derive import angular_momenta, gradient, poisson_bracket, radial_profile, separable_split
+from ..derive import (angular_momenta, constraint_monitors, declared, detected_momenta, gradient,
+                      poisson_bracket, radial_profile, separable_split)
 from ..problem import Hamiltonian
 from .common import REF_NOTES, at, system_domain, y1_symbols
 from .exact import Domain, certify, fmt_point, guarded
 from .report import Certificate
 
 __all__ = ["angular_momentum_generic", "angular_momentum_user", "invariant_preserved",
-           "invariant_certificates", "invariant_items"]
+           "invariant_certificates", "invariant_items", "first_integral_certificates",
+           "splitting_invariant"]
+
+REF_FIRST_INTEGRALS = "HLW06 §IV.1 (first integrals: {I, H} = 0)"
 
 
 def angular_momentum_generic(dim: int) -> list[Certificate]:
@@ -49,6 +53,84 @@ def angular_momentum_user(system: Hamiltonian) -> list[Certificate]:
                     poisson_bracket(system, inv.expr, system.H), system_domain(system),
                     f"{REF_NOTES}, Ex. 1.1.1")
             for inv in angular_momenta(system)]
+
+
+def first_integral_certificates(system: Hamiltonian) -> list[Certificate]:
+    """``{I, H} = 0`` (and ``{I, g_i} = 0`` for each constraint) for every detected total
+    momentum and every declared invariant: proved, or refuted with a counterexample point.
+
+    A declared invariant that is refuted here is still monitored, but no method claims it
+    (it is not ``exact`` in :func:`methodgen.derive.invariants`).
+    """
+    out = []
+    cons = list(system.constraints)
+    for kind, invs in (("detected", detected_momenta(system)), ("declared", declared(system))):
+        for inv in invs:
+            brackets = [poisson_bracket(system, inv.expr, system.H)]
+            what = f"{{{inv.name}, H}} = 0"
+            if cons:
+                brackets += [poisson_bracket(system, inv.expr, g) for g in cons]
+                what += " and " + ", ".join(f"{{{inv.name}, g{i + 1}}} = 0" for i in range(len(cons)))
+            cert = certify(f"{kind} invariant {inv.name} = {inv.expr} is a first integral of this H: {what}",
+                           brackets if len(brackets) > 1 else brackets[0], system_domain(system),
+                           REF_FIRST_INTEGRALS)
+            cert.details.setdefault("invariant", inv.name)
+            cert.details.setdefault("kind", kind)
+            out.append(cert)
+    return out
+
+
+def splitting_invariant(scheme, name: str, expr: sp.Expr) -> Certificate | None:
+    """An exact route for a kick–drift splitting (Störmer–Verlet) and ``I`` affine in q and in p.
+
+    The stages recorded in ``scheme.structure`` are recomposed from ``H = T(p) + U(q)`` and
+    checked to *be* the scheme's increment.  A drift ``q += τ∇T(p)`` changes such an I by
+    exactly ``τ ∂I/∂q(p)·∇T(p)`` and a kick ``p -= τ∇U(q)`` by ``-τ ∂I/∂p(q)·∇U(q)``, so
+    I is kept when both expressions vanish identically — proved by :func:`certify` (or
+    refuted).  None when the route does not apply.
+    """
+    st = scheme.structure or {}
+    if st.get("kind") != "splitting":
+        return None
+    system = scheme.system
+    sep = separable_split(system)
+    if sep is None:
+        return None
+    d = system.dim
+    try:
+        poly = sp.Poly(expr, *system.y)
+    except sp.PolynomialError:
+        return None
+    if poly.free_symbols_in_domain & set(system.y) or \
+            not all(sum(m[:d]) <= 1 and sum(m[d:]) <= 1 for m in poly.monoms()):
+        return None
+    from .structural import _same
+    t0 = time.perf_counter()
+    qs, ps = list(system.q), list(system.p)
+    gradU = sp.Matrix([sp.diff(sep.U, s) for s in qs])
+    gradT = sp.Matrix([sp.diff(sep.T, s) for s in ps])
+    q, p = sp.Matrix(qs), sp.Matrix(ps)
+    for kind, a in st["stages"]:
+        if kind == "kick":
+            p = p - a * gradU.xreplace(dict(zip(qs, q)))
+        elif kind == "drift":
+            q = q + a * gradT.xreplace(dict(zip(ps, p)))
+        else:
+            return None
+    inc = list(q - sp.Matrix(qs)) + list(p - sp.Matrix(ps))
+    if not all(_same(x, y) for x, y in zip(inc, scheme.increment)):
+        return None
+    drift = sp.Add(*[sp.diff(expr, s) * g for s, g in zip(qs, gradT)])
+    kick = sp.Add(*[sp.diff(expr, s) * g for s, g in zip(ps, gradU)])
+    cert = certify(f"{scheme.method}: {name}(y1) = {name}(y0), {name} = {expr} (kick–drift splitting: "
+                   f"∂{name}/∂q·∇T = 0 and ∂{name}/∂p·∇U = 0)", [drift, kick], system_domain(system),
+                   "HLW06 Thm IV.2.4 (partitioned RK) / splitting stages")
+    if cert.status == "proved":
+        cert.method = ("structural: stages recomposed and checked equal to the increment; each stage changes "
+                       f"{name} by τ·(∂{name}/∂q·∇T) or −τ·(∂{name}/∂p·∇U) exactly ({name} affine in q and "
+                       "in p) + " + cert.method)
+    cert.seconds = time.perf_counter() - t0
+    return cert
 
 
 def _is_quadratic(expr, syms) -> bool:
@@ -195,12 +277,15 @@ def invariant_items(scheme) -> list[tuple[str, Certificate]]:
     """
     out = []
     invs = {inv.name: inv.expr for inv in scheme.invariants}
+    cons = {inv.name for inv in constraint_monitors(scheme.system)}
     for name in scheme.traits.preserved:
-        if name.startswith("g") or name not in invs:
+        if name in cons or name not in invs:
             continue
         if name == "H" and scheme.traits.discrete_gradient:
             continue
         cert = _structural(scheme, name, invs[name])
+        if cert is None:
+            cert = splitting_invariant(scheme, name, invs[name])
         if cert is None:
             cert = invariant_preserved(scheme, name, invs[name])
         # A claimed invariant is never left unchecked: without an exact route it is
