@@ -63,6 +63,7 @@ def test_growth_exponent_fit():
     assert abs(bench.growth_exponent(t, 1e-15 * (2 + np.sin(t)))) < 0.1
 
 
+@pytest.mark.slow   # 12 s; bench --brouwer, the 1e6-step version is slow too
 def test_brouwer_stepper_follows_sqrt_t_below_the_plain_stepper():
     """RMS energy error of the exact numerical states (extended precision): √t growth,
     and compensated summation keeps it well below the plain-summation stepper."""

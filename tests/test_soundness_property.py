@@ -276,7 +276,7 @@ SETTINGS = dict(derandomize=True, deadline=None,
                                        HealthCheck.data_too_large, HealthCheck.function_scoped_fixture])
 
 
-@settings(max_examples=20, **FAST, **SETTINGS)
+@settings(max_examples=10, **FAST, **SETTINGS)
 @given(st.data())
 def test_discrete_gradients_are_exact_where_the_code_evaluates_them(data):
     system = data.draw(systems(max_dim=2, depth=3), label="system")
