@@ -154,10 +154,16 @@ def _time_transform_report(scene, module, h, y_final, steps_done, report_inv) ->
             "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
 
 
+#: An invariant whose initial value is below this times the state's scale starts at 0.
+_ZERO_SCALE = 1e-12
+
+
 def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, steps_done, params=None,
             stages=None) -> dict:
     report_inv = {}
     problems = []
+    # the state's scale: an invariant whose start is at round-off level of it "starts at 0"
+    scale = max([1.0] + [abs(float(v)) for v in y_final if math.isfinite(float(v))])
     for name, v in (inv_acc or {}).items():
         init, abs_err, bad = v["initial"], v["max_abs_error"], v.get("nonfinite_step")
         if bad is not None:
@@ -167,9 +173,14 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
             problems.append(f"{name} is not finite at step {bad}"
                             + (f" ({name}(y0) = {init})" if bad == 0 else ""))
             continue
-        rel = abs_err / abs(init) if init != 0 else (0.0 if abs_err == 0 else math.inf)
+        if abs(init) <= _ZERO_SCALE * scale:
+            # A quantity that starts at 0 (total momentum at rest, a constraint): no relative
+            # error -- only the absolute one means something (shown as "—", null in --json).
+            rel = None
+        else:
+            rel = _finite_or_none(abs_err / abs(init))
         report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": abs_err,
-                            "max_rel_error": _finite_or_none(rel), "status": "ok"}
+                            "max_rel_error": rel, "status": "ok"}
     y_final = [float(v) for v in y_final]
     if not all(math.isfinite(v) for v in y_final):
         problems.append("the final state is not finite")
@@ -544,7 +555,7 @@ def _print_run(rep: dict) -> None:
         else:
             err_s = f"{v['max_abs_error']:14.3e}"
             rel = v["max_rel_error"]
-            rel_s = f"{rel:14.3e}" if rel is not None else f"{'inf':>14}"
+            rel_s = f"{rel:14.3e}" if rel is not None else f"{'—':>14}"   # starts at 0: no relative error
         print(f"{name:>10} {_num(v['initial'], '.15g', 22)} {_num(v['final'], '.15g', 22)} {err_s} {rel_s}")
     if tt is not None:
         err = tt.get("H_phys_max_abs_error")

@@ -173,7 +173,8 @@ def _check_keys(table: dict, allowed: dict, where: str) -> None:
         if key in table:
             value = table[key]
             if isinstance(value, bool) or not isinstance(value, typ):
-                want = typ.__name__ if isinstance(typ, type) else " or ".join(t.__name__ for t in typ)
+                want = (typ.__name__ if isinstance(typ, type) else
+                        "number" if set(typ) == {int, float} else " or ".join(t.__name__ for t in typ))
                 raise SceneError(f"{where}.{key} must be a {want}, got {type(value).__name__} {value!r}")
 
 

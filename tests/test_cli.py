@@ -76,3 +76,17 @@ def test_listings():
     assert {"kepler", "harmonic"} <= names
     res = run("methods", "--json")
     assert {"midpoint", "energy-momentum"} <= {m["name"] for m in json.loads(res.stdout)["methods"]}
+
+
+def test_a_quantity_that_starts_at_zero_has_no_relative_error(tmp_path):
+    """K of a time-transformed run starts at 0: its relative error is "—" (null in --json), not
+    inf or a ratio of round-off; a quantity that does not start at 0 keeps its relative error."""
+    res = run("run", "kepler-eccentric", "--steps", "314", "--json")
+    assert res.returncode == 0, res.stderr
+    inv = json.loads(res.stdout)["invariants"]
+    assert abs(inv["H"]["initial"]) < 1e-15 and inv["H"]["max_rel_error"] is None
+    assert inv["H"]["max_abs_error"] is not None
+    assert inv["H_phys"]["max_rel_error"] is not None and inv["H_phys"]["max_rel_error"] < 1e-12
+    text = run("run", "kepler-eccentric", "--steps", "314").stdout
+    row = next(line for line in text.splitlines() if line.split() and line.split()[0] == "H")
+    assert row.rstrip().endswith("—")

@@ -36,7 +36,7 @@ def test_good_scene(tmp_path):
 @pytest.mark.parametrize("edit, fragment", [
     (lambda t: t.replace('name = "s"', 'name = "s"\ncolour = "red"'), "unknown key(s) ['colour']"),
     (lambda t: t.replace("steps = 10", "steps = 10\nstep = 3"), "unknown key(s) ['step'] in [run]"),
-    (lambda t: t.replace("h = 0.1", 'h = "0.1"'), "[run].h must be a int or float"),
+    (lambda t: t.replace("h = 0.1", 'h = "0.1"'), "[run].h must be a number"),
     (lambda t: t.replace("h = 0.1", "h = 0"), "non-zero"),
     (lambda t: t.replace("steps = 10", "steps = -1"), ">= 0"),
     (lambda t: t.replace("y0 = [1.0, 0.0]", "y0 = [1.0]"), "has 1 values"),
