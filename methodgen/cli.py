@@ -154,6 +154,18 @@ def _time_transform_report(scene, module, h, y_final, steps_done, report_inv) ->
             "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
 
 
+def _claim(module, name: str) -> dict:
+    """What the method promises for a monitored quantity (from the module's TRAITS):
+    ``"exact"`` (kept to round-off; ``methodgen verify`` proves it), ``"approximate"`` (kept
+    to a stated approximation error) or ``"monitored"`` (no promise)."""
+    traits = getattr(module, "TRAITS", {}) or {}
+    if name in traits.get("preserved", ()):
+        return {"claim": "exact"}
+    if name in traits.get("approximate", ()):
+        return {"claim": "approximate"}
+    return {"claim": "monitored"}
+
+
 #: An invariant whose initial value is below this times the state's scale starts at 0.
 _ZERO_SCALE = 1e-12
 
@@ -180,7 +192,7 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         else:
             rel = _finite_or_none(abs_err / abs(init))
         report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": abs_err,
-                            "max_rel_error": rel, "status": "ok"}
+                            "max_rel_error": rel, "status": "ok", **_claim(module, name)}
     y_final = [float(v) for v in y_final]
     if not all(math.isfinite(v) for v in y_final):
         problems.append("the final state is not finite")

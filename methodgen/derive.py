@@ -430,7 +430,9 @@ def declared(system: Hamiltonian) -> tuple[Invariant, ...]:
     """The user's declared invariants; ``exact`` only where ``{I, H} = 0`` (and ``{I, g_i} = 0``
     for every constraint) is shown symbolically — else ``why`` says what failed."""
     out = []
-    others = [("H", system.H)] + [(f"g{i + 1}", g) for i, g in enumerate(system.constraints)]
+    # The Hamiltonian's name in the messages: K for a time-transformed system (its H is K).
+    hname = "K" if system.time_transform is not None else "H"
+    others = [(hname, system.H)] + [(f"g{i + 1}", g) for i, g in enumerate(system.constraints)]
     for dec in system.declared_invariants:
         failed, unknown = [], []
         for label, F in others:
@@ -440,7 +442,7 @@ def declared(system: Hamiltonian) -> tuple[Invariant, ...]:
             elif status == "unknown":
                 unknown.append(label)
         if not failed and not unknown:
-            why = "declared; {%s, H} = 0 exactly" % dec.name + (
+            why = "declared; {%s, %s} = 0 exactly" % (dec.name, hname) + (
                 " and it commutes with every constraint" if system.constraints else "")
             out.append(Invariant(dec.name, dec.expr, True, why))
             continue

@@ -90,3 +90,14 @@ def test_a_quantity_that_starts_at_zero_has_no_relative_error(tmp_path):
     text = run("run", "kepler-eccentric", "--steps", "314").stdout
     row = next(line for line in text.splitlines() if line.split() and line.split()[0] == "H")
     assert row.rstrip().endswith("—")
+
+
+def test_json_says_what_the_method_promises_for_each_invariant():
+    """energy-momentum keeps H and q × p (claim "exact"); the midpoint rule keeps q × p but H only
+    to its error ("monitored"); AVF with quadrature keeps H "approximate"."""
+    em = json.loads(run("run", "kepler", "--steps", "50", "--json").stdout)["invariants"]
+    mp = json.loads(run("run", "kepler", "--steps", "50", "--method", "midpoint", "--json").stdout)["invariants"]
+    assert {k: v["claim"] for k, v in em.items()} == dict.fromkeys(("H", "Lx", "Ly", "Lz"), "exact")
+    assert mp["H"]["claim"] == "monitored" and mp["Lz"]["claim"] == "exact"
+    avf = json.loads(run("run", "kepler", "--steps", "50", "--method", "avf", "--json").stdout)["invariants"]
+    assert avf["H"]["claim"] == "approximate"
