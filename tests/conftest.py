@@ -26,6 +26,21 @@ def marked(pairs):
     return [pytest.param(*p, marks=pytest.mark.slow) if p[0] in HEAVY_SCENES else p for p in pairs]
 
 KEPLER_Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
+#: The henon-heiles-2d scene's regular orbit at H = 1/8, and the time of the order tests.
+HH_Y0 = np.array([0.0, 0.0, 0.4330127018922193, 0.25])
+HH_T = 10.0
+
+
+@pytest.fixture(scope="session")
+def hh_reference():
+    """Hénon–Heiles 2-DOF from HH_Y0 at HH_T by DOP853 at rtol 2.3e-14 (the order tests' reference)."""
+    from scipy.integrate import solve_ivp
+
+    def f(t, y):
+        q1, q2, p1, p2 = y
+        return [p1, p2, -q1 - 2 * q1 * q2, -q2 - q1**2 + q2**2]
+
+    return solve_ivp(f, (0, HH_T), HH_Y0, method="DOP853", rtol=2.3e-14, atol=1e-16).y[:, -1]
 
 
 def scene_system(name):

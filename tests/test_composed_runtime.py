@@ -14,17 +14,15 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 import methodgen as mg
+from conftest import HH_T, HH_Y0
 from methodgen.compositions import Composition, composition
 from methodgen.emit import module_filename
 
 E = 0.6                                      # Kepler eccentricity (the bench problem's)
 KEPLER_Y0 = np.array([1 - E, 0.0, 0.0, 0.0, np.sqrt((1 + E) / (1 - E)), 0.0])
 PERIOD = 2 * np.pi
-HH_Y0 = np.array([0.0, 0.0, 0.4330127018922193, 0.25])
-HH_T = 10.0
 #: The error at 2N must stay above this (the reference's own error is ~1e-14) and 10x
 #: above the run's round-off, estimated as the difference between the runs with and
 #: without compensated summation, for the ratio to mean anything.
@@ -62,16 +60,6 @@ def composed(tmp_path_factory):
         return cache[key]
 
     return get
-
-
-@pytest.fixture(scope="module")
-def hh_reference():
-    def f(t, y):
-        q1, q2, p1, p2 = y
-        return [p1, p2, -q1 - 2 * q1 * q2, -q2 - q1**2 + q2**2]
-
-    sol = solve_ivp(f, (0, HH_T), HH_Y0, method="DOP853", rtol=2.3e-14, atol=1e-16)
-    return sol.y[:, -1]
 
 
 def _errors(mod, y0, T, N, ref):

@@ -8,15 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 import sympy as sp
-from scipy.integrate import solve_ivp
 
 import methodgen as mg
+from conftest import HH_T, HH_Y0
 from methodgen.errors import InputError
 from methodgen.verify import verify
 from methodgen.verify.collocation import energy_collocation_certificates
 from methodgen.verify.report import PROVED, REFUTED
 
-HH_Y0 = np.array([0.0, 0.0, 0.4330127018922193, 0.25])
 
 
 @pytest.fixture(scope="module")
@@ -38,20 +37,11 @@ def module(tmp_path_factory):
     return get
 
 
-@pytest.fixture(scope="module")
-def hh_reference():
-    def f(t, y):
-        q1, q2, p1, p2 = y
-        return [p1, p2, -q1 - 2 * q1 * q2, -q2 - q1**2 + q2**2]
-
-    return solve_ivp(f, (0, 10.0), HH_Y0, method="DOP853", rtol=2.3e-14, atol=1e-16).y[:, -1]
-
-
 @pytest.mark.parametrize("s, N", [(1, 20), (2, 20), (3, 20), pytest.param(4, 10, marks=pytest.mark.slow)])
 def test_order_and_exact_energy(module, hh, hh_reference, s, N):
     mod = module(hh, s)
     assert mod.ORDER == 2 * s and mod.TRAITS["preserved"] == ["H"] and mod.TRAITS["energy_preserving"]
-    errs = [np.abs(mod.integrate(HH_Y0, 10.0 / n, n, check_resolution=False)[-1] - hh_reference).max()
+    errs = [np.abs(mod.integrate(HH_Y0, HH_T / n, n, check_resolution=False)[-1] - hh_reference).max()
             for n in (N, 2 * N)]
     assert errs[1] > 3e-14 and errs[0] / errs[1] >= 2 ** (2 * s - 0.7), errs
     H = mod.hamiltonian(mod.integrate(HH_Y0, 0.3, 1000))

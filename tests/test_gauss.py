@@ -6,16 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from scipy.integrate import solve_ivp
 
 import methodgen as mg
+from conftest import HH_T, HH_Y0
 from methodgen.errors import InputError
 from methodgen.schemes.gauss import coefficients
 from methodgen.verify.collocation import gauss_certificates, moments
 from methodgen.verify.report import NUMERICAL, PROVED, REFUTED
 
-HH_Y0 = np.array([0.0, 0.0, 0.4330127018922193, 0.25])
-HH_T = 10.0
 E = 0.6
 KEPLER_Y0 = np.array([1 - E, 0.0, 0.0, 0.0, np.sqrt((1 + E) / (1 - E)), 0.0])
 
@@ -33,15 +31,6 @@ def gauss(tmp_path_factory):
         return cache[scene, stages, backend]
 
     return get
-
-
-@pytest.fixture(scope="module")
-def hh_reference():
-    def f(t, y):
-        q1, q2, p1, p2 = y
-        return [p1, p2, -q1 - 2 * q1 * q2, -q2 - q1**2 + q2**2]
-
-    return solve_ivp(f, (0, HH_T), HH_Y0, method="DOP853", rtol=2.3e-14, atol=1e-16).y[:, -1]
 
 
 @pytest.mark.parametrize("s, N", [(1, 200), (2, 50), (3, 25), (4, 16),

@@ -264,12 +264,17 @@ class Scheme:
 # Discrete-gradient–type methods: y1 = y0 + h J ∇̄H(y0, y1)
 # ---------------------------------------------------------------------------
 
-def _is_quadratic(expr: sp.Expr, syms) -> bool:
+def _degree_at_most(expr: sp.Expr, syms, k: int) -> bool:
+    """``expr`` is a polynomial of total degree ≤ k in ``syms`` with coefficients free of them."""
     try:
         poly = sp.Poly(expr, *syms)
     except sp.PolynomialError:
         return False
-    return poly.total_degree() <= 2 and not (poly.free_symbols_in_domain & set(syms))
+    return poly.total_degree() <= k and not (poly.free_symbols_in_domain & set(syms))
+
+
+def _is_quadratic(expr: sp.Expr, syms) -> bool:
+    return _degree_at_most(expr, syms, 2)
 
 
 def quadratic_invariants(system: Hamiltonian) -> tuple[str, ...]:
@@ -285,11 +290,7 @@ def quadratic_invariants(system: Hamiltonian) -> tuple[str, ...]:
 
 
 def _is_linear(expr: sp.Expr, syms) -> bool:
-    try:
-        poly = sp.Poly(expr, *syms)
-    except sp.PolynomialError:
-        return False
-    return poly.total_degree() <= 1 and not (poly.free_symbols_in_domain & set(syms))
+    return _degree_at_most(expr, syms, 1)
 
 
 def linear_invariants(system: Hamiltonian) -> tuple[str, ...]:
@@ -414,7 +415,7 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     grad_bar = dg(y0, y1)
     h = STEP
     sep = separable_split(system)
-    q0, p0 = sp.Matrix(system.q), sp.Matrix(system.p)
+    p0 = sp.Matrix(system.p)
     p1s = set(y1[d:]) | set(system.p)
     reducible = (
         reduce and sep is not None and sep.Minv is not None

@@ -46,6 +46,7 @@ from ..derive import invariants, vector_field
 from ..errors import InputError
 from ..problem import Hamiltonian
 from .base import STEP, Scheme, Traits
+from .gauss import _f64
 
 NAME = "energy-collocation"
 SUMMARY = ("energy-preserving (AVF) collocation, stages=s at Gauss nodes (symmetric, order 2s, "
@@ -131,10 +132,6 @@ def nodes_needed(stages: int, degree: int) -> int:
     return max(1, -(-((stages - 1) + degree * stages + 1) // 2))
 
 
-def _f64(x) -> sp.Float:
-    return sp.Float(float(x), 17)
-
-
 def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
     c, ell, Lam, b = basis(stages)
     n = 2 * system.dim
@@ -142,7 +139,6 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
     f = vector_field(system)
     y0 = list(system.y)
     Z = [[sp.Symbol(f"_z{j + 1}_{v.name}", real=True) for v in y0] for j in range(stages)]
-    u = {v: v + sp.Add(*[Lam[k] * Z[k][i] for k in range(stages)]) for i, v in enumerate(y0)}
     degree = field_degree(system)
     exact = degree is not None
     # A Gauss–Legendre rule with enough nodes is exact for a polynomial field (the integrand

@@ -15,8 +15,7 @@ import time
 
 import sympy as sp
 
-from ..derive import (angular_momenta, constraint_monitors, declared, detected_momenta, gradient,
-                      poisson_bracket, radial_profile, separable_split)
+from ..derive import (angular_momenta, constraint_monitors, declared, detected_momenta, poisson_bracket)
 from ..problem import Hamiltonian
 from .common import REF_NOTES, at, system_domain, y1_symbols
 from .exact import Domain, certify, fmt_point, guarded
@@ -89,13 +88,9 @@ def splitting_invariant(scheme, name: str, expr: sp.Expr) -> Certificate | None:
     I is kept when both expressions vanish identically — proved by :func:`certify` (or
     refuted).  None when the route does not apply.
     """
-    st = scheme.structure or {}
-    if st.get("kind") != "splitting":
+    if (scheme.structure or {}).get("kind") != "splitting":
         return None
     system = scheme.system
-    sep = separable_split(system)
-    if sep is None:
-        return None
     d = system.dim
     try:
         poly = sp.Poly(expr, *system.y)
@@ -104,22 +99,12 @@ def splitting_invariant(scheme, name: str, expr: sp.Expr) -> Certificate | None:
     if poly.free_symbols_in_domain & set(system.y) or \
             not all(sum(m[:d]) <= 1 and sum(m[d:]) <= 1 for m in poly.monoms()):
         return None
-    from .structural import _same
+    from .maps import recompose_splitting
     t0 = time.perf_counter()
-    qs, ps = list(system.q), list(system.p)
-    gradU = sp.Matrix([sp.diff(sep.U, s) for s in qs])
-    gradT = sp.Matrix([sp.diff(sep.T, s) for s in ps])
-    q, p = sp.Matrix(qs), sp.Matrix(ps)
-    for kind, a in st["stages"]:
-        if kind == "kick":
-            p = p - a * gradU.xreplace(dict(zip(qs, q)))
-        elif kind == "drift":
-            q = q + a * gradT.xreplace(dict(zip(ps, p)))
-        else:
-            return None
-    inc = list(q - sp.Matrix(qs)) + list(p - sp.Matrix(ps))
-    if not all(_same(x, y) for x, y in zip(inc, scheme.increment)):
+    rec = recompose_splitting(scheme)
+    if rec is None:
         return None
+    qs, ps, gradU, gradT = rec.q, rec.p, rec.gradU, rec.gradT
     drift = sp.Add(*[sp.diff(expr, s) * g for s, g in zip(qs, gradT)])
     kick = sp.Add(*[sp.diff(expr, s) * g for s, g in zip(ps, gradU)])
     cert = certify(f"{scheme.method}: {name}(y1) = {name}(y0), {name} = {expr} (kick–drift splitting: "

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import random
 import time
+from typing import NamedTuple
 
 import mpmath as mp
 import sympy as sp
 
-from ..derive import vector_field
+from ..derive import separable_split
 from .common import system_domain
 from .exact import certify, fmt_point
 from .numeric import DPS, Stepper, param_point, random_state
@@ -70,20 +71,21 @@ def _shear_lemma(d: int) -> bool:
 _SHEAR: dict[int, bool] = {}
 
 
-def splitting_symplectic(scheme, claim: str) -> Certificate | None:
-    """Explicit splitting methods: the step is a composition of symplectic shears (or None).
+class Splitting(NamedTuple):
+    """A kick–drift splitting recomposed from ``H = T(p) + U(q)`` (:func:`recompose_splitting`)."""
 
-    The scheme records its stages (``structure = {"kind": "splitting", "stages":
-    [("kick", a), ("drift", b), ...]}``).  The composition of the kicks
-    ``(q, p) ↦ (q, p - a∇U(q))`` and drifts ``(q, p) ↦ (q + b∇T(p), p)`` is recomputed
-    here from ``H = T(p) + U(q)`` and checked to *be* the scheme's increment; each
-    stage's Jacobian is a shear ``[[I, 0], [-a∇²U, I]]`` / ``[[I, b∇²T], [0, I]]`` whose
-    block is symmetric (checked: the Hessians are symmetric), and shears with a
-    symmetric block are symplectic (proved for a generic symmetric block).  A product
-    of symplectic matrices is symplectic (chain rule), so Φ' is.
-    """
-    from ..derive import separable_split
-    t0 = time.perf_counter()
+    sep: object
+    q: list
+    p: list
+    gradU: sp.Matrix
+    gradT: sp.Matrix
+
+
+def recompose_splitting(scheme) -> Splitting | None:
+    """Recompose the stages recorded in ``scheme.structure`` (``{"kind": "splitting", "stages":
+    [("kick", a), ("drift", b), ...]}``) from ``H = T(p) + U(q)`` and check that they *are*
+    the scheme's increment; None when there is no such record, H is not separable, or the
+    recomposition differs (then no structural argument may use the stages)."""
     st = scheme.structure or {}
     if st.get("kind") != "splitting":
         return None
@@ -106,6 +108,28 @@ def splitting_symplectic(scheme, claim: str) -> Certificate | None:
     from .structural import _same
     if not all(_same(x, y) for x, y in zip(inc, scheme.increment)):
         return None
+    return Splitting(sep, qs, ps, gradU, gradT)
+
+
+def splitting_symplectic(scheme, claim: str) -> Certificate | None:
+    """Explicit splitting methods: the step is a composition of symplectic shears (or None).
+
+    The scheme records its stages (``structure = {"kind": "splitting", "stages":
+    [("kick", a), ("drift", b), ...]}``).  The composition of the kicks
+    ``(q, p) ↦ (q, p - a∇U(q))`` and drifts ``(q, p) ↦ (q + b∇T(p), p)`` is recomputed
+    here from ``H = T(p) + U(q)`` and checked to *be* the scheme's increment; each
+    stage's Jacobian is a shear ``[[I, 0], [-a∇²U, I]]`` / ``[[I, b∇²T], [0, I]]`` whose
+    block is symmetric (checked: the Hessians are symmetric), and shears with a
+    symmetric block are symplectic (proved for a generic symmetric block).  A product
+    of symplectic matrices is symplectic (chain rule), so Φ' is.
+    """
+    t0 = time.perf_counter()
+    st = scheme.structure or {}
+    rec = recompose_splitting(scheme)
+    if rec is None:
+        return None
+    system = scheme.system
+    sep, qs, ps = rec.sep, rec.q, rec.p
     hess = [sp.hessian(sep.U, qs), sp.hessian(sep.T, ps)]
     d = system.dim
     if any(sp.expand(Hm[i, j] - Hm[j, i]) != 0 for Hm in hess for i in range(d) for j in range(i + 1, d)):
