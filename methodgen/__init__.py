@@ -7,7 +7,9 @@ Pipeline (data flows one way)::
 
 Public API
 ----------
-Hamiltonian(H, q, p, params=None, constraints=(), name=None, invariants=None)
+Hamiltonian(H, q, p, params=None, constraints=(), name=None, invariants=None, time=None)
+autonomise(system) -> Hamiltonian               (K = H(q, p, t) + e on (q, t; p, e); done by discretize/build)
+PoissonSystem(H, y, S, params=None, invariants=None, name=None)   (y' = S(y)∇H(y), non-canonical)
 discretize(system, method) -> Scheme
 generate(scheme, path=None, backend="numpy") -> module   (backend="numba": compiled loop)
 build(system, method, path=None, backend="numpy") -> module  (reuses an up-to-date file without deriving)
@@ -20,17 +22,18 @@ from ._version import __version__
 from .errors import (GenerationError, InputError, MethodgenError, MethodNotApplicable,
                      ParseError, SceneError)
 from .problem import Hamiltonian
+from .poisson import PoissonSystem
 from .schemes import Scheme, Traits, applicable_methods, discretize, method_names
 from .build import build, generate
 from .scene import Scene, load_scene, scene_names
-from .timetransform import time_transform
+from .timetransform import autonomise, time_transform
 from .verify import verify
 
 __all__ = [
-    "__version__", "Hamiltonian", "discretize", "generate", "build", "Scheme", "Traits",
+    "__version__", "Hamiltonian", "PoissonSystem", "discretize", "generate", "build", "Scheme", "Traits",
     "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods", "verify",
     "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
-    "GenerationError", "time_transform",
+    "GenerationError", "time_transform", "autonomise",
 ]
 
 

@@ -61,7 +61,8 @@ from .schemes import SYMMETRIC_METHODS, composition_for, discretize, method_key
 from .schemes.base import is_linear_field
 
 __all__ = ["Reference", "reference", "work_precision", "long_run", "brouwer", "solver_variants",
-           "ode_rhs", "PEER_FACTORS", "PEER_ORDERS", "composed_steps", "row_label", "targets"]
+           "ode_rhs", "PEER_FACTORS", "PEER_ORDERS", "composed_steps", "row_label", "targets",
+           "extended_scene"]
 
 TOLERANCES = [10.0 ** -k for k in range(3, 14)]
 QUICK_TOLERANCES = [1e-3, 1e-6, 1e-9]
@@ -211,6 +212,31 @@ def _circular_kepler(system, y0, T):
     return np.concatenate([qt, vt / minv])
 
 
+def extended_scene(scene: Scene) -> Scene:
+    """A scene of a time-dependent H as the autonomous scene the methods integrate: system
+    ``K = H(q, p, t) + e`` (:func:`methodgen.autonomise`), ``y0 = (q0, t0, p0, e0 = −H(q0, p0, t0))``
+    (on K = 0, as ``module.initial_state`` starts a run).  Any other scene is returned as it is.
+    A declared time transformation is left out, as the bench does for autonomous H (it measures
+    the methods on the system in its own time)."""
+    import dataclasses
+
+    from .timetransform import autonomise
+
+    if getattr(scene.system, "time", None) is None:
+        return scene
+    K = autonomise(scene.system)
+    tt = K.time_transform
+    user = scene.system
+    H = sp.lambdify([*user.y, user.time, *user.params], user.H, "math")
+    e0 = -float(H(*scene.y0, scene.t0, *(user.param_values[k] for k in user.param_names)))
+    d = user.dim
+    y0 = (*scene.y0[:d], float(scene.t0), *scene.y0[d:], e0)
+    if not all(math.isfinite(v) for v in y0):
+        raise InputError(f"H({', '.join(user.state_names)}, {tt.time}) is not finite at y0, t0 = {scene.t0}")
+    return dataclasses.replace(scene, system=K, y0=y0, time_transform=None, transformed=None,
+                               declared_fingerprint=K.fingerprint())
+
+
 # --- measuring one trajectory -----------------------------------------------------------
 
 def _errors(module, traj, y_ref, monitors=None):
@@ -304,8 +330,10 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     of each method at the issue-14 targets (:func:`targets`).
 
     Without ``peers``, ``orders`` must be None or ``(2,)`` (the scipy comparison is of
-    the base methods).
+    the base methods).  A time-dependent H is benchmarked as its autonomous extension
+    (:func:`extended_scene`): states, errors and the reference are on ``(q, t; p, e)``.
     """
+    scene = extended_scene(scene)
     methods = list(methods or scene.methods)
     if peers:
         return _work_precision_peers(scene, methods, quick=quick, T=T, progress=progress, backend=backend,
@@ -564,6 +592,7 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
     """Energy-error envelope of the geometric methods and of DOP853 at a similar cost."""
     from scipy.integrate import solve_ivp
 
+    scene = extended_scene(scene)
     methods = list(methods or scene.methods)
     h = h or scene.h
     y0 = np.array(scene.y0)
@@ -696,6 +725,7 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
 
 def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
     """Iterations and µs per step of each nonlinear solver, per implicit method."""
+    scene = extended_scene(scene)
     methods = list(methods or scene.methods)
     y0 = np.array(scene.y0)
     rows = []

@@ -165,6 +165,9 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     Parameters
     ----------
     system : Hamiltonian
+        A time-dependent one (``time="t"``) is built as its autonomous extension
+        (:func:`methodgen.autonomise`): the module's state is ``(q, t, p, e)``; start from
+        ``module.initial_state(y0, t0)``.
     method : str
     path : path-like, optional
         Target file; default: the per-user cache, named by the signature.
@@ -177,6 +180,9 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     **options
         Method options (e.g. ``stages=3`` for ``"gauss"``), passed to :func:`methodgen.discretize`.
     """
+    from .timetransform import autonomise
+
+    system = autonomise(system)   # a time-dependent H: its autonomous extension K = H + e
     backend = resolve_backend(backend)
     key = method_key(method, composition_for(order, composition), scheme_options(method, options))
     sig = signature(system, key, backend)

@@ -110,10 +110,12 @@ def dump_json(obj) -> str:
     return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
 
 
-def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: dict | None = None) -> dict:
+def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: dict | None = None,
+                     stride: int = 1) -> dict:
     """Update running max errors of every monitored invariant with ``traj`` (rows of states).
 
-    ``offset`` is the step index of ``traj[0]``.  NaN never disappears into a
+    ``offset`` is the step index of ``traj[0]``, ``stride`` the steps between rows (``--save-every``:
+    the maxima are then over the kept states).  NaN never disappears into a
     maximum (the builtin ``max(x, nan)`` returns x): the first step at which
     an invariant is not finite is recorded, and the maximum is taken over the
     finite values only, to be reported as null with a status.
@@ -131,7 +133,7 @@ def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: di
             err = np.abs(vals - entry["initial"])
             bad = ~np.isfinite(err).all(axis=1)
             if bad.any() and entry["nonfinite_step"] is None:
-                entry["nonfinite_step"] = offset + int(np.argmax(bad))
+                entry["nonfinite_step"] = offset + stride * int(np.argmax(bad))
             good = err[~bad]
             if good.size:
                 entry["max_abs_error"] = max(entry["max_abs_error"], float(good.max()))
@@ -146,12 +148,30 @@ def _time_transform_report(scene, module, h, y_final, steps_done, report_inv) ->
     the fictive time; ``H_phys`` is the original Hamiltonian (on K = 0, H = −e).
     """
     tt = getattr(module, "TIME_TRANSFORM", None)
-    if not tt:
+    if not tt or _time_dependent(scene):
         return None
     t_end = float(y_final[list(module.STATE_NAMES).index(tt["time"])])
     h_phys = report_inv.get("H_phys") or {}
-    return {"g": getattr(scene, "time_transform", None) or tt["g"], "t0": 0.0, "t_final": t_end,
-            "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
+    return {"g": getattr(scene, "time_transform", None) or tt["g"], "t0": getattr(scene, "t0", 0.0),
+            "t_final": t_end, "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
+
+
+def _time_dependent(scene) -> bool:
+    """The scene's H depends on its declared time and is integrated as K = H + e (no time transformation)."""
+    return getattr(scene.system, "time", None) is not None and getattr(scene, "transformed", None) is None
+
+
+def _time_dependent_report(scene, module, y_final) -> dict | None:
+    """``{"time", "energy", "K", "t0", "t_final", "state_names", "y_final"}`` of a run of a
+    time-dependent H (integrated as K = H + e on (q, t; p, e)), else None; the last two are the
+    extended state (the report's own ``y_final`` is in the original variables)."""
+    tt = getattr(module, "TIME_TRANSFORM", None)
+    if not tt or not _time_dependent(scene):
+        return None
+    names = list(module.STATE_NAMES)
+    return {"time": tt["time"], "energy": tt["energy"], "K": str(getattr(module, "HAMILTONIAN", "")),
+            "t0": scene.t0, "t_final": float(y_final[names.index(tt["time"])]),
+            "state_names": names, "y_final": [float(v) for v in y_final]}
 
 
 def _claim(module, name: str) -> dict:
@@ -197,6 +217,11 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
     if not all(math.isfinite(v) for v in y_final):
         problems.append("the final state is not finite")
     tt = _time_transform_report(scene, module, h, y_final, steps_done, report_inv)
+    td = _time_dependent_report(scene, module, y_final)
+    names = list(module.STATE_NAMES)
+    if td is not None:   # states in the original variables (q then p, like y0), the time apart
+        y_final = [v for n, v in zip(names, y_final) if n not in (td["time"], td["energy"])]
+        names = [n for n in names if n not in (td["time"], td["energy"])]
     return {
         "scene": scene.name,
         "method": method,
@@ -205,17 +230,21 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "stages": stages,                                      # gauss / energy-collocation, else None
         # {g, t0, t_final (physical), tau_final (fictive), H_phys_max_abs_error} or None
         "time_transform": tt,
+        # time-dependent H: {time, energy, K, t0, t_final, state_names, y_final (extended)} or None
+        "time_dependent": td,
         "status": "non-finite" if problems else "ok",
         "status_detail": "; ".join(problems) or None,
         "h": h,
         "steps": steps,
         "steps_done": steps_done,
-        # The physical time reached: h * steps, or with a time transformation the state's t.
-        "t_final": h * steps_done if tt is None else tt["t_final"],
+        # The physical time reached: h * steps, or with a time transformation or a time-dependent H
+        # the state's t (from t0).
+        "t0": getattr(scene, "t0", 0.0),
+        "t_final": td["t_final"] if td is not None else h * steps_done if tt is None else tt["t_final"],
         "y0": list(scene.y0),
         "params": dict(scene.system.param_values) if params is None else dict(params),
         "y_final": y_final,
-        "state_names": list(module.STATE_NAMES),
+        "state_names": names,
         "invariants": report_inv,
         "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
                    "max_iterations": int(its.max()) if its.size else 0},
@@ -357,7 +386,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
               interrupted_path: str | None = None, plot: str | None = None,
               backend: str = "numpy", extended: bool = False, y0=None, params: dict | None = None,
               t_final: float | None = None, order=None, composition: str | None = None,
-              stages=None, time_transform: str | None = None) -> dict:
+              stages=None, time_transform: str | None = None, save_every: int | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -380,6 +409,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     the run integrates K = g(q)(H + e) from ``initial_state(y0)`` (y0 in the original
     variables), ``h``/``steps`` in fictive time; ``t_final`` (a physical time) is then
     refused, and the report's ``t_final`` is the physical time reached.
+    ``save_every`` = k keeps every k-th state (and the last): what ``save`` writes, what is
+    plotted and what the invariant errors are the maximum over (``integrate(..., save_every=k)``).
     """
     if extended and backend != "numpy":
         raise InputError("--extended needs the numpy backend (numba has no long double)")
@@ -403,6 +434,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                              f"{scene.time_transform} h and steps are in fictive time τ (dt = g(q) dτ: the "
                              "physical time is known only after the run); give --steps instead — the "
                              "report gives the physical time reached")
+        if _time_dependent(scene):
+            if not (math.isfinite(t_final) and t_final > scene.t0):
+                raise InputError(f"--t-final is the final time of the time-dependent H; it must be after "
+                                 f"t0 = {scene.t0:g}, got {t_final!r}")
+            t_final = t_final - scene.t0
         steps = _steps_for(t_final, h)
     steps = scene.steps if steps is None else steps
     system = scene.run_system
@@ -416,7 +452,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                          f"{module.EXTENDED_BITS} bits on this platform")
     y = np.array(scene.y0)
     if getattr(module, "TIME_TRANSFORM", None):
-        y = module.initial_state(y, 0.0, params)   # the extended state on K = 0 (e = -H(y0))
+        y = module.initial_state(y, scene.t0, params)   # the extended state on K = 0 (e = -H(y0, t0))
     n_stages = effective_stages(method, options)
     if getattr(module, "BACKEND", "numpy") == "numba":
         # Compile (or load from numba's disk cache) before the timed region.
@@ -424,7 +460,13 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             module.step(y, h, params)
         except (RuntimeError, FloatingPointError, ValueError):
             pass
+    every = 1 if save_every is None else int(save_every)
+    if isinstance(save_every, bool) or every < 1:
+        raise InputError(f"--save-every must be a positive integer, got {save_every!r}")
     chunk = steps if not chunk else chunk
+    # chunks end on kept steps, so chunk after chunk the rows stay every-th states
+    chunk = -(-chunk // every) * every
+    stride = {} if every == 1 else {"save_every": every}
     writer = None
     meta = dict(scene=scene.name, method=method, order=order, composition=composition or "", h=h,
                 state_names=list(module.STATE_NAMES),
@@ -433,6 +475,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 time_transform=scene.time_transform or "")
     if n_stages is not None:
         meta["stages"] = n_stages
+    if every > 1:
+        meta["save_every"] = every   # row i is the state after min(i * save_every, steps) steps
     kept: list[np.ndarray] = []
     inv_acc = None
     its_all: list[np.ndarray] = []
@@ -451,12 +495,12 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             info: dict = {} if compensation is None else {"compensation": compensation}
             t0 = time.perf_counter()
             try:
-                part = module.integrate(y, h, n, params, info=info, extended=extended)
+                part = module.integrate(y, h, n, params, info=info, extended=extended, **stride)
             finally:
                 seconds += time.perf_counter() - t0
             compensation = info.get("compensation")
             rows = part if first else part[1:]
-            inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params)
+            inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params, stride=every)
             its_all.append(info.get("newton_iterations", np.zeros(0)))
             if writer is not None:
                 writer.append(rows)
@@ -478,8 +522,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             rows = np.zeros((0,) + y.shape)
         elif partial is not None and len(partial):
             rows = partial if first else partial[1:]
-            inv_acc = _invariant_stats(module, partial, inv_acc, offset=done, params=params)
-            done += len(partial) - 1
+            inv_acc = _invariant_stats(module, partial, inv_acc, offset=done, params=params, stride=every)
+            done += (len(partial) - 1) * every   # the last kept state is the one reported
             y = partial[-1]
         else:
             rows = np.zeros((0,) + y.shape)
@@ -518,6 +562,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
     its = np.concatenate(its_all) if its_all else np.zeros(0)
     rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
+    if every > 1:
+        rep["save_every"] = every   # invariant errors are maxima over the kept states
     if writer is not None:
         complete = rep["status"] == "ok"
         rep["saved"] = str(writer.close(steps_done=done, complete=complete,
@@ -530,7 +576,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         else:
             traj = np.concatenate(kept)
         cons = module.constraint_residuals(traj) if hasattr(module, "constraint_residuals") else None
-        rep["plot"] = str(plot_run(module, traj, plot, scene_name=scene.name, method=key, h=h,
+        rep["plot"] = str(plot_run(module, traj, plot, scene_name=scene.name, method=key, h=h * every,
                                    constraint_residuals=cons))
     return rep
 
@@ -548,16 +594,22 @@ def _order_text(rep: dict) -> str:
 
 
 def _print_run(rep: dict) -> None:
-    tt = rep.get("time_transform")
+    tt, td = rep.get("time_transform"), rep.get("time_dependent")
     method = rep["method"] + (f" ({rep['stages']} stages)" if rep.get("stages") is not None else "")
-    span = (f"(t = 0 .. {rep['t_final']:g})" if tt is None else
-            f"(fictive τ = 0 .. {tt['tau_final']:g}, physical t = 0 .. {_num(tt['t_final'], 'g', 1)})")
+    t0 = rep.get("t0", 0.0)
+    span = (f"(t = {t0:g} .. {_num(rep['t_final'], 'g', 1)})" if tt is None else
+            f"(fictive τ = 0 .. {tt['tau_final']:g}, physical t = {t0:g} .. {_num(tt['t_final'], 'g', 1)})")
     print(f"scene {rep['scene']}  method {method}  {_order_text(rep)}  h = {rep['h']:g}  "
           f"steps = {rep['steps']}  {span}")
     if tt is not None:
         print(f"time transformation on: g = {tt['g']}; integrates K = g(q)(H + e) (the H row below), "
               f"h and steps in fictive time τ, dt = g dτ; physical time reached t = "
               f"{_num(tt['t_final'], '.10g', 1)}")
+    if td is not None:
+        t, e = td["time"], td["energy"]
+        print(f"time-dependent H: integrates K = H + {e} on the extended phase space ({t} a coordinate, "
+              f"{e} its momentum; the H row below is K); H_phys is H(q, p, {t}) along the run (not "
+              f"conserved: dH/d{t} = ∂H/∂{t}; H_phys = -{e} where K = 0)")
     print(f"module: {rep['module']}")
     print(f"{'invariant':>10} {'initial':>22} {'final':>22} {'max abs error':>14} {'max rel error':>14}")
     for name, v in rep["invariants"].items():
@@ -578,7 +630,8 @@ def _print_run(rep: dict) -> None:
     print(f"Newton iterations per step{stages}: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
     print(f"wall time {rep['seconds']:.3f} s, {rep['us_per_step']:.2f} µs/step")
     names = rep["state_names"]
-    print("y_final: " + ", ".join(f"{n}={v:.15g}" for n, v in zip(names, rep["y_final"])))
+    print("y_final: " + ", ".join(f"{n}={v:.15g}" for n, v in zip(names, rep["y_final"]))
+          + (f"; {td['time']}={_num(td['t_final'], '.15g', 1)}" if td is not None else ""))
 
 
 def _cli_overrides(args):
@@ -598,7 +651,7 @@ def cmd_run(args) -> int:
                         plot=args.plot, backend=args.backend, extended=args.extended, y0=y0,
                         params=params, t_final=args.t_final, order=args.order,
                         composition=args.composition, stages=args.stages,
-                        time_transform=args.time_transform)
+                        time_transform=args.time_transform, save_every=args.save_every)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         if fail.saved:
@@ -832,10 +885,43 @@ def _bench_orders(text: str) -> tuple[int, ...]:
     return tuple(sorted(set(out)))
 
 
+def _with_param_values(system, values: dict):
+    """A copy of ``system`` whose parameter defaults are ``values`` (the other parameters kept).
+
+    Its fingerprint differs, so its modules are generated into the cache under their own
+    signature (``generated/`` is never touched by an override).
+    """
+    new = object.__new__(type(system))
+    for slot in type(system).__slots__:
+        if hasattr(system, slot):
+            object.__setattr__(new, slot, getattr(system, slot))
+    object.__setattr__(new, "param_values", {**system.param_values, **values})
+    return new
+
+
+def _bench_overrides(scene, args):
+    """``bench --y0/--param/--h`` applied to the scene (validated like ``run``'s, one-line errors).
+
+    Unlike ``run`` (which passes parameters at run time), bench also derives reference
+    solutions and peers' models from the system, so the parameters become the system's
+    defaults here.
+    """
+    import dataclasses
+    y0_text, items, h = getattr(args, "y0", None), getattr(args, "param", None), getattr(args, "h", None)
+    if y0_text is not None:
+        scene = dataclasses.replace(scene, y0=tuple(parse_y0(y0_text, len(scene.y0))))
+    if items:
+        values = parse_params(items, list(scene.system.param_values))
+        scene = dataclasses.replace(scene, system=_with_param_values(scene.system, values))
+    if h is not None:
+        scene = dataclasses.replace(scene, h=float(h))
+    return scene
+
+
 def cmd_bench(args) -> int:
     from . import bench
 
-    scene = load_scene(args.scene)
+    scene = _bench_overrides(load_scene(args.scene), args)
     orders = getattr(args, "orders", None)
     if orders is not None and not args.peers and orders != (2,):
         raise InputError("--orders above 2 (compositions) are benchmarked with --peers; "
@@ -888,7 +974,8 @@ def cmd_scenes(args) -> int:
     for name in scene_names():
         s = load_scene(name)
         rows.append({"name": s.name, "description": s.description, "methods": list(s.methods),
-                     "dim": s.system.dim, "constraints": len(s.system.constraints),
+                     "dim": getattr(s.system, "dim", None),   # None: a Poisson system (see "state")
+                     "state": len(s.system.y), "constraints": len(s.system.constraints),
                      "order": s.order, "composition": s.composition, "stages": s.stages,
                      "time_transform": s.time_transform})
     if args.json:
@@ -980,6 +1067,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--save", metavar="FILE.npz", help="write the trajectory to an .npz (in chunks)")
     p.add_argument("--chunk", type=_positive_int, metavar="N",
                    help="with --save: steps per chunk (memory stays bounded; default: one chunk)")
+    p.add_argument("--save-every", type=_positive_int, metavar="K",
+                   help="keep every K-th state (and the last): what --save writes and --plot draws; the "
+                        "invariant errors are then maxima over the kept states (default 1)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
 
@@ -1026,6 +1116,10 @@ def make_parser() -> argparse.ArgumentParser:
                         "down to a final error of 1e-12); without --peers only 2")
     p.add_argument("--solver", choices=("newton", "simplified", "fixed-point"),
                    help="with --peers: nonlinear solver of methodgen's rows (default: the module's)")
+    p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="parameter value (repeatable; the system is derived with it: its modules go to the cache)")
+    p.add_argument("--h", type=_step, help="the scene's step size for this bench (with --peers the step-size ladder is scaled from it)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_bench)
 

@@ -18,10 +18,11 @@ from dataclasses import dataclass
 
 import sympy as sp
 
+from .poisson import is_poisson
 from .problem import Hamiltonian
 
 __all__ = [
-    "Invariant", "Separable", "gradient", "vector_field", "separable_split", "radial_profile",
+    "Invariant", "Separable", "gradient", "vector_field", "structure_matrix", "casimir_invariants", "separable_split", "radial_profile",
     "angular_momenta", "invariants", "poisson_bracket", "PHYSICAL_ENERGY", "detected_momenta",
     "declared", "first_integrals", "constraint_monitors", "DETECT_MAX_DIM",
 ]
@@ -84,10 +85,28 @@ def gradient(system: Hamiltonian) -> sp.Matrix:
 
 @_cache
 def vector_field(system: Hamiltonian) -> sp.Matrix:
-    """``f(y) = J ∇H(y)`` with ``J = [[0, I], [-I, 0]]`` (column of length 2d)."""
+    """``f(y) = J ∇H(y)`` with ``J = [[0, I], [-I, 0]]`` (column of length 2d); for a
+    :class:`~methodgen.poisson.PoissonSystem` ``f(y) = S(y) ∇H(y)``."""
     g = gradient(system)
+    if is_poisson(system):
+        out = []
+        for e in sp.Matrix(system.S) * g:
+            # u*v*(1 - 2/v) is the polynomial u*v - 2*u: write it so (quadratic-field tests, Kahan)
+            c = sp.cancel(e)
+            out.append(sp.expand(c) if c.is_polynomial(*system.y) else e)
+        return sp.Matrix(out)
     d = system.dim
     return sp.Matrix(list(g[d:]) + [-v for v in g[:d]])
+
+
+@_cache
+def structure_matrix(system: Hamiltonian) -> sp.Matrix:
+    """The structure matrix of ``y' = B(y)∇H``: the canonical ``J = [[0, I], [-I, 0]]`` of a
+    Hamiltonian, ``S(y)`` of a Poisson system."""
+    if is_poisson(system):
+        return sp.Matrix(system.S)
+    d = system.dim
+    return sp.Matrix(sp.BlockMatrix([[sp.zeros(d), sp.eye(d)], [-sp.eye(d), sp.zeros(d)]]))
 
 
 @_cache
@@ -98,6 +117,8 @@ def separable_split(system: Hamiltonian) -> Separable | None:
     mixing q and p makes the system non-separable.  ``T`` is quadratic when its
     Hessian in p is constant and ``T = ½ pᵀ (∂²T/∂p²) p`` exactly.
     """
+    if is_poisson(system):
+        return None          # no (q, p) split
     qs, ps = set(system.q), set(system.p)
     for H in (system.H, sp.expand(system.H)):
         T, U, ok = sp.S.Zero, sp.S.Zero, True
@@ -152,7 +173,11 @@ def radial_profile(system: Hamiltonian) -> tuple[sp.Symbol, sp.Expr] | None:
 
 
 def poisson_bracket(system: Hamiltonian, F: sp.Expr, G: sp.Expr) -> sp.Expr:
-    """``{F, G} = Σ ∂F/∂q_i ∂G/∂p_i - ∂F/∂p_i ∂G/∂q_i``."""
+    """``{F, G} = Σ ∂F/∂q_i ∂G/∂p_i - ∂F/∂p_i ∂G/∂q_i``; ``∇Fᵀ S ∇G`` for a Poisson system."""
+    if is_poisson(system):
+        gF = sp.Matrix([sp.diff(F, s) for s in system.y])
+        gG = sp.Matrix([sp.diff(G, s) for s in system.y])
+        return (gF.T * sp.Matrix(system.S) * gG)[0, 0]
     return sp.Add(*[sp.diff(F, qi) * sp.diff(G, pi) - sp.diff(F, pi) * sp.diff(G, qi)
                     for qi, pi in zip(system.q, system.p)])
 
@@ -224,6 +249,8 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     simplifies to exactly 0, i.e. H is invariant under rotations in that plane.
     Constrained systems are skipped (the constraint forces may break it).
     """
+    if is_poisson(system):
+        return ()
     d = system.dim
     if d < 2:
         return ()
@@ -395,6 +422,8 @@ def detected_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     a detected quantity equal to a declared one is left out.  Skipped (empty) above
     :data:`DETECT_MAX_DIM` degrees of freedom and for time-transformed systems.
     """
+    if is_poisson(system):
+        return ()            # a Poisson system's simple first integrals are its Casimirs
     d = system.dim
     if d > DETECT_MAX_DIM or system.time_transform is not None:
         return ()
@@ -458,17 +487,36 @@ def declared(system: Hamiltonian) -> tuple[Invariant, ...]:
 
 
 @_cache
+def casimir_invariants(system) -> tuple[Invariant, ...]:
+    """The Casimirs of a Poisson system (:meth:`~methodgen.poisson.PoissonSystem.casimirs`) as
+    monitored first integrals (empty for a canonical Hamiltonian)."""
+    if not is_poisson(system):
+        return ()
+    return tuple(Invariant(c.name, c.expr, True, c.why) for c in system.casimirs())
+
+
+@_cache
 def invariants(system: Hamiltonian) -> tuple[Invariant, ...]:
     """All monitored quantities, in this order: H; the angular momenta (:func:`angular_momenta`);
     detected total momenta (:func:`detected_momenta`); the declared invariants (:func:`declared`,
     exact or not); the constraint monitors; ``H_phys`` for a time-transformed system.
+    For a Poisson system: H, its Casimirs (:func:`casimir_invariants`), the declared invariants.
 
     Only those with ``exact=True`` are first integrals a method may claim to keep.
     """
+    if is_poisson(system):
+        return (Invariant("H", system.H, True, "the Hamiltonian"),) + casimir_invariants(system) \
+            + declared(system)
     out = ((Invariant("H", system.H, True, "the Hamiltonian"),) + angular_momenta(system)
            + detected_momenta(system) + declared(system) + constraint_monitors(system))
     tt = system.time_transform
-    if tt is not None:
+    if tt is not None and tt.original.time is not None:
+        # A time-dependent H along the run: dH/dt = ∂H/∂t, so monitored, never claimed exact
+        # (K = H + e is the conserved one: H = −e on K = 0).
+        out += (Invariant(PHYSICAL_ENERGY, tt.original.H, False,
+                          f"the physical Hamiltonian H(q, p, {tt.time}): not conserved (dH/d{tt.time} = "
+                          f"∂H/∂{tt.time}); = −{tt.energy} on the level set K = 0"),)
+    elif tt is not None:
         # The original energy: constant on the level set K = 0 only ({H, K} = (H + e){H, g}),
         # so monitored, never claimed exact.
         out += (Invariant(PHYSICAL_ENERGY, tt.original.H, False,

@@ -28,7 +28,8 @@ import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
-from .derive import Invariant, separable_split, vector_field
+from .derive import Invariant, casimir_invariants, separable_split, vector_field
+from .poisson import is_poisson
 from .schemes.base import STEP, is_linear_field
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 
@@ -206,6 +207,10 @@ class ModuleIR:
     #: coordinate and its momentum, the original H (text) and the index of its monitor
     #: among the invariants.  None otherwise.
     time_transform: dict | None = None
+    #: For a Poisson system y' = S(y)∇H: its state names, S as text (``matrix``: rows of
+    #: entries; ``matrix_text``: one line), the Casimirs' names and the Jacobi-identity
+    #: verdict.  None for a canonical system (``q_names``, ``p_names``).
+    poisson: dict | None = None
 
     @property
     def stages(self) -> int:
@@ -219,7 +224,18 @@ class ModuleIR:
 
     @property
     def dim(self) -> int:
+        """Degrees of freedom d of a canonical system (0 for a Poisson system: see n_state)."""
         return len(self.q_names)
+
+    @property
+    def n_state(self) -> int:
+        """Length of the state vector: 2d for a canonical system, n for a Poisson system."""
+        return len(self.state_vars)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """The state's names, in state-vector order (q then p for a canonical system)."""
+        return tuple(self.poisson["state"]) if self.poisson else self.q_names + self.p_names
 
     @property
     def n_unknowns(self) -> int:
@@ -363,18 +379,20 @@ def local_error_plan(scheme, dy=None) -> LocalErrorPlan | None:
     system = scheme.system
     if is_linear_field(system) and not system.constraints:
         return None
-    d = system.dim
     h = STEP
     f = list(vector_field(system))
     inc = list(scheme.increment) if dy is None else list(dy)
     at1 = {s: s + dv for s, dv in zip(system.y, inc)}
-    full = tuple(range(2 * d))
-    index = tuple(range(d, 2 * d)) if scheme.resolution == "reduced" else full
+    n = len(system.y)
+    full = tuple(range(n))
+    # "reduced": momenta eliminated (canonical systems only), E lives in the momenta p = y[d:]
+    index = tuple(range(n // 2, n)) if scheme.resolution == "reduced" else full
 
     def squares(exprs):
         return sp.Add(*[e**2 for e in exprs])
 
     if system.constraints or scheme.traits.solve == "explicit":
+        d = system.dim
         q = tuple(range(d))
         sep = separable_split(system)
         if sep is not None and sep.Minv is not None:
@@ -454,7 +472,7 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     vp = VectorPrinter({"fully_qualified_modules": True})
 
     n = len(scheme.unknowns)
-    d2 = 2 * system.dim
+    d2 = len(system.y)
     res = list(scheme.residual)
     jac = list(scheme.jacobian) if n else []
     inc = list(scheme.increment)
@@ -522,8 +540,8 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         traits=scheme.traits.as_dict(),
         source=system.source,
         constraints=tuple(system.constraint_sources),
-        q_names=tuple(s.name for s in system.q),
-        p_names=tuple(s.name for s in system.p),
+        q_names=() if is_poisson(system) else tuple(s.name for s in system.q),
+        p_names=() if is_poisson(system) else tuple(s.name for s in system.p),
         state_vars=tuple(names[s.name] for s in system.y),
         param_names=tuple(system.param_names),
         param_vars=tuple(names[k] for k in system.param_names),
@@ -545,7 +563,18 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         domain=tuple((kind, str(u)) for kind, u in conds),
         **_composition_fields(scheme),
         time_transform=_time_transform_fields(system, invs),
+        poisson=_poisson_fields(system),
     )
+
+
+def _poisson_fields(system) -> dict | None:
+    if not is_poisson(system):
+        return None
+    rows = tuple(tuple(" ".join(e.split()) for e in row) for row in system.S_sources)
+    casimirs = tuple(inv.name for inv in casimir_invariants(system))
+    return {"state": system.state_names, "matrix": rows,
+            "matrix_text": "[" + ", ".join("[" + ", ".join(r) + "]" for r in rows) + "]",
+            "casimirs": casimirs, "jacobi": system.jacobi().status}
 
 
 def _time_transform_fields(system, invs) -> dict | None:

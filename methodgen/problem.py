@@ -50,6 +50,31 @@ def builtin_monitor_names(dim: int, n_constraints: int) -> set[str]:
     return out
 
 
+#: Unknown symbols that get the hint to declare a time (``time="t"``).
+_TIME_HINT_NAMES = ("t", "time")
+
+
+def _time_name(time, qn, pn, parn) -> str | None:
+    """The declared time's name (None for none); an error if a coordinate, momentum or
+    parameter has it — a parameter named like the time would freeze it."""
+    if time is None:
+        return None
+    if isinstance(time, sp.Symbol):
+        time = time.name
+    if not isinstance(time, str):
+        raise InputError(f"time must be the name of the time variable, e.g. time=\"t\", got {time!r}")
+    name = check_name(time, "time")
+    if name in parn:
+        raise InputError(f"parameter {name!r} has the name of the declared time time={name!r}: a parameter "
+                         f"is a constant (it would freeze the time); remove {name!r} from params, or "
+                         "name the time differently")
+    if name in qn or name in pn:
+        kind = "coordinate" if name in qn else "momentum"
+        raise InputError(f"the declared time time={name!r} is also a {kind} name; the time is "
+                         f"not a state variable of H (its momentum is added by the autonomous extension)")
+    return name
+
+
 def _names(items: Iterable, what: str) -> tuple[str, ...]:
     if isinstance(items, (str, bytes)):
         raise InputError(f"{what} must be a list of names, got the string {items!r}")
@@ -83,6 +108,12 @@ class Hamiltonian:
         Holonomic constraints ``g_i(q) = 0`` (functions of ``q`` and parameters).
     name : str, optional
         A label used in generated file names and reports.
+    time : str or sympy.Symbol, optional
+        The name of the time when ``H`` depends on it explicitly, ``time="t"``: H (and the
+        declared invariants) may then use it.  The system stays the user's ``H(q, p, t)``
+        on ``(q, p)``; every method integrates its autonomous extension ``K = H + e`` on
+        ``(q, t; p, e)`` (:func:`methodgen.autonomise`, done by ``discretize``/``build``).
+        Without it, ``t`` in H is an error (declaring ``t`` as a parameter would freeze time).
     invariants : mapping of str to (str or sympy.Expr), optional
         Quantities to monitor as first integrals, ``{"P": "p1 + p2 + p3"}``: text is parsed
         with the same whitelist parser as H (never evaluated), SymPy expressions are
@@ -103,6 +134,8 @@ class Hamiltonian:
         The Hamiltonian as the user wrote it (text) or ``str(H)``.
     declared_invariants : tuple of DeclaredInvariant
         The declared invariants, in the order given (empty when none).
+    time : sympy.Symbol or None
+        The declared time (``time=``), None for an autonomous H.
 
     Examples
     --------
@@ -115,17 +148,19 @@ class Hamiltonian:
 
     __slots__ = ("H", "q", "p", "params", "param_values", "constraints", "source",
                  "constraint_sources", "name", "_symbols", "time_transform",
-                 "declared_invariants")
+                 "declared_invariants", "time")
 
     def __init__(self, H, q: Sequence, p: Sequence, params: Mapping[str, float] | None = None,
                  constraints: Sequence = (), name: str | None = None,
-                 invariants: Mapping | None = None):
+                 invariants: Mapping | None = None, time: str | sp.Symbol | None = None):
         qn = _names(q, "coordinate")
         pn = _names(p, "momentum")
         if len(qn) == 0:
             raise InputError("a Hamiltonian needs at least one coordinate q")
         if len(qn) != len(pn):
-            raise InputError(f"q has {len(qn)} names but p has {len(pn)}: each coordinate needs one momentum")
+            raise InputError(f"q has {len(qn)} names but p has {len(pn)}: each coordinate needs one momentum "
+                             "(for a non-canonical system y' = S(y)∇H use methodgen.PoissonSystem(H, y=[...], "
+                             "S=[[...]]))")
         params = {} if params is None else params
         if not isinstance(params, Mapping):
             raise InputError(f"params must be a mapping name -> value, got {type(params).__name__}")
@@ -145,13 +180,15 @@ class Hamiltonian:
             if n in seen:
                 raise InputError(f"name {n!r} is declared twice (q, p and params must be distinct)")
             seen.add(n)
+        tn = _time_name(time, qn, pn, parn)
 
-        symbols = {n: sp.Symbol(n, real=True) for n in allnames}
+        symbols = {n: sp.Symbol(n, real=True) for n in allnames + ((tn,) if tn else ())}
         object.__setattr__(self, "_symbols", symbols)
         object.__setattr__(self, "q", tuple(symbols[n] for n in qn))
         object.__setattr__(self, "p", tuple(symbols[n] for n in pn))
         object.__setattr__(self, "params", tuple(symbols[n] for n in parn))
         object.__setattr__(self, "param_values", values)
+        object.__setattr__(self, "time", symbols[tn] if tn else None)
 
         expr, source = self._expr(H, "Hamiltonian")
         if not expr.free_symbols & set(self.p):
@@ -170,6 +207,9 @@ class Hamiltonian:
                                  "constraints g(q) = 0 are supported")
             if not e.free_symbols & set(self.q):
                 raise InputError(f"constraint {i + 1} ({s}) does not depend on q")
+            if self.time is not None and self.time in e.free_symbols:
+                raise InputError(f"constraint {i + 1} ({s}) depends on the time {self.time.name!r}; only "
+                                 "constraints g(q) = 0 that do not move with time are supported")
             cons.append(e)
             csrc.append(s)
         if len(cons) >= len(qn):
@@ -191,7 +231,7 @@ class Hamiltonian:
         if not isinstance(invariants, Mapping):
             raise InputError("invariants must be a mapping name -> expression, e.g. "
                              f"{{'P': 'p1 + p2'}}, got {type(invariants).__name__}")
-        taken = set(allnames)
+        taken = set(allnames) | ({self.time.name} if self.time is not None else set())
         builtin = builtin_monitor_names(len(self.q), len(self.constraints))
         qd = [s.name for s in self.q]
         for i in range(len(qd)):          # the angular-momentum names of d > 3 (derive.angular_momenta)
@@ -219,7 +259,10 @@ class Hamiltonian:
 
     def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
         if isinstance(value, str):
-            return parse_expr(value, self._symbols, what=what), value.strip()
+            try:
+                return parse_expr(value, self._symbols, what=what), value.strip()
+            except ParseError as exc:
+                raise ParseError(f"{exc}{self._time_hint(str(exc))}") from None
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             value = sp.Rational(repr(value)) if isinstance(value, float) else sp.Integer(value)
         if not isinstance(value, sp.Expr):
@@ -229,7 +272,8 @@ class Hamiltonian:
         for s in value.free_symbols:
             if s.name not in self._symbols:
                 declared = ", ".join(sorted(self._symbols))
-                raise InputError(f"{what}: unknown symbol {s.name!r}; declared symbols are: {declared}")
+                msg = f"{what}: unknown symbol {s.name!r}; declared symbols are: {declared}"
+                raise InputError(msg + self._time_hint(msg))
             repl[s] = self._symbols[s.name]
         expr = value.xreplace(repl)
         if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
@@ -239,6 +283,17 @@ class Hamiltonian:
         check_smooth(expr, what)
         return expr, str(value)
 
+    def _time_hint(self, message: str) -> str:
+        """A hint for an unknown symbol that reads like a time (``t``, ``time``) when none is declared."""
+        if self.time is not None:
+            return ""
+        for name in _TIME_HINT_NAMES:
+            if f"unknown symbol {name!r}" in message:
+                return (f"; if {name!r} is the time (a time-dependent H), declare it: "
+                        f'time = "{name}" in [system], or time="{name}" in the API '
+                        "(a parameter would freeze it)")
+        return ""
+
     def __setattr__(self, key, value):
         raise AttributeError("Hamiltonian is immutable")
 
@@ -247,6 +302,11 @@ class Hamiltonian:
     def dim(self) -> int:
         """Number of degrees of freedom d (the state has 2d components)."""
         return len(self.q)
+
+    @property
+    def autonomous(self) -> bool:
+        """False when a time was declared (``time=``): H may depend on it explicitly."""
+        return self.time is None
 
     @property
     def y(self) -> tuple[sp.Symbol, ...]:
@@ -281,6 +341,8 @@ class Hamiltonian:
         ]
         if self.time_transform is not None:
             parts.append("time_transform=" + self.time_transform.fingerprint())
+        if self.time is not None:      # only when declared, so other systems keep their fingerprint
+            parts.append(f"time={self.time.name}")
         if self.declared_invariants:   # only when declared, so other systems keep their fingerprint
             parts.append("invariants=" + ";".join(f"{inv.name}:{sp.srepr(inv.expr)}"
                                                   for inv in self.declared_invariants))
@@ -290,6 +352,8 @@ class Hamiltonian:
         extra = f", constraints={list(self.constraint_sources)}" if self.constraints else ""
         if self.declared_invariants:
             extra += f", invariants={ {inv.name: inv.source for inv in self.declared_invariants} }"
+        if self.time is not None:
+            extra += f", time={self.time.name!r}"
         return (f"Hamiltonian({self.source!r}, q={[s.name for s in self.q]}, "
                 f"p={[s.name for s in self.p]}, params={self.param_values}{extra})")
 

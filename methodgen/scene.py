@@ -6,6 +6,10 @@ Format (see DESIGN.md §3 and the built-in scenes in ``methodgen/scenes``)::
     description = "..."
     [system]
     H = "..."; q = [...]; p = [...]; constraints = []
+    # or a Poisson system y' = S(y)∇H (methodgen.PoissonSystem): y = [...] and
+    # S = [["0", "-m3", "m2"], ...] (rows of strings, skew-symmetric) instead of q, p
+    time = "t"                   # optional: H depends on the time t explicitly (the methods
+                                 #   integrate K = H(q, p, t) + e on (q, t; p, e), methodgen.autonomise)
     [params]
     m = 1.0
     [run]
@@ -20,6 +24,7 @@ Format (see DESIGN.md §3 and the built-in scenes in ``methodgen/scenes``)::
     time_transform = "sqrt(x**2 + y**2 + z**2)"   # optional: integrate K = g(q)(H + e) instead
                                  #   (methodgen.time_transform); y0 stays in the original variables,
                                  #   h and steps are in fictive time
+    t0 = 0.0                     # optional: the initial time (with [system] time or a time_transform)
     [invariants]                 # optional: quantities to monitor as first integrals
     P = "p1 + p2 + p3"           #   NAME = "expression" (whitelist parser; verify proves or
                                  #   refutes {I, H} = 0; methods claim only what they keep)
@@ -55,9 +60,9 @@ __all__ = ["Scene", "NBody", "load_scene", "scene_names", "builtin_scene_dir", "
 
 _TOP = {"name": str, "description": str, "system": dict, "params": dict, "run": dict, "nbody": dict,
         "invariants": dict}
-_SYSTEM = {"H": str, "q": list, "p": list, "constraints": list}
+_SYSTEM = {"H": str, "q": list, "p": list, "constraints": list, "time": str, "y": list, "S": list}
 _RUN = {"method": (str, list), "h": (int, float), "steps": int, "y0": list, "order": int,
-        "composition": str, "stages": int, "time_transform": str}
+        "composition": str, "stages": int, "time_transform": str, "t0": (int, float)}
 _NBODY = {"G": (int, float, str), "masses": list, "centre_mass": (int, float, str)}
 
 
@@ -125,6 +130,9 @@ class Scene:
         ``steps`` are in fictive time.
     transformed : Hamiltonian or None
         ``K``, the time-transformed system (named ``<name>-tt``), when ``time_transform`` is set.
+    t0 : float
+        ``[run].t0``: the initial time (default 0) of a time-dependent H (``[system] time``)
+        or of a time transformation's physical time.
     declared_fingerprint : str or None
         Fingerprint of the system the scene *file* integrates (its ``[run] time_transform``
         or none): a built-in scene's ``generated/`` modules are of that system only, a
@@ -145,6 +153,7 @@ class Scene:
     composition: str | None = None
     stages: int | None = None
     time_transform: str | None = None
+    t0: float = 0.0
     transformed: Hamiltonian | None = field(default=None, repr=False, compare=False)
     declared_fingerprint: str | None = field(default=None, repr=False, compare=False)
 
@@ -155,8 +164,13 @@ class Scene:
     @property
     def run_system(self) -> Hamiltonian:
         """The system the scene's methods integrate: :attr:`transformed` if the scene has a
-        time transformation, else :attr:`system` (``y0`` always belongs to :attr:`system`)."""
-        return self.system if self.transformed is None else self.transformed
+        time transformation, else :attr:`system` — for a time-dependent H its autonomous
+        extension ``K = H + e`` (:func:`methodgen.autonomise`) — (``y0`` always belongs to
+        :attr:`system`)."""
+        if self.transformed is not None:
+            return self.transformed
+        from .timetransform import autonomise
+        return autonomise(self.system)
 
     def options(self, method: str, stages: int | None = None) -> dict:
         """Method options of ``method`` in this scene: ``{"stages": s}`` for a method that
@@ -347,10 +361,14 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
             if not isinstance(item, str):
                 raise SceneError(f"[system].{key} must be a list of strings, got item {item!r}")
     try:
-        system = Hamiltonian(_require(system_t, "H", "[system]"), q=_require(system_t, "q", "[system]"),
-                             p=_require(system_t, "p", "[system]"), params=params_t,
-                             constraints=system_t.get("constraints", []), name=name,
-                             invariants=_invariants_table(data.get("invariants")))
+        if "y" in system_t or "S" in system_t:
+            system = _poisson_system(system_t, params_t, name, data.get("invariants"))
+        else:
+            system = Hamiltonian(_require(system_t, "H", "[system]"), q=_require(system_t, "q", "[system]"),
+                                 p=_require(system_t, "p", "[system]"), params=params_t,
+                                 constraints=system_t.get("constraints", []), name=name,
+                                 invariants=_invariants_table(data.get("invariants")),
+                                 time=system_t.get("time"))
     except SceneError:
         raise
     except InputError as exc:
@@ -366,14 +384,18 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
     if steps < 0:
         raise SceneError(f"[run].steps must be >= 0, got {steps}")
     y0 = tuple(_number(v, f"[run].y0[{i}]") for i, v in enumerate(_require(run_t, "y0", "[run]")))
-    if len(y0) != 2 * system.dim:
+    if len(y0) != len(system.y):
         raise SceneError(f"[run].y0 has {len(y0)} values but the state ({', '.join(system.state_names)}) "
-                         f"has {2 * system.dim}")
+                         f"has {len(system.y)}")
     nbody = _parse_nbody(data["nbody"], system, params_t) if "nbody" in data else None
     stages = check_stages(run_t.get("stages"), methods, name="[run].stages", error=SceneError)
+    t0 = _number(run_t.get("t0", 0.0), "[run].t0")
+    if "t0" in run_t and getattr(system, "time", None) is None and "time_transform" not in run_t:
+        raise SceneError("[run].t0 is the initial time of a time-dependent H: declare the time in "
+                         '[system] (time = "t") or leave t0 out (an autonomous H does not see it)')
     scene = Scene(name=name, description=data.get("description", ""), system=system, methods=methods,
                   h=h, steps=steps, y0=y0, path=path, builtin=builtin, nbody=nbody, order=order,
-                  composition=composition, stages=stages)
+                  composition=composition, stages=stages, t0=t0)
     if "time_transform" in run_t:
         scene = with_time_transform(scene, run_t["time_transform"], error=SceneError,
                                     name="[run].time_transform")
@@ -382,6 +404,28 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
         check_g_positive(scene.transformed, y0, error=SceneError, name="[run].time_transform:")
     import dataclasses
     return dataclasses.replace(scene, declared_fingerprint=scene.run_system.fingerprint())
+
+
+def _poisson_system(system_t: dict, params_t: dict, name: str, invariants):
+    """``[system] y = [...]``, ``S = [["...", ...], ...]`` (strings), ``H``: a
+    :class:`~methodgen.poisson.PoissonSystem` (q, p, constraints and time are refused with it)."""
+    from .poisson import PoissonSystem
+
+    mixed = sorted(k for k in ("q", "p", "constraints", "time") if k in system_t)
+    if mixed:
+        raise SceneError(f"[system] with y and S is a Poisson system y' = S(y)∇H; it takes no "
+                         f"{', '.join(mixed)} (those describe canonical coordinates)")
+    y = _require(system_t, "y", "[system] (a Poisson system needs y and S)")
+    S = _require(system_t, "S", "[system] (a Poisson system needs y and S)")
+    for item in y:
+        if not isinstance(item, str):
+            raise SceneError(f"[system].y must be a list of strings, got item {item!r}")
+    for i, row in enumerate(S):
+        if not isinstance(row, list) or not all(isinstance(e, str) for e in row):
+            raise SceneError(f'[system].S must be a list of rows of strings (S = [["0", "-m3", "m2"], ...]), '
+                             f"got row {i}: {row!r}")
+    return PoissonSystem(_require(system_t, "H", "[system]"), y=y, S=S, params=params_t, name=name,
+                         invariants=_invariants_table(invariants))
 
 
 def _invariants_table(table: dict | None) -> dict | None:

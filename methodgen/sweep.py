@@ -217,10 +217,12 @@ def parse_spec(data: Mapping, base: Path | None = None, source: str = "the sweep
     if "scene" not in data:
         raise SpecError(f"{source}: missing key 'scene' (a built-in scene name or a scene file path)")
     scene = _resolve_scene(data["scene"], base)
-    if getattr(scene, "transformed", None) is not None or getattr(scene, "stages", None) is not None:
+    if (getattr(scene, "transformed", None) is not None or getattr(scene, "stages", None) is not None
+            or getattr(scene.system, "time", None) is not None):
         # Not silently ignored: a sweep would run the untransformed system / the default stages.
-        what = "a time transformation ([run] time_transform)" if scene.transformed is not None else \
-            "a number of stages ([run] stages)"
+        what = ("a time transformation ([run] time_transform)" if scene.transformed is not None else
+                "a time-dependent H ([system] time)" if getattr(scene.system, "time", None) is not None else
+                "a number of stages ([run] stages)")
         raise SpecError(f"{source}: scene {scene.name!r} declares {what}, which sweeps do not support yet; "
                         "use `methodgen run` (--time-transform, --stages) or a scene without it")
     if scene.path is None:  # pragma: no cover - load_scene always records the file

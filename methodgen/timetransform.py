@@ -16,6 +16,15 @@ applies to K like to any Hamiltonian; a method that preserves K exactly (the
 discrete gradients) keeps ``H = −e`` exactly on K = 0 (``e`` is constant because
 K does not depend on t).  [HLW06, §VIII.2; Hairer 1997].
 
+A time-dependent ``H(q, p, t)`` (``Hamiltonian(..., time="t")``) is made autonomous by
+the same construction with ``g = 1`` (:func:`autonomise`): ``K = H(q, p, t) + e`` on
+``(q, t; p, e)`` has ``t' = 1`` (the fictive time is the physical time),
+``q' = ∂H/∂p``, ``p' = −∂H/∂q`` — the flow of H(t) — and ``e' = −∂H/∂t``; K is
+autonomous, so every method applies, and K = H + e is a first integral (a discrete
+gradient keeps it exactly: ``H = −e`` along the run from ``e0 = −H(q0, p0, t0)``).
+A time-dependent system may also be time-transformed: ``K = g(q)(H(q, p, t) + e)``
+[HLW06, §VIII.2].
+
 References
 ----------
 .. [HLW06] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
@@ -35,7 +44,7 @@ from .errors import InputError
 from .parse import check_smooth, parse_expr
 from .problem import Hamiltonian
 
-__all__ = ["TimeTransform", "time_transform"]
+__all__ = ["TimeTransform", "time_transform", "autonomise"]
 
 _TIME_NAMES = ("t", "time", "t_")
 _ENERGY_NAMES = ("e", "energy", "e_")
@@ -66,6 +75,12 @@ class TimeTransform:
         text = "\n".join([sp.srepr(self.g), self.original.fingerprint(), self.time.name, self.energy.name])
         return hashlib.sha256(text.encode()).hexdigest()
 
+    @property
+    def autonomised(self) -> bool:
+        """``g = 1``: the autonomous extension ``K = H(q, p, t) + e`` of a time-dependent H
+        (:func:`autonomise`); the fictive time is the physical time."""
+        return self.g == 1
+
 
 def _free_name(candidates, taken, what):
     for name in candidates:
@@ -80,7 +95,9 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
     Parameters
     ----------
     system : Hamiltonian
-        The original system (constraints are kept: they depend on q only).
+        The original system (constraints are kept: they depend on q only).  A time-dependent
+        H(q, p, t) (``time="t"``) gives ``K = g(q)(H(q, p, t) + e)`` with its declared time
+        as the new coordinate (``e`` is then not constant: ``de/dτ = −g ∂H/∂t``).
     g : str or sympy.Expr
         A smooth function of the coordinates (and parameters), positive along the
         motion, e.g. ``"sqrt(x**2 + y**2 + z**2)"``.  Text is parsed with the
@@ -104,7 +121,8 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
     if not isinstance(system, Hamiltonian):
         raise InputError(f"time_transform expects a methodgen.Hamiltonian, got {type(system).__name__}")
     if system.time_transform is not None:
-        raise InputError("this system is already time-transformed; transform the original once")
+        raise InputError("this system is already time-transformed (or the autonomous extension of a "
+                         "time-dependent H); transform the original once")
     symbols = {s.name: s for s in (*system.y, *system.params)}
     if isinstance(g, str):
         g_expr, g_source = parse_expr(g, symbols, what="the time transformation g(q)"), g.strip()
@@ -124,19 +142,75 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
     if not g_expr.free_symbols & set(system.q):
         raise InputError(f"the time transformation g = {g_source} does not depend on q: a constant g "
                          "only rescales time (use a different step size instead)")
-    taken = set(symbols) | {inv.name for inv in system.declared_invariants}
-    t_name = _free_name(_TIME_NAMES, taken, "physical time coordinate")
-    e_name = _free_name(_ENERGY_NAMES, taken | {t_name}, "energy momentum")
-    t, e = sp.Symbol(t_name, real=True), sp.Symbol(e_name, real=True)
-    K = g_expr * (system.H + e)
+    K, t_name, e_name = _extend(system, g_expr)
     # Declared invariants are carried over (monitored on the extended phase space).  On the
     # level set K = 0, {I, K} = g{I, H}: a first integral of H stays constant along the
     # motion, but it is *claimed* (exact) for K only where {I, K} = 0 identically.
-    out = Hamiltonian(K, q=[*system.q, t], p=[*system.p, e], params=system.param_values,
+    out = Hamiltonian(K, q=[*system.q, t_name], p=[*system.p, e_name], params=system.param_values,
                       constraints=system.constraints, name=name or f"{system.name or 'system'}-tt",
                       invariants={inv.name: inv.expr for inv in system.declared_invariants} or None)
     object.__setattr__(out, "time_transform",
                        TimeTransform(g_expr, g_source, system, out.symbol(t_name), out.symbol(e_name)))
     # the source text a user reads in generated modules and reports
     object.__setattr__(out, "source", f"({g_source})*({system.source} + {e_name})")
+    return out
+
+
+def _extend(system: Hamiltonian, g: sp.Expr) -> tuple[sp.Expr, str, str]:
+    """``(K, t, e)``: ``K = g (H + e)`` and the names of the new coordinate (the declared time
+    of a time-dependent H, else a free name) and of its momentum (a free name)."""
+    taken = {s.name for s in (*system.y, *system.params)} | {inv.name for inv in system.declared_invariants}
+    if system.time is not None:
+        t_name = system.time.name
+    else:
+        t_name = _free_name(_TIME_NAMES, taken, "physical time coordinate")
+    e_name = _free_name(_ENERGY_NAMES, taken | {t_name}, "energy momentum")
+    e = sp.Symbol(e_name, real=True)
+    return (system.H + e if g == 1 else g * (system.H + e)), t_name, e_name
+
+
+_AUTONOMISED: dict[int, tuple[Hamiltonian, Hamiltonian]] = {}
+
+
+def autonomise(system: Hamiltonian) -> Hamiltonian:
+    """The autonomous extension ``K = H(q, p, t) + e`` of a time-dependent system (module docstring).
+
+    Parameters
+    ----------
+    system : Hamiltonian
+        Declared with ``time="t"``; any other system is returned unchanged (so every
+        consumer may call this unconditionally: :func:`methodgen.discretize`,
+        :func:`methodgen.build`, :attr:`methodgen.Scene.run_system`).
+
+    Returns
+    -------
+    Hamiltonian
+        State ``(q…, t, p…, e)``: the declared time ``t`` is the last coordinate, its
+        conjugate momentum ``e`` (``e``, ``energy`` or ``e_``, the first name not taken)
+        the last momentum; same name, parameters, constraints and declared invariants
+        (which may depend on t: on the extended phase space ``{I, K} = {I, H} + ∂I/∂t``,
+        so ``verify`` proves or refutes exactly what a time-dependent first integral needs).
+        ``K.time_transform`` is a :class:`TimeTransform` with ``g = 1``
+        (:attr:`TimeTransform.autonomised`); generated modules offer ``initial_state(y0, t0)``
+        (``e0 = −H(y0, t0)``, so K = 0) and ``physical_state(Y)``, and monitor ``H_phys``,
+        the physical ``H(q, p, t)`` (not conserved: ``dH/dt = ∂H/∂t``).  The same object is
+        returned for the same system.
+    """
+    if getattr(system, "kind", None) == "poisson":
+        return system       # a PoissonSystem has no time dependence (methodgen.poisson)
+    if getattr(system, "time", None) is None:     # autonomous (a Poisson system has no time either)
+        return system
+    if not isinstance(system, Hamiltonian):
+        raise InputError(f"autonomise expects a methodgen.Hamiltonian, got {type(system).__name__}")
+    hit = _AUTONOMISED.get(id(system))
+    if hit is not None and hit[0] is system:
+        return hit[1]
+    K, t_name, e_name = _extend(system, sp.S.One)
+    out = Hamiltonian(K, q=[*system.q, t_name], p=[*system.p, e_name], params=system.param_values,
+                      constraints=system.constraints, name=system.name,
+                      invariants={inv.name: inv.expr for inv in system.declared_invariants} or None)
+    object.__setattr__(out, "time_transform",
+                       TimeTransform(sp.S.One, "1", system, out.symbol(t_name), out.symbol(e_name)))
+    object.__setattr__(out, "source", f"{system.source} + {e_name}")
+    _AUTONOMISED[id(system)] = (system, out)
     return out

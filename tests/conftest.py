@@ -88,3 +88,21 @@ def modules(tmp_path_factory):
         return cache[key]
 
     return get
+
+
+@pytest.fixture(scope="session")
+def pair(modules, tmp_path_factory):
+    """``pair(scene, method)`` -> (numpy module, numba module), generated once per session
+    (shared by the numba tests, so each module compiles once; callers importorskip numba)."""
+    root = tmp_path_factory.mktemp("numba")
+    cache = {}
+
+    def get(scene_name, method):
+        if (scene_name, method) not in cache:
+            scene = mg.load_scene(scene_name)
+            scheme, np_mod = modules(scene.system, method)
+            path = root / module_filename(scene.name, method, "numba")
+            cache[scene_name, method] = (np_mod, mg.generate(scheme, path, backend="numba"))
+        return cache[scene_name, method]
+
+    return get

@@ -28,23 +28,6 @@ CASES = [("kepler", "energy-momentum"), ("henon-heiles", "kahan"),
          ("simple-pendulum", "stormer-verlet"), ("pendulum", "rattle")]
 
 
-@pytest.fixture(scope="session")
-def pair(modules, tmp_path_factory):
-    """``pair(scene, method)`` -> (numpy module, numba module), generated once per session."""
-    root = tmp_path_factory.mktemp("numba")
-    cache = {}
-
-    def get(scene_name, method):
-        if (scene_name, method) not in cache:
-            scene = mg.load_scene(scene_name)
-            scheme, np_mod = modules(scene.system, method)
-            path = root / module_filename(scene.name, method, "numba")
-            cache[scene_name, method] = (np_mod, mg.generate(scheme, path, backend="numba"))
-        return cache[scene_name, method]
-
-    return get
-
-
 def _close(a, b, rtol=1e-12):
     scale = max(1.0, float(np.max(np.abs(b))))
     np.testing.assert_allclose(a, b, rtol=0, atol=rtol * scale)

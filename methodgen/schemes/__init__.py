@@ -11,13 +11,14 @@ import dataclasses
 from types import ModuleType
 
 from ..errors import InputError, MethodNotApplicable
+from ..poisson import PoissonSystem, is_poisson
 from ..problem import Hamiltonian
 from . import energy_collocation, energy_momentum, gauss, kahan, midpoint, stormer_verlet, trapezoidal
-from .base import Scheme, Traits, method_key
+from .base import Scheme, Traits, is_quadratic_field, method_key
 from .discrete_gradients import AVF, Gonzalez, ItohAbe
 from .rattle import Rattle, Shake
 
-__all__ = ["METHODS", "SYMMETRIC_METHODS", "Scheme", "Traits", "discretize", "applicable_methods",
+__all__ = ["METHODS", "SYMMETRIC_METHODS", "POISSON_METHODS", "Scheme", "Traits", "discretize", "applicable_methods",
            "method_names", "composition_for", "method_key", "scheme_options"]
 
 METHODS: dict[str, ModuleType] = {m.NAME: m for m in (
@@ -30,8 +31,30 @@ def method_names() -> list[str]:
 
 
 def applicable_methods(system: Hamiltonian) -> list[str]:
-    """Names of the methods that apply to ``system``."""
-    return [name for name, m in METHODS.items() if m.applies(system) is None]
+    """Names of the methods that apply to ``system`` (a time-dependent one: to its autonomous
+    extension, :func:`methodgen.autonomise`)."""
+    from ..timetransform import autonomise
+
+    system = autonomise(system)
+    return [name for name in METHODS if _applies(name, system) is None]
+
+
+#: Methods for Poisson systems ``y' = S(y)∇H``: the midpoint rule and the discrete gradients
+#: as ``y1 = y0 + h S(ȳ)∇̄H`` (:func:`methodgen.schemes.base.gradient_scheme`), and Kahan's
+#: Jacobian form on the quadratic field ``f = S∇H``.  The others need canonical (q, p).
+POISSON_METHODS = ("midpoint", "avf", "gonzalez", "itoh-abe", "kahan")
+
+
+def _applies(name: str, system) -> str | None:
+    """None when method ``name`` applies to ``system``, else the reason (Poisson systems included)."""
+    if is_poisson(system):
+        if name not in POISSON_METHODS:
+            return (f"{name} needs canonical coordinates (q, p) (a Hamiltonian, not a Poisson system "
+                    "y' = S(y)∇H)")
+        if name == "kahan" and not is_quadratic_field(system):
+            return ("Kahan's method on a Poisson system is generated in its Jacobian form, which "
+                    "needs a quadratic vector field f = S∇H")
+    return METHODS[name].applies(system)
 
 
 def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition: str | None = None,
@@ -41,6 +64,9 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
     Parameters
     ----------
     system : Hamiltonian
+        A time-dependent system (``time="t"``) is discretised as its autonomous extension
+        ``K = H(q, p, t) + e`` on ``(q, t; p, e)`` (:func:`methodgen.autonomise`): the
+        scheme's system is K.
     method : str
         One of :data:`METHODS` (``methodgen methods`` lists them).
     order : {2, 4, 6, 8, 10}
@@ -63,14 +89,26 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         The method does not apply to this system (the message says why and lists
         the methods that do).
     """
-    if not isinstance(system, Hamiltonian):
-        raise InputError(f"discretize expects a methodgen.Hamiltonian, got {type(system).__name__}")
+    if not isinstance(system, (Hamiltonian, PoissonSystem)):
+        raise InputError(f"discretize expects a methodgen.Hamiltonian or PoissonSystem, got "
+                         f"{type(system).__name__}")
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
+    from ..timetransform import autonomise
+
+    system = autonomise(system)
     mod = METHODS[method]
-    reason = mod.applies(system)
+    reason = _applies(method, system)
     if reason is not None:
         ok = applicable_methods(system)
+        tt = getattr(system, "time_transform", None)
+        if tt is not None and tt.autonomised:
+            # The method was asked for K, not for the H the user wrote: say so.
+            why = (f" (its kinetic part T(p) + {tt.energy} is linear in {tt.energy}: no mass matrix)"
+                   if "kinetic" in reason else "")
+            reason = (f"a time-dependent H is integrated as its autonomous extension K = H(q, p, "
+                      f"{tt.time}) + {tt.energy} on ({', '.join(s.name for s in system.q)}; "
+                      f"{', '.join(s.name for s in system.p)}){why}: {reason}")
         raise MethodNotApplicable(f"{reason}. Methods that apply to this system: "
                                   f"{', '.join(ok) if ok else '(none)'}")
     comp = composition_for(order, composition)

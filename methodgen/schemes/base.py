@@ -33,6 +33,7 @@ import sympy as sp
 
 from ..derive import (Invariant, _zero_status, first_integrals, gradient, invariants, separable_split,
                       vector_field)
+from ..poisson import is_poisson
 from ..problem import Hamiltonian
 
 STEP = sp.Symbol("_h", real=True)
@@ -166,6 +167,10 @@ class Scheme:
     #: How the discrete gradient was assembled (e.g. Gonzalez: ∇H(ȳ), the numerator N,
     #: Itoh–Abe components), in y0/y1 symbols, for structural proofs; None when not recorded.
     structure: dict | None = None
+    #: For a Poisson system: the structure matrix the step applies to ∇̄H, ``S̄`` in y0/y1
+    #: symbols (``S((y0 + y1)/2)`` for the midpoint rule and the discrete gradients), for the
+    #: proofs of :mod:`methodgen.verify.poisson`; None for a canonical system (J).
+    structure_matrix: sp.Matrix | None = None
     #: A symmetric composition Ψ_h = Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h} of this base step
     #: (:class:`methodgen.compositions.Composition`), or None for the base method itself.
     #: The residual, increment etc. above are always those of the base step Φ_h; ``traits``
@@ -409,6 +414,8 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     works on d unknowns ``Δq`` instead of 2d (a 3×3 system for Kepler instead
     of 6×6).  The start value is the Störmer–Verlet prediction.
     """
+    if is_poisson(system):
+        return _poisson_gradient_scheme(system, method, dg, traits, description)
     d = system.dim
     y0 = system.y
     y1 = tuple(next_symbol(s) for s in y0)
@@ -460,6 +467,56 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
                   invariants=invariants(system), description=description, resolution=resolution,
                   fixed_point=True)
+
+
+def _poisson_gradient_scheme(system, method: str, dg: Callable[[tuple, tuple], sp.Matrix],
+                             traits: Traits, description: str) -> Scheme:
+    """``y1 = y0 + h S(ȳ) ∇̄H(y0, y1)``, ``ȳ = (y0 + y1)/2``, for a Poisson system ``y' = S(y)∇H``.
+
+    With the midpoint gradient this is the implicit midpoint rule ``y1 = y0 + h f(ȳ)``; with a
+    discrete gradient, H is kept exactly because S(ȳ) is skew:
+    ``H(y1) - H(y0) = ∇̄Hᵀ(y1 - y0) = h ∇̄Hᵀ S(ȳ) ∇̄H = 0`` [MQR99].  Newton works on Δy.
+
+    A first integral I that is linear or quadratic in y is claimed kept when
+    ``∇I(ȳ)ᵀ S(ȳ) ∇̄H(y0, y1) ≡ 0`` is shown exactly on this ∇̄H (then
+    ``I(y1) - I(y0) = ∇I(ȳ)ᵀ(y1 - y0)`` vanishes): every Casimir of degree ≤ 2, since
+    ``S(ȳ)∇C(ȳ) ≡ 0``.  Symplecticity is never claimed: the structure is not canonical
+    (``traits.symplectic`` is False; for constant S the midpoint rule is a Poisson map, which
+    is not certified here).
+
+    References
+    ----------
+    .. [MQR99] McLachlan, Quispel, Robidoux, Phil. Trans. R. Soc. A 357 (1999) 1021-1045.
+    """
+    y0 = system.y
+    n = len(y0)
+    y1 = tuple(next_symbol(s) for s in y0)
+    grad_bar = dg(y0, y1)
+    h = STEP
+    S_bar = sp.Matrix(system.S).xreplace({a: (a + b) / 2 for a, b in zip(y0, y1)})
+    z = tuple(increment_symbol(s) for s in y0)
+    zv = sp.Matrix(z)
+    sub = {y1[i]: y0[i] + z[i] for i in range(n)}
+    G = sp.Matrix([e.xreplace(sub) for e in grad_bar])
+    residual = zv - h * S_bar.xreplace(sub) * G
+    preserved = tuple(traits.preserved)
+    mid = [(a + b) / 2 for a, b in zip(y0, y1)]
+    for inv in first_integrals(system):
+        if inv.name in preserved or not _is_quadratic(inv.expr, y0):
+            continue
+        gI = sp.Matrix([sp.diff(inv.expr, s) for s in y0]).xreplace(dict(zip(y0, mid)))
+        if _claim_zero((gI.T * S_bar * grad_bar)[0, 0], system):
+            preserved += (inv.name,)
+    notes = ("Poisson system: y1 = y0 + h S(ȳ) ∇̄H with ȳ = (y0 + y1)/2, Newton on Δy; "
+             "first integrals of degree <= 2 claimed where ∇I(ȳ)ᵀ S(ȳ) ∇̄H ≡ 0 is shown exactly",)
+    energy = traits.energy_preserving or "H" in preserved
+    traits = Traits(**{**traits.__dict__, "symplectic": False, "energy_preserving": energy,
+                       "notes": traits.notes + notes, "preserved": preserved})
+    resolution = None if is_linear_field(system) else "full"
+    return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
+                  guess=h * vector_field(system), increment=zv, discrete_gradient=grad_bar,
+                  invariants=invariants(system), description=description.replace(" J ", " S(ȳ) "),
+                  resolution=resolution, fixed_point=True, structure_matrix=S_bar)
 
 
 def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:

@@ -29,10 +29,23 @@ fits:
 2. it is ``V(E(q))`` with E a quadratic form without linear part (``|q|²``,
    ``|q_a - q_b|²``, …): ``V[E0, E1] ∇E(q̄)`` — for ``E = |q|²`` the formula
    above; pair potentials keep total linear and angular momentum;
-3. it is a polynomial: its average-vector-field integral, exactly.
+3. it is ``V(u)``, ``u = aᵀq + c`` one affine form in two or more coordinates
+   (Toda's ``exp(q1 - q2)``, a torsion spring ``cos(q1 - q2)``, Calogero–Moser's
+   ``1/(q1 - q2)²``, a 1D pair potential or an FPU ``(q2 - q1)⁴``):
+   ``V[u0, u1] a``.  Since ``(q1 - q0)ᵀa = u1 - u0`` this is an exact discrete
+   gradient of the term, and it is the term's AVF integral (the same
+   :func:`~methodgen.schemes.discrete_gradients.linear_form_gradient`).  A term
+   with ``Σ_i a_i = 0`` (a function of differences) contributes nothing to
+   ``Σ_i ∇̄U_i``, so total momentum is kept when every term is translation
+   invariant — shown on the scheme's own ∇̄H by
+   :func:`~methodgen.schemes.base.dg_linear_invariants`;
+4. it is a polynomial: its average-vector-field integral, exactly;
+5. otherwise it is distributed over its sums (``g²(1/(q1 - q2)² + 1/(q1 - q3)²)``)
+   and each part is treated by these rules.
 
-Potentials with other terms have a genuine (not removable) singularity of κ
-and the method is refused for them.
+Potentials with a term that fits none (``x·exp(y)``) are refused: no exact
+term-wise discrete gradient is derived for them (AVF, Gonzalez and Itoh–Abe
+apply to any H).
 
 References
 ----------
@@ -40,11 +53,13 @@ References
    (1992) 63-116.
 .. [2] R. A. LaBudde, D. Greenspan, J. Comput. Phys. 15 (1974) 134-167.
 .. [3] E. Celledoni, lecture notes (shared/seed), Exercise 1.1.
+.. [4] R. I. McLachlan, G. R. W. Quispel, N. Robidoux, Phil. Trans. R. Soc. A 357
+   (1999) 1021-1045 (discrete gradients; the AVF integral of a term V(aᵀq)).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import sympy as sp
 
@@ -52,6 +67,8 @@ from ..derive import first_integrals, separable_split
 from ..divdiff import divided_difference
 from ..problem import Hamiltonian
 from .base import Scheme, Traits, bilinear_invariants, gradient_scheme
+from .discrete_gradients import (_is_polynomial, additive_terms, linear_form_gradient,
+                                 linear_form_term)
 
 NAME = "energy-momentum"
 SUMMARY = "Exercise 1.1 discrete gradient: preserves H and, for U = V(|q|), q × p"
@@ -59,12 +76,24 @@ SUMMARY = "Exercise 1.1 discrete gradient: preserves H and, for U = V(|q|), q ×
 
 @dataclass(frozen=True)
 class _Term:
-    kind: str            # "coordinate", "quadratic-form", "polynomial"
+    """One additive term of U and how its discrete gradient is formed.
+
+    ``kind`` is "coordinate" (``var``), "quadratic-form" (``expr = V(E)``, V in ``s``),
+    "linear-form" (``expr = V(L)`` with L affine, V in ``s``) or "polynomial".
+    """
+
+    kind: str
     expr: sp.Expr
     var: sp.Symbol | None = None
     E: sp.Expr | None = None
     V: sp.Expr | None = None
     s: sp.Symbol | None = None
+    L: sp.Expr | None = None
+
+    @property
+    def form(self) -> sp.Expr | None:
+        """F with ``∇̄U_t = c(q0, q1) ∇F(q̄)`` (the coordinate, E or L), None for polynomials."""
+        return {"coordinate": self.var, "quadratic-form": self.E, "linear-form": self.L}.get(self.kind)
 
 
 def _quadratic_form(expr: sp.Expr, q) -> bool:
@@ -102,31 +131,52 @@ def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr]
     return None
 
 
+def _classify(t: sp.Expr, q) -> list[_Term] | None:
+    """The term(s) of one additive term t of U, by the first rule that fits (None: none does)."""
+    fq = t.free_symbols & set(q)
+    if not fq:
+        return []
+    if len(fq) == 1:
+        return [_Term("coordinate", t, var=next(iter(fq)))]
+    found = _as_function_of_form(t, q)
+    if found is not None:
+        E, s, V = found
+        return [_Term("quadratic-form", t, E=E, V=V, s=s)]
+    lf = linear_form_term(t, q)
+    if lf is not None:
+        L, u, G = lf
+        return [_Term("linear-form", t, V=G, s=u, L=L)]
+    if _is_polynomial(t, q):
+        return [_Term("polynomial", t)]
+    # g²(1/(q1 - q2)² + 1/(q1 - q3)²): distribute over the sum and treat each part.
+    parts = additive_terms(t)
+    if len(parts) > 1:
+        out = []
+        for part in parts:
+            sub = _classify(part, q)
+            if sub is None:
+                return None
+            out += sub
+        return out
+    return None
+
+
 def decompose(system: Hamiltonian) -> tuple[_Term, ...] | None:
-    """Split U into additive terms the method can treat (None if some term cannot be)."""
+    """Split U into additive terms the method can treat (None if some term cannot be).
+
+    Each additive term of U (as written: ``Add.make_args``) is classified by the first
+    rule that fits — one coordinate, a function of a quadratic form, a function of one
+    affine form, a polynomial — and a term that fits none is distributed over its sums
+    (:func:`~methodgen.schemes.discrete_gradients.additive_terms`) and its parts classified.
+    """
     sep = separable_split(system)
     q = list(system.q)
     terms = []
     for t in sp.Add.make_args(sep.U):
-        fq = t.free_symbols & set(q)
-        if not fq:
-            continue
-        if len(fq) == 1:
-            terms.append(_Term("coordinate", t, var=next(iter(fq))))
-            continue
-        found = _as_function_of_form(t, q)
-        if found is not None:
-            E, s, V = found
-            terms.append(_Term("quadratic-form", t, E=E, V=V, s=s))
-            continue
-        try:
-            poly = sp.Poly(t, *q)
-            if not (poly.free_symbols_in_domain & set(q)):
-                terms.append(_Term("polynomial", t))
-                continue
-        except sp.PolynomialError:
-            pass
-        return None
+        found = _classify(t, q)
+        if found is None:
+            return None
+        terms += found
     return tuple(terms)
 
 
@@ -139,9 +189,11 @@ def applies(system: Hamiltonian) -> str | None:
     if not sep.quadratic_kinetic:
         return "energy-momentum needs a quadratic kinetic energy T = ½ pᵀ M⁻¹ p with constant M"
     if decompose(system) is None:
-        return ("energy-momentum needs U(q) = V(|q|) (or a sum of terms of one coordinate, of a "
-                "quadratic form such as |q_a - q_b|², or polynomials): for other potentials κ has "
-                "non-removable singularities")
+        return ("energy-momentum needs U(q) = V(|q|), or a sum of terms each a function of one "
+                "coordinate, of a quadratic form such as |q_a - q_b|², of one linear form such as "
+                "q1 - q2 (exp(q1 - q2), cos(q1 - q2), 1/(q1 - q2)**2), or a polynomial: for other "
+                "potentials (a term like x*exp(y)) no exact term-wise discrete gradient is derived; "
+                "avf, gonzalez or itoh-abe apply to any H")
     return None
 
 
@@ -149,13 +201,16 @@ def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
     """The first integrals ``L = qᵀDp`` (angular momenta — of one particle, total, or declared)
     that the term-wise discrete gradient keeps.
 
-    L is quadratic, so ``L(y1) - L(y0) = ∇L(ȳ)ᵀ(y1 - y0) = h ∇L(ȳ)ᵀ J ∇̄H``.  With
-    ``∇̄H = [Σ V_t[E0, E1] ∇E_t(q̄); M⁻¹ p̄]`` this is ``h (Σ V_t[·] {L, E_t} + {L, T})(ȳ)``,
-    so L is kept exactly when every term is a function of a quadratic form E_t with
-    ``{L, E_t} = 0`` (then ``{L, T} = {L, H} = 0`` too).  A term V(E) whose form is not
-    rotation-invariant (``4(x² + 2y²)²``) keeps no L, even if the sum U happens to be radial.
+    L is quadratic, so ``L(y1) - L(y0) = ∇L(ȳ)ᵀ(y1 - y0) = h ∇L(ȳ)ᵀ J ∇̄H``.  Every
+    term but a polynomial has a discrete gradient ``c_t(q0, q1) ∇F_t(q̄)`` with F_t its form
+    (:attr:`_Term.form`: the quadratic form E_t, the affine form L_t with constant ∇L_t, or
+    the coordinate q_i), so with ``∇̄H = [Σ c_t ∇F_t(q̄); M⁻¹ p̄]`` this is
+    ``h (Σ c_t {L, F_t} + {L, T})(ȳ)``, and L is kept exactly when ``{L, F_t} = 0`` for every
+    term (then ``{L, T} = {L, H} - Σ U_t'(F_t){L, F_t} = 0`` too).  A term V(E) whose form is
+    not rotation-invariant (``4(x² + 2y²)²``) keeps no L, even if the sum U happens to be
+    radial; a polynomial term (AVF integral, not of that form) keeps none either.
     """
-    if not terms or any(t.kind != "quadratic-form" for t in terms):
+    if not terms or any(t.form is None for t in terms):
         return ()
     q, p = list(system.q), list(system.p)
     out = []
@@ -165,7 +220,7 @@ def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
             continue
         L = inv.expr
         # {L, E(q)} = -Σ_k ∂L/∂p_k ∂E/∂q_k
-        if all(sp.expand(sum(sp.diff(L, pk) * sp.diff(t.E, qk) for qk, pk in zip(q, p))) == 0
+        if all(sp.expand(sum(sp.diff(L, pk) * sp.diff(t.form, qk) for qk, pk in zip(q, p))) == 0
                for t in terms):
             out.append(inv)
     return tuple(out)
@@ -184,9 +239,24 @@ def _term_dg(term: _Term, q, q0, q1) -> list[sp.Expr]:
         Vdd = divided_difference(term.V, term.s, E0, E1)
         mid = {v: (a + b) / 2 for v, a, b in zip(q, q0, q1)}
         return [Vdd * sp.diff(term.E, v).xreplace(mid) for v in q]
+    if term.kind == "linear-form":
+        return linear_form_gradient((term.L, term.s, term.V), q, q0, q1)
     sigma = sp.Symbol("_sigma", real=True)
     path = {v: a + sigma * (b - a) for v, a, b in zip(q, q0, q1)}
     return [sp.integrate(sp.expand(sp.diff(term.expr, v).xreplace(path)), (sigma, 0, 1)) for v in q]
+
+
+def _profile(term: _Term, q, q0, q1) -> tuple | None:
+    """``(V, s, F, w)`` with the term's discrete gradient ``V[F(q0), F(q1)] w`` and
+    ``wᵀ(q1 - q0) = F(q1) - F(q0)``; None for a polynomial term (an AVF integral)."""
+    if term.kind == "coordinate":
+        return term.expr, term.var, term.var, [sp.S.One if v == term.var else sp.S.Zero for v in q]
+    if term.kind == "quadratic-form":
+        mid = {v: (a + b) / 2 for v, a, b in zip(q, q0, q1)}
+        return term.V, term.s, term.E, [sp.diff(term.E, v).xreplace(mid) for v in q]
+    if term.kind == "linear-form":
+        return term.V, term.s, term.L, [sp.diff(term.L, v) for v in q]
+    return None
 
 
 def build(system: Hamiltonian) -> Scheme:
@@ -194,14 +264,22 @@ def build(system: Hamiltonian) -> Scheme:
     d = system.dim
     q = list(system.q)
     terms = decompose(system)
+    parts = []   # the term-wise pieces, recorded for the structural proof of the identity
 
     def dg(y0, y1):
         q0, q1 = list(y0[:d]), list(y1[:d])
         p0, p1 = sp.Matrix(y0[d:]), sp.Matrix(y1[d:])
         Gq = [sp.S.Zero] * d
+        parts.clear()
+        zp = [sp.S.Zero] * d
         for term in terms:
-            Gq = [a + b for a, b in zip(Gq, _term_dg(term, q, q0, q1))]
+            Gt = _term_dg(term, q, q0, q1)
+            Gq = [a + b for a, b in zip(Gq, Gt)]
+            prof = _profile(term, q, q0, q1)
+            parts.append({"expr": term.expr, "dg": Gt + zp,
+                          "profile": None if prof is None else prof[:3] + (list(prof[3]) + zp,)})
         Gp = sep.Minv * (p0 + p1) / 2
+        parts.append({"expr": sep.T, "dg": [sp.S.Zero] * d + list(Gp), "profile": None})
         return sp.Matrix(Gq + list(Gp))
 
     kinds = sorted({t.kind for t in terms})
@@ -210,6 +288,9 @@ def build(system: Hamiltonian) -> Scheme:
     if "quadratic-form" in kinds:
         notes.append("κ∇U(q̄) = Σ V[E0, E1] ∇E(q̄) over terms V(E) with E a quadratic form "
                      "(|q|² for a radial U: V[s0, s1](q0 + q1)); V[·,·] cancelled divided differences")
+    if "linear-form" in kinds:
+        notes.append("terms V(aᵀq + c) of one affine form (exp(q1 - q2), cos(q1 - q2), 1/(q1 - q2)²): "
+                     "V[u0, u1] a with u = aᵀq + c, the cancelled divided difference (AVF for the term)")
     if "coordinate" in kinds:
         notes.append("one-coordinate terms: U[q0, q1], the cancelled divided difference (κU'(q̄) in 1 DOF)")
     if "polynomial" in kinds:
@@ -219,5 +300,8 @@ def build(system: Hamiltonian) -> Scheme:
     traits = Traits(order=2, symmetric=True, symplectic=False, energy_preserving=True,
                     preserved=("H",) + momenta, solve="newton", discrete_gradient=True,
                     notes=tuple(notes))
-    return gradient_scheme(system, NAME, dg, traits,
-                           "y1 = y0 + h J [κ∇U(q̄); M⁻¹(p0 + p1)/2]")
+    scheme = gradient_scheme(system, NAME, dg, traits,
+                             "y1 = y0 + h J [κ∇U(q̄); M⁻¹(p0 + p1)/2]")
+    # ∇̄H = Σ_t ∇̄U_t + [0; M⁻¹p̄], each piece in the scheme's y0/y1 symbols (dg was called with
+    # them once): methodgen.verify.structural proves the identity term by term from these.
+    return replace(scheme, structure={"kind": "term-wise", "terms": tuple(parts)})

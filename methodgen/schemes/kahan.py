@@ -20,6 +20,7 @@ from __future__ import annotations
 import sympy as sp
 
 from ..derive import gradient, invariants, vector_field
+from ..poisson import is_poisson
 from ..problem import Hamiltonian
 from .base import (STEP, Scheme, Traits, gradient_scheme, increment_symbol, is_linear_field,
                    is_quadratic_field, linear_invariants, quadratic_invariants)
@@ -38,7 +39,7 @@ def jacobian_form(system: Hamiltonian):
     """``(A, b)`` with ``A = I - h/2 f'(y0)`` and ``b = h f(y0)``; the step solves ``A Δy = b``."""
     f = vector_field(system)
     fprime = f.jacobian(sp.Matrix(system.y))
-    n = 2 * system.dim
+    n = len(system.y)
     return sp.eye(n) - STEP / 2 * fprime, STEP * f
 
 
@@ -52,10 +53,17 @@ def build(system: Hamiltonian, form: str | None = None) -> Scheme:
         from ..errors import MethodNotApplicable
         raise MethodNotApplicable("Kahan's Jacobian form needs a quadratic vector field (cubic H); "
                                   "use form='rk' (Newton on the one-step form)")
+    if form == "rk" and is_poisson(system):
+        from ..errors import MethodNotApplicable
+        raise MethodNotApplicable("Kahan's one-step form is not generated for Poisson systems; the "
+                                  "Jacobian form (quadratic f = S∇H) is")
     linear = is_linear_field(system)
     # linear first integrals cᵀy: cᵀf ≡ 0 (so cᵀf' ≡ 0) and both forms give cᵀΔy = 0
     preserved = quadratic_invariants(system) if linear else linear_invariants(system)
-    base = dict(order=2, symmetric=True, symplectic=linear, energy_preserving="H" in preserved,
+    # symplectic for a linear Hamiltonian field (it is the midpoint rule then); a Poisson
+    # structure is never claimed (not certified)
+    base = dict(order=2, symmetric=True, symplectic=linear and not is_poisson(system),
+                energy_preserving="H" in preserved,
                 preserved=preserved)
     if form == "jacobian":
         A, b = jacobian_form(system)

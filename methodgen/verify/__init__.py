@@ -59,6 +59,7 @@ import types
 from typing import Callable, NamedTuple
 
 from ..derive import angular_momenta, radial_profile, separable_split
+from ..poisson import is_poisson
 from ..schemes.base import is_linear_field, is_quadratic_field
 from .budget import BudgetExceeded, budget
 from .common import REF_KAHAN, REF_NOTES
@@ -75,6 +76,9 @@ from .invariants import (REF_FIRST_INTEGRALS, angular_momentum_generic, angular_
 from .kahan import (forms_agree_generic, forms_agree_user, modified_energy, modified_energy_fast,
                     modified_energy_structural, modified_volume, modified_volume_structural)
 from .maps import explicit_symmetry, residual_symmetry, symplectic_certificate
+from .poisson import REF_POISSON as POISSON_REF
+from .poisson import (casimir_certificates, jacobi_certificate, kahan_poisson_certificates, skew_certificate,
+                      structure_symmetry)
 from .quadratic import retiming_certificate
 from .report import NUMERICAL, PROVED, REFUTED, STATUSES, UNDECIDED, Certificate, Report
 
@@ -171,7 +175,7 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
     (``radial_profile``, ``is_quadratic_field``...) run inside the thunks.
     """
     system, traits, m = scheme.system, scheme.traits, scheme.method
-    d = system.dim
+    d = len(system.y) // 2       # degrees of freedom of a canonical system
     radial = _Lazy("the radial-potential test (radial_profile, angular_momenta)",
                    lambda: radial_profile(system) is not None and bool(angular_momenta(system)))
 
@@ -215,6 +219,15 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         add(f"float64 coefficients of the generated module ({scheme.key})", REF_HLW,
             lambda: float_coefficients_certificate(comp, key=scheme.key))
 
+    if is_poisson(system):
+        _poisson_claims(scheme, add, add_step, tagged, step, quadratic)
+        if comp is not None:
+            if traits.symmetric:
+                add(f"the composition is symmetric ({scheme.key})", REF_HLW,
+                    lambda: symmetry_certificate(scheme, base))
+            add(f"invariants kept by the composition ({scheme.key})", REF_HLW,
+                lambda: inherited_certificates(scheme, base))
+        return claims
     # Gauss collocation: the coefficients' order conditions and symplecticity, exactly.
     if (scheme.structure or {}).get("kind") == "collocation":
         stages = scheme.structure["stages"]
@@ -224,7 +237,11 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         add(f"energy-preserving collocation keeps H exactly ({step})", ENERGY_COLLOCATION_REF,
             lambda: energy_collocation_certificates(scheme))
     # The Poincaré time transformation K = g(q)(H + e), when the system is one.
-    if system.time_transform is not None:
+    if system.time_transform is not None and system.time_transform.autonomised:
+        tt = system.time_transform
+        add(f"time-dependent H: autonomous extension K = H(q, p, {tt.time}) + {tt.energy}", TIME_TRANSFORM_REF,
+            lambda: time_transform_certificates(system))
+    elif system.time_transform is not None:
         add(f"time transformation K = g(q)(H + e), g = {system.time_transform.g_source}", TIME_TRANSFORM_REF,
             lambda: time_transform_certificates(system))
     # Claim 1: first integrals of the flow (system-level).
@@ -303,6 +320,38 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         add(f"invariants, constraints and symplecticity kept by the composition ({scheme.key})", REF_HLW,
             lambda: inherited_certificates(scheme, base))
     return claims
+
+
+def _poisson_claims(scheme, add, add_step, tagged, step: str, quadratic) -> None:
+    """The claim groups of a scheme for a Poisson system y' = S(y)∇H (:mod:`.poisson`)."""
+    system, traits, m = scheme.system, scheme.traits, scheme.method
+    add("the structure matrix S is skew-symmetric", POISSON_REF, lambda: skew_certificate(system))
+    add("the Jacobi identity of S (Poisson bracket)", POISSON_REF, lambda: jacobi_certificate(system))
+    add("Casimirs of S: S∇C ≡ 0", POISSON_REF, lambda: casimir_certificates(system))
+    if system.declared_invariants:
+        add("declared invariants are first integrals of this H: {I, H} = ∇IᵀS∇H = 0", REF_FIRST_INTEGRALS,
+            lambda: first_integral_certificates(system))
+    if traits.discrete_gradient and scheme.discrete_gradient is not None:
+        add_step(f"discrete-gradient identity and consistency ({step})", POISSON_REF,
+                 lambda: dg_items(scheme), lambda: dg_certificates(scheme))
+    add_step(f"invariants kept by the step ({step})", POISSON_REF,
+             lambda: invariant_items(scheme), lambda: invariant_certificates(scheme))
+    if m == "kahan":
+        n = len(system.y)
+        where = "" if scheme.composition is None else f" ({step})"
+        for label, run in ((f"Kahan's two forms agree (generic quadratic field, n = {n})",
+                            lambda: forms_agree_generic(n)),
+                           ("Kahan's two forms agree on this field", lambda: forms_agree_user(system)),
+                           ("Kahan preserves a modified energy and measure (CMOQ 2013: constant S)",
+                            lambda: kahan_poisson_certificates(system))):
+            add_step(label + where, REF_KAHAN, tagged("kahan", lambda run=run: run() if quadratic() else []))
+    if traits.symmetric:
+        def _sym():
+            if scheme.structure_matrix is not None and scheme.discrete_gradient is not None:
+                return [dg_symmetry(system, scheme.discrete_gradient, m, scheme=scheme),
+                        structure_symmetry(scheme)]
+            return _symmetry(scheme)
+        add_step(f"the step is symmetric ({step})", "symmetry (claim 9)", tagged("symmetry", _sym))
 
 
 def _undecided(label: str, ref: str, seconds: float, reason: str, **details) -> Certificate:

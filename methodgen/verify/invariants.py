@@ -136,7 +136,7 @@ def invariant_preserved(scheme, name: str, expr: sp.Expr, dg: sp.Matrix | None =
     """
     system = scheme.system
     y0, y1 = system.y, y1_symbols(system)
-    d = system.dim
+    d = len(y0) // 2
     ref = f"{REF_NOTES}, Ex. 1.1.3" if name.startswith("L") and scheme.method == "energy-momentum" \
         else "preserved invariants (scheme traits)"
     claim = f"{scheme.method}: {name}(y1) = {name}(y0), {name} = {expr}"
@@ -147,9 +147,13 @@ def invariant_preserved(scheme, name: str, expr: sp.Expr, dg: sp.Matrix | None =
         # Q quadratic: Q(y1) - Q(y0) = ∇Q(ȳ)ᵀ(y1 - y0) exactly (checked, never assumed).
         if sp.expand(at(expr, y0, y1) - expr - sum(g * (b - a) for g, a, b in zip(gQ, y0, y1))) != 0:
             return None
-        Jdg = sp.Matrix(list(dg[d:]) + [-v for v in dg[:d]])
+        if getattr(scheme, "structure_matrix", None) is not None:
+            # a Poisson system: y1 - y0 = h S̄ ∇̄H with S̄ = S((y0 + y1)/2) (methodgen.verify.poisson)
+            Jdg, how = scheme.structure_matrix * dg, "h S̄ ∇̄H(y0, y1), S̄ = S((y0 + y1)/2)"
+        else:
+            Jdg, how = sp.Matrix(list(dg[d:]) + [-v for v in dg[:d]]), "h J ∇̄H(y0, y1)"
         e = scheme.h * (gQ.T * Jdg)[0, 0]
-        cert = certify(claim + " (from the scheme's equations y1 - y0 = h J ∇̄H(y0, y1))", e,
+        cert = certify(claim + f" (from the scheme's equations y1 - y0 = {how})", e,
                        system_domain(system), ref)
         cert.method = "substitution of the scheme's equations + " + cert.method
         return cert

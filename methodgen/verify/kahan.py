@@ -20,11 +20,10 @@ import itertools
 
 import sympy as sp
 
-from ..derive import gradient, vector_field
+from ..derive import gradient, structure_matrix, vector_field
 from ..schemes.base import STEP, is_quadratic_field
 from .common import REF_KAHAN, at, system_domain
 from .exact import Domain, certify
-from .maps import symplectic_matrix
 from .report import Certificate
 
 __all__ = ["forms_agree_generic", "forms_agree_user", "modified_energy", "modified_volume", "modified_energy_fast",
@@ -203,7 +202,9 @@ def _lemmas(system, which: tuple[str, ...], theta=sp.Rational(1, 2)) -> dict[str
     y = list(system.y)
     n, h = len(y), STEP
     Y = sp.Matrix(y)
-    J = symplectic_matrix(2 * system.dim)
+    # J canonical; for a Poisson system its structure matrix S (the lemmas then hold only
+    # for a constant S: methodgen.verify.poisson.kahan_conditions)
+    J = structure_matrix(system)
     f = vector_field(system)
     grad = gradient(system)
     K = f.jacobian(Y) / 2

@@ -12,6 +12,17 @@ Three identities, each reduced to 0 by ``expand``/``cancel`` (no floats):
    level set K = 0 the q, p motion is the original flow re-timed by
    ``dt/dτ = g`` and ``H = −e`` [HLW06, §VIII.2].
 
+For a time-dependent ``H(q, p, t)`` (``time="t"``: the autonomous extension ``K = H + e``,
+g = 1, or a time transformation of it, ``K = g(q)(H + e)``) identity 2 is replaced by
+
+2'. ``K`` is autonomous: its free symbols are the extended state ``(q, t; p, e)`` and
+   the parameters, so every method for autonomous systems applies to it;
+
+and identity 3 gets the row of ``e``: ``−∂K/∂t + g ∂H/∂t ≡ 0``, i.e. ``de/dτ = −g ∂H/∂t``.
+With g = 1 the rows say: ``dq/dτ = ∂H/∂p``, ``dp/dτ = −∂H/∂q``, ``dt/dτ = 1``: on (q, p)
+the flow of K is the flow of H(q, p, t) with ``t = t0 + τ``, and K = H + e is a first
+integral (so ``H = −e`` along the motion from ``e0 = −H(q0, p0, t0)``).
+
 References
 ----------
 .. [HLW06] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
@@ -53,23 +64,56 @@ def _cert(claim, exprs, t0, theta_ok=True):
 
 
 def time_transform_certificates(system) -> list[Certificate]:
-    """Certificates 1–3 of the module docstring for a time-transformed ``system``."""
+    """Certificates 1–3 (2' for a time-dependent H) of the module docstring for a
+    time-transformed or autonomised ``system``."""
     tt = system.time_transform
     if tt is None:
         return []
     g, H, t, e = tt.g, tt.original.H, tt.time, tt.energy
     K = system.H
+    timed = tt.original.time is not None
     out = []
     t0 = time.perf_counter()
-    out.append(_cert(f"K = g(q)·(H + {e}) with g = {tt.g_source}", [K - g * (H + e)], t0))
+    if tt.autonomised:
+        out.append(_cert(f"K = H(q, p, {t}) + {e}: the autonomous extension of the time-dependent H",
+                         [K - (H + e)], t0))
+    else:
+        out.append(_cert(f"K = g(q)·(H + {e}) with g = {tt.g_source}", [K - g * (H + e)], t0))
     t0 = time.perf_counter()
-    out.append(_cert(f"∂K/∂{t} = 0, so {e} is constant along the flow of K", [sp.diff(K, t)], t0))
+    if timed:
+        out.append(_autonomous(system, t0))
+    else:
+        out.append(_cert(f"∂K/∂{t} = 0, so {e} is constant along the flow of K", [sp.diff(K, t)], t0))
     t0 = time.perf_counter()
     rows = []
     for qi, pi in zip(tt.original.q, tt.original.p):
         rows.append(sp.diff(K, pi) - g * sp.diff(H, pi) - (H + e) * sp.diff(g, pi))
         rows.append(-sp.diff(K, qi) + g * sp.diff(H, qi) + (H + e) * sp.diff(g, qi))
     rows.append(sp.diff(K, e) - g)
-    out.append(_cert(f"on K = 0 (g ≠ 0): dq/dτ = g ∂H/∂p, dp/dτ = −g ∂H/∂q, d{t}/dτ = g and H = −{e} "
-                     f"(J∇K − g·J∇H − (H + {e}) J∇g ≡ 0, ∂K/∂{e} = g)", rows, t0))
+    if timed:
+        rows.append(-sp.diff(K, t) + g * sp.diff(H, t) + (H + e) * sp.diff(g, t))
+    if tt.autonomised:
+        claim = (f"the flow of K is the flow of H(q, p, {t}): dq/dτ = ∂H/∂p, dp/dτ = −∂H/∂q, "
+                 f"d{t}/dτ = 1 ({t} = {t}0 + τ), d{e}/dτ = −∂H/∂{t}, so H = −{e} on K = 0 "
+                 f"(J∇K − (J∇H, 1, −∂H/∂{t}) ≡ 0)")
+    else:
+        claim = (f"on K = 0 (g ≠ 0): dq/dτ = g ∂H/∂p, dp/dτ = −g ∂H/∂q, d{t}/dτ = g and H = −{e} "
+                 f"(J∇K − g·J∇H − (H + {e}) J∇g ≡ 0, ∂K/∂{e} = g"
+                 + (f", ∂K/∂{t} = g ∂H/∂{t})" if timed else ")"))
+    out.append(_cert(claim, rows, t0))
     return out
+
+
+def _autonomous(system, t0) -> Certificate:
+    """2': K depends on the extended state and the parameters only (no time of its own)."""
+    allowed = set(system.y) | set(system.params)
+    extra = sorted((s.name for s in system.H.free_symbols if s not in allowed))
+    tt = system.time_transform
+    claim = (f"K is autonomous on the extended phase space: a function of "
+             f"({', '.join(s.name for s in system.q)}; {', '.join(s.name for s in system.p)}) "
+             f"and the parameters only, with the declared time {tt.time} as a coordinate")
+    return Certificate(claim, REFUTED if extra else PROVED,
+                       f"free symbols of K outside the state and parameters: {extra}" if extra else
+                       f"free symbols of K ⊆ {{{', '.join(s.name for s in (*system.y, *system.params))}}}",
+                       "", "free symbols", time.perf_counter() - t0, REF,
+                       {"nonzero": extra} if extra else {})
