@@ -28,6 +28,7 @@ import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
+from .compensate import compensate, compensation_symbols
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .poisson import is_poisson
 from .schemes.base import STEP, is_linear_field
@@ -114,6 +115,15 @@ for _cls in SPECIAL_FUNCTIONS:
     setattr(VectorPrinter, f"_print_{_cls.__name__}", _special_printer("_v_"))
 
 
+def _print_grouped(self, expr):
+    # A compensated stage sum (methodgen.compensate): its parentheses fix the association.
+    return "(" + self._print(expr.args[0]) + ")"
+
+
+ScalarPrinter._print_grouped = _print_grouped
+VectorPrinter._print_grouped = _print_grouped
+
+
 @dataclass(frozen=True)
 class Kernel:
     """One generated function body.
@@ -172,6 +182,9 @@ class ModuleIR:
     q_names: tuple[str, ...]
     p_names: tuple[str, ...]
     state_vars: tuple[str, ...]
+    #: Names of the state's compensations in the step kernels (``_c_<state var>``): the
+    #: kernels evaluate the step at the exact numerical state y + c (methodgen.compensate).
+    comp_vars: tuple[str, ...]
     param_names: tuple[str, ...]
     param_vars: tuple[str, ...]
     param_defaults: tuple[str, ...]
@@ -468,14 +481,22 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     user = [s.name for s in system.y] + list(system.param_names)
     names = sanitize_names(user)
     rename = {s: sp.Symbol(names[s.name], real=True) for s in list(system.y) + list(system.params)}
+    comp = compensation_symbols(system.y)
+    rename.update({c: sp.Symbol("_c_" + names[s.name], real=True) for s, c in comp.items()})
     sp_ = ScalarPrinter({"fully_qualified_modules": True})
     vp = VectorPrinter({"fully_qualified_modules": True})
 
     n = len(scheme.unknowns)
     d2 = len(system.y)
-    res = list(scheme.residual)
-    jac = list(scheme.jacobian) if n else []
-    inc = list(scheme.increment)
+    # The step's equations at the exact numerical state y + c (compensated stage sums:
+    # the round-off of long runs then follows Brouwer's law, see methodgen.compensate).
+    # Only where the unknowns are increments (``_d_*``): stage *values* (Gauss) are O(1)
+    # numbers that cannot hold c, and grouping c with them would only add rounding.
+    cmp_ = ((lambda exprs, c: list(exprs)) if any(not u.name.startswith("_d_") for u in scheme.unknowns)
+            else compensate)
+    res = cmp_(list(scheme.residual), comp)
+    jac = cmp_(list(scheme.jacobian), comp) if n else []
+    inc = cmp_(list(scheme.increment), comp)
     guess = list(scheme.guess)
     invs: tuple[Invariant, ...] = scheme.invariants
     inv_exprs = [inv.expr for inv in invs]
@@ -543,6 +564,7 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         q_names=() if is_poisson(system) else tuple(s.name for s in system.q),
         p_names=() if is_poisson(system) else tuple(s.name for s in system.p),
         state_vars=tuple(names[s.name] for s in system.y),
+        comp_vars=tuple(str(rename[comp[s]]) for s in system.y),
         param_names=tuple(system.param_names),
         param_vars=tuple(names[k] for k in system.param_names),
         param_defaults=tuple(repr(system.param_values[k]) for k in system.param_names),
