@@ -22,6 +22,7 @@
 from __future__ import annotations
 
 import errno
+import functools
 import hashlib
 import hmac
 import importlib.machinery
@@ -87,17 +88,56 @@ def template_hash(backend: str = "numpy") -> str:
     return h.hexdigest()
 
 
+#: Modules of the package that never shape what a generated module contains (front ends,
+#: runtime I/O, verification, scene data); every other ``.py`` file of the package is part
+#: of the generator and enters :func:`generator_hash`.  A file missing from this list only
+#: makes signatures change more often — never a stale module believed current.
+_NOT_GENERATOR = frozenset({
+    "__main__.py", "bench.py", "build.py", "cli.py", "figures.py", "figures_cli.py", "peers.py",
+    "plots.py", "runio.py", "scene.py", "sweep.py", "sweep_cli.py", "verify_cli.py",
+})
+_NOT_GENERATOR_DIRS = frozenset({"verify", "scenes"})
+
+
+@functools.lru_cache(maxsize=None)
+def generator_hash() -> str:
+    """SHA-256 over the names and bytes of the package's generator sources (sorted).
+
+    The derivation (schemes, divided differences, special functions), the
+    lowering and compensation passes and the emitter decide what a module
+    contains, so a change to any of them — even without a version bump, as in
+    a source checkout — must make every cached module stale instead of
+    importing one derived by older code.  Computed once per process.
+    """
+    return _generator_tree_hash(Path(__file__).resolve().parent)
+
+
+def _generator_tree_hash(root: Path) -> str:
+    """:func:`generator_hash` of the package tree at ``root``."""
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root)
+        if rel.name in _NOT_GENERATOR and len(rel.parts) == 1:
+            continue
+        if rel.parts[0] in _NOT_GENERATOR_DIRS or "__pycache__" in rel.parts:
+            continue
+        h.update(rel.as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def signature(system, method: str, backend: str = "numpy") -> str:
     """Hash of everything a generated module depends on.
 
-    Computed from the system's fingerprint, the method name, the backend and
-    the versions of methodgen, SymPy and the templates — no derivation needed,
-    so a cached module can be reused without re-deriving the scheme.  The
-    backend enters the hash only when it is not ``"numpy"``: numpy signatures
-    stay what they were before there was a choice (committed modules remain in
-    sync), and a numpy and a numba module never share a signature.
+    Computed from the system's fingerprint, the method name, the backend, the
+    versions of methodgen and SymPy, the templates and the generator's own
+    sources (:func:`generator_hash`) — no derivation needed, so a cached
+    module can be reused without re-deriving the scheme, and a module written
+    by a different derivation is never taken for current.  The backend enters
+    the hash only when it is not ``"numpy"``; a numpy and a numba module never
+    share a signature.
     """
-    parts = [system.fingerprint(), method, __version__, sympy.__version__, template_hash(backend)]
+    parts = [system.fingerprint(), method, __version__, sympy.__version__, template_hash(backend),
+             generator_hash()]
     if backend != "numpy":
         parts.append(f"backend={backend}")
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
