@@ -150,6 +150,8 @@ def test_convergence_error_with_step_and_partial_trajectory(pair):
     _close(exc_nb.trajectory, exc_np.trajectory)
     assert exc_nb.iterations == limit and exc_nb.trajectories is None
     assert "did not converge at step" in str(exc_nb)
+    # The messages are written once for both backends (templates/_stepping.py.j2).
+    assert str(exc_nb) == str(exc_np)
 
 
 def test_resolution_errors(pair):
@@ -161,6 +163,9 @@ def test_resolution_errors(pair):
         assert isinstance(exc_nb, nb_mod.ResolutionError) and isinstance(exc_np, np_mod.ResolutionError)
         assert exc_nb.step == exc_np.step >= 0     # h = 0.5 from pericentre: refused at step 0
         assert exc_nb.resolution == pytest.approx(exc_np.resolution, rel=1e-9)
+        assert exc_nb.check == exc_np.check
+        if exc_nb.resolution == exc_np.resolution:
+            assert str(exc_nb) == str(exc_np)
         _close(exc_nb.trajectory, exc_np.trajectory)
     # check_resolution=False accepts the unresolved run, like numpy.
     infall = np.array([1.0, 0, 0, 0, 0, 0])
