@@ -483,7 +483,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     done = 0
     seconds = 0.0
     first = True
-    compensation = None  # carried from chunk to chunk so chunking does not change the result
+    carry: dict = {}  # compensation and solver state, chunk to chunk: chunking does not change the result
     if save:
         # A path that cannot be written is a StorageError here (exit 2), before any work.
         writer = ChunkWriter(save, meta=meta)
@@ -492,13 +492,13 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     try:
         while first or done < steps:
             n = min(chunk, steps - done)
-            info: dict = {} if compensation is None else {"compensation": compensation}
+            info: dict = dict(carry)
             t0 = time.perf_counter()
             try:
                 part = module.integrate(y, h, n, params, info=info, extended=extended, **stride)
             finally:
                 seconds += time.perf_counter() - t0
-            compensation = info.get("compensation")
+            carry = {k: info[k] for k in ("compensation", "solver_state") if k in info}
             rows = part if first else part[1:]
             inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params, stride=every)
             its_all.append(info.get("newton_iterations", np.zeros(0)))
@@ -1114,7 +1114,7 @@ def make_parser() -> argparse.ArgumentParser:
                    help="with --peers: orders of methodgen's rows, each method at each order (default 2,4,6,8,10; "
                         "above 2 the symmetric composition of the order's default family, step sizes per order "
                         "down to a final error of 1e-12); without --peers only 2")
-    p.add_argument("--solver", choices=("newton", "simplified", "fixed-point"),
+    p.add_argument("--solver", choices=("newton", "simplified", "fixed-point", "reuse", "auto"),
                    help="with --peers: nonlinear solver of methodgen's rows (default: the module's)")
     p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE",

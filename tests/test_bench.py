@@ -31,7 +31,7 @@ def test_bench_json_structure(harmonic_quick):
     for r in wp["rows"]:
         for key in ("seconds", "error", "energy_error", "invariant_errors"):
             assert key in r
-    assert {r["solver"] for r in rep["solvers"]["rows"]} == {"newton", "simplified", "fixed-point"}
+    assert {r["solver"] for r in rep["solvers"]["rows"]} == {"newton", "simplified", "fixed-point", "reuse", "auto"}
 
 
 def test_bench_rows_show_second_order_and_exact_energy(harmonic_quick):
