@@ -118,6 +118,10 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
         g is not a smooth expression of the declared names, depends on a momentum,
         or is constant (then there is nothing to transform; use the original system).
     """
+    if getattr(system, "kind", None) == "poisson":
+        raise InputError("time_transform needs a canonical system (methodgen.Hamiltonian with q and p): "
+                         "the Poincaré transformation adds the time t and its conjugate momentum e to "
+                         "(q, p); for a PoissonSystem it is not implemented")
     if not isinstance(system, Hamiltonian):
         raise InputError(f"time_transform expects a methodgen.Hamiltonian, got {type(system).__name__}")
     if system.time_transform is not None:

@@ -106,6 +106,11 @@ def test_hamiltonian_without_momenta_points_to_poisson_system():
         mg.Hamiltonian("m1**2", q=["m1", "m2", "m3"], p=[])
 
 
+def test_time_transform_of_a_poisson_system_says_why(rigid):
+    with pytest.raises(mg.InputError, match="canonical system.*PoissonSystem it is not implemented"):
+        mg.time_transform(rigid, "1 + m1**2")
+
+
 def test_immutable_and_fingerprint(rigid):
     with pytest.raises(AttributeError):
         rigid.H = 0
