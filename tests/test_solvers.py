@@ -151,3 +151,19 @@ def test_chunks_equal_one_piece(pair, solver):
                 parts.append(part if k == 0 else part[1:])
                 y = part[-1]
             assert not np.array_equal(np.concatenate(parts), whole), mod.BACKEND
+
+
+def test_solver_state_is_not_taken_across_backends_or_solvers(pair):
+    # One info dict handed from a numpy run to a numba run (or to another solver): the
+    # state that does not belong to it is ignored, never misread.
+    pytest.importorskip("numba")
+    np_mod, nb_mod = pair("henon-heiles", "midpoint")
+    y0 = np.array(mg.load_scene("henon-heiles").y0, dtype=float)
+    info = {}
+    np_mod.integrate(y0, 0.5, 20, solver="reuse", info=info)
+    info.pop("compensation")
+    a = nb_mod.integrate(y0, 0.5, 20, solver="reuse", info=info)
+    assert np.array_equal(a, nb_mod.integrate(y0, 0.5, 20, solver="reuse"))
+    info.pop("compensation")
+    b = nb_mod.integrate(y0, 0.5, 20, solver="auto", info=info)
+    assert np.array_equal(b, nb_mod.integrate(y0, 0.5, 20, solver="auto"))
