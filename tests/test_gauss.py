@@ -68,8 +68,9 @@ def test_quadratic_hamiltonian_exact(gauss):
     mod = gauss("harmonic", 2)
     scene = mg.load_scene("harmonic")
     # Newton's method, as calibrated: with 4 unknowns the default is "auto", whose steps
-    # agree to round-off; either way H carries a linear round-off drift of ~2e-17 per step
-    # at h = 0.7 (Gauss stage values are not compensated), 1e-14 after ~500 steps.
+    # agree to round-off; either way H carries a linear drift of ~2e-17 per step at h = 0.7
+    # from the float64 rounding of A and d (the symplecticity condition holds to ~1e-17),
+    # 1e-14 after ~500 steps.
     tr = mod.integrate(np.asarray(scene.y0, float), 0.7, 500, solver="newton")
     H = mod.hamiltonian(tr)
     assert np.abs(H - H[0]).max() < 1e-14 and mod.TRAITS["energy_preserving"]
