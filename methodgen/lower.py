@@ -490,8 +490,11 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     d2 = len(system.y)
     # The step's equations at the exact numerical state y + c (compensated stage sums:
     # the round-off of long runs then follows Brouwer's law, see methodgen.compensate).
-    # Only where the unknowns are increments (``_d_*``): stage *values* (Gauss) are O(1)
-    # numbers that cannot hold c, and grouping c with them would only add rounding.
+    # Only where the unknowns are named increments (``_d_*``).  Gauss collocation (stage
+    # increments ``_z*``) is left out: measured on harmonic ensembles (200 phases), its
+    # energy drift is the same with and without (h = 0.01, 20000 steps: -8.3e-17 vs
+    # -8.7e-17 for s = 2; h = 0.7: -6.6e-14 both) -- it comes from the float64 rounding
+    # of A and d, not from the stage sums.
     cmp_ = ((lambda exprs, c: list(exprs)) if any(not u.name.startswith("_d_") for u in scheme.unknowns)
             else compensate)
     res = cmp_(list(scheme.residual), comp)
