@@ -247,7 +247,8 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "state_names": names,
         "invariants": report_inv,
         "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
-                   "max_iterations": int(its.max()) if its.size else 0},
+                   "max_iterations": int(its.max()) if its.size else 0,
+                   "solver": getattr(module, "DEFAULT_SOLVER", None)},
         "seconds": seconds,
         "us_per_step": seconds / steps_done * 1e6 if steps_done else 0.0,
         "module": str(getattr(module, "__file__", "")),
@@ -627,7 +628,10 @@ def _print_run(rep: dict) -> None:
               "H_phys = -e)")
     nw = rep["newton"]
     stages = f" ({rep['composition']['stages']} stages)" if rep.get("composition") else ""
-    print(f"Newton iterations per step{stages}: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
+    # "auto" iterates the fixed point and runs Newton's method only where that is slow.
+    what = ("solver iterations (auto: fixed point, Newton where it contracts slowly)"
+            if nw.get("solver") == "auto" else "Newton iterations")
+    print(f"{what} per step{stages}: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
     print(f"wall time {rep['seconds']:.3f} s, {rep['us_per_step']:.2f} µs/step")
     names = rep["state_names"]
     print("y_final: " + ", ".join(f"{n}={v:.15g}" for n, v in zip(names, rep["y_final"]))
