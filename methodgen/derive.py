@@ -218,12 +218,45 @@ def _zero_status(expr: sp.Expr, system: Hamiltonian, simplify_limit: int | None 
             break
         if abs(val) > 1e-20:
             return "nonzero"
+    if _zero_by_groups(expr):
+        return "zero"
     for reduce in (sp.expand, sp.cancel, sp.simplify):
         if reduce is sp.simplify and simplify_limit is not None and sp.count_ops(expr) > simplify_limit:
             break
         if reduce(expr) == 0:
             return "zero"
     return "unknown"
+
+
+#: Below this many terms an expression is reduced whole (:func:`_zero_by_groups`).
+GROUP_MIN_TERMS = 8
+
+
+def _zero_by_groups(expr: sp.Expr) -> bool:
+    """A sum of many terms shown to be 0 group by group: the terms (after distributing
+    products over sums, not inside functions) grouped by their exact set of free symbols,
+    each group reduced by ``expand`` then ``cancel``.  Sound: the groups partition the
+    sum, so the sum of the groups' zeros is 0.  Not complete (terms with different
+    symbols may cancel only together): False then, and the caller reduces the whole.
+
+    A bracket ``{P, H}`` of a pair potential is a sum over pairs whose terms cancel within
+    each pair (the same symbols), so this costs what one pair costs, times the pairs,
+    where reducing the whole sum costs far more (N-body systems).
+    """
+    # distribute each term's products over its sums (top level only, nothing inside functions)
+    args = [t for a in sp.Add.make_args(expr) for t in sp.Add.make_args(sp.expand_mul(a, deep=False))]
+    if len(args) < GROUP_MIN_TERMS:
+        return False
+    groups: dict = {}
+    for a in args:
+        groups.setdefault(frozenset(a.free_symbols), []).append(a)
+    if len(groups) < 2:
+        return False
+    for terms in groups.values():
+        part = sp.Add(*terms)
+        if part != 0 and sp.expand(part) != 0 and sp.cancel(part) != 0:
+            return False
+    return True
 
 
 def _is_zero(expr: sp.Expr, system: Hamiltonian) -> bool:
@@ -241,6 +274,36 @@ def _angular_name(system: Hamiltonian, i: int, j: int) -> str:
 
 
 @_cache
+def _gradient_samples(system: Hamiltonian):
+    """``[(y, ∇H(y))]`` in float64 at two fixed points (None where H cannot be evaluated
+    there): a cheap screen that rejects candidate first integrals before any exact test.
+    Only rejection uses floats; what is kept is proved exactly."""
+    args = list(system.y) + list(system.params)
+    pv = [system.param_values[s.name] for s in system.params]
+    try:
+        from .special import to_elementary
+        fn = sp.lambdify(args, [to_elementary(e) for e in gradient(system)], modules="math")
+        out = []
+        for k in (3, 7):
+            y = [0.37 + 0.11 * ((i * k) % 13) for i in range(len(system.y))]
+            out.append((y, [float(v) for v in fn(*(y + pv))]))
+        return out
+    except Exception:
+        return None
+
+
+def _angular_sample(y, g, d: int, i: int, j: int) -> tuple[float, float]:
+    """``{q_i p_j - q_j p_i, H}`` at a sample point, and the size of its terms."""
+    terms = (y[d + j] * g[d + i], -y[d + i] * g[d + j], -y[i] * g[j], y[j] * g[i])
+    return sum(terms), sum(abs(t) for t in terms)
+
+
+def _small(sample: tuple[float, float]) -> bool:
+    value, size = sample
+    return math.isfinite(value) and abs(value) <= 1e-9 * max(size, 1e-300)
+
+
+@_cache
 def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     """Components of angular momentum ``q × p`` that are first integrals.
 
@@ -255,8 +318,11 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     if d < 2:
         return ()
     out = []
+    screen = _gradient_samples(system)
     for i in range(d):
         for j in range(i + 1, d):
+            if screen is not None and not all(_small(_angular_sample(y, g, d, i, j)) for y, g in screen):
+                continue   # {L_ij, H} clearly nonzero at a sample point: not a candidate
             qi, qj, pi, pj = system.q[i], system.q[j], system.p[i], system.p[j]
             if d == 3 and (i, j) == (0, 2):
                 L = qj * pi - qi * pj  # Ly = z px - x pz
@@ -400,8 +466,14 @@ def _total_angular_candidates(system: Hamiltonian):
 
 
 def _commutes(system: Hamiltonian, I: sp.Expr) -> bool:
-    """``{I, H} = 0`` and ``{I, g_i} = 0`` for every constraint, shown exactly."""
-    return all(_is_zero(poisson_bracket(system, I, F), system) for F in [system.H, *system.constraints])
+    """``{I, H} = 0`` and ``{I, g_i} = 0`` for every constraint, shown exactly ({I, H} from
+    the cached gradient of H)."""
+    g = gradient(system)
+    d = system.dim
+    IH = sp.Add(*[sp.diff(I, qi) * g[d + k] - sp.diff(I, pi) * g[k]
+                  for k, (qi, pi) in enumerate(zip(system.q, system.p))])
+    return _is_zero(IH, system) and all(_is_zero(poisson_bracket(system, I, F), system)
+                                        for F in system.constraints)
 
 
 @_cache

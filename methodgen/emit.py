@@ -229,7 +229,8 @@ def _vector_view(kern: Kernel, groups: list[tuple[str, tuple[int, ...]]], return
                 targets.append((f"{name}[..., {idx}]", code))
                 break
     allocs = [(name, repr(tuple(shape))) for name, shape in groups]
-    return {"temps": kern.temps, "targets": targets, "allocs": allocs, "returns": returns}
+    return {"temps": kern.temps, "targets": targets, "allocs": allocs, "returns": returns,
+            "loops": kern.loops, "accs": kern.accs}
 
 
 def _docsafe(text: str) -> str:
@@ -259,7 +260,11 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     if n:
         vector["guess"] = _vector_view(ir.vector["guess"], [("_out", (n,))], "_out")
         vector["res"] = _vector_view(ir.vector["res"], [("_R", (n,))], "_R")
-        vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_J", (n, n))], "_R, _J")
+        if ir.vector["resjac"].jac_rows:   # J = I + diag(s) _sB (methodgen.lower_loops)
+            vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_JS", (n,))],
+                                            f"_R, _JS[..., :, None] * _sB + numpy.eye({n})")
+        else:
+            vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_J", (n, n))], "_R, _J")
         if "scale" in ir.vector:
             vector["scale"] = _vector_view(ir.vector["scale"], [("_out", (1,))], "_out[..., 0]")
     defaults = "{" + ", ".join(f"{k!r}: {v}" for k, v in zip(ir.param_names, ir.param_defaults)) + "}"

@@ -22,13 +22,15 @@ from __future__ import annotations
 
 import builtins
 import keyword
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field, replace
 
 import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 from .compensate import compensate, compensation_symbols
+from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, table_names
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .poisson import is_poisson
 from .schemes.base import STEP, is_linear_field
@@ -36,6 +38,7 @@ from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
 
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _RESERVED = set(dir(builtins)) | set(keyword.kwlist) | set(keyword.softkwlist) | {"numpy", "math"}
 
 
@@ -136,11 +139,32 @@ class Kernel:
         ``(index, code)`` for each non-trivial output entry.
     shape : tuple of int
         Shape of the output (without batch axes).
+    loops, accs : tuple
+        Loops over families of like terms that run before ``temps`` and the accumulator
+        arrays they fill (empty for straight-line kernels; see :mod:`methodgen.lower_loops`).
     """
 
     temps: tuple[tuple[str, str], ...]
     outputs: tuple[tuple[tuple[int, ...], str], ...]
     shape: tuple[int, ...]
+    #: Loops over families of like terms ahead of ``temps``
+    #: (:class:`methodgen.lower_loops.Loop`) and the accumulators they fill.
+    loops: tuple = ()
+    accs: tuple = ()
+    #: A Newton kernel whose outputs after the residual are row scales s: the Jacobian
+    #: is ``I + diag(s) _sB`` (:func:`methodgen.lower_loops.jacobian_row_scales`).
+    jac_rows: bool = False
+    _names: frozenset | None = field(default=None, repr=False, compare=False)
+
+    def reads(self, name: str) -> bool:
+        """Whether the kernel's straight-line code reads the variable ``name`` (a compiled
+        kernel then loads only what it reads: its loops load their slots themselves)."""
+        if self._names is None:
+            found = set()
+            for code in [c for _, c in self.temps] + [c for _, c in self.outputs]:
+                found.update(_IDENT.findall(code))
+            object.__setattr__(self, "_names", frozenset(found))
+        return name in self._names
 
     def entries(self) -> list[str]:
         """Codes of all entries in C order, ``0.0`` where there is no output (scalar lists)."""
@@ -224,6 +248,9 @@ class ModuleIR:
     #: entries; ``matrix_text``: one line), the Casimirs' names and the Jacobi-identity
     #: verdict.  None for a canonical system (``q_names``, ``p_names``).
     poisson: dict | None = None
+    #: Index tables of the loops over families of like terms: ``(name, rows)``, rows of
+    #: ints (coordinates' positions in q, or parameters' positions); empty without loops.
+    loop_tables: tuple = ()
 
     @property
     def stages(self) -> int:
@@ -344,7 +371,7 @@ class LocalErrorPlan:
     shared: tuple = ()              # subexpressions to compute once (the components of E)
 
 
-def local_error_plan(scheme, dy=None) -> LocalErrorPlan | None:
+def local_error_plan(scheme, dy=None, field_at_end=None) -> LocalErrorPlan | None:
     """The embedded error estimate ``E`` of one step ``y0 → y1 = y0 + Δy`` of ``scheme``.
 
     The classical embedded pair for second-order one-step methods is the
@@ -388,12 +415,16 @@ def local_error_plan(scheme, dy=None) -> LocalErrorPlan | None:
     Returns None for a linear vector field without constraints: the methods
     are then exact up to a phase error and E vanishes identically (Figure 1
     uses h·ω ≈ 5 on purpose).  Constraint forces make a linear field nonlinear.
+
+    ``field_at_end``: the field written so that ``y → y + Δy`` gives f(y1) (a module that
+    loops over sums of like terms passes its force at the step's end as the sum ``_sK``);
+    default the system's vector field.
     """
     system = scheme.system
     if is_linear_field(system) and not system.constraints:
         return None
     h = STEP
-    f = list(vector_field(system))
+    f = list(vector_field(system)) if field_at_end is None else list(field_at_end)
     inc = list(scheme.increment) if dy is None else list(dy)
     at1 = {s: s + dv for s, dv in zip(system.y, inc)}
     n = len(system.y)
@@ -466,7 +497,29 @@ def domain_conditions(system) -> tuple[tuple[str, sp.Expr], ...]:
     return tuple(seen[k] for k in sorted(seen))
 
 
-def lower(scheme, signature: str, module_name: str) -> ModuleIR:
+#: A family of like terms with at least this many instances makes the module loop over
+#: the families (:func:`uses_loops`); below it the unrolled code is as small and faster.
+LOOP_MIN_INSTANCES = 3
+
+
+def uses_loops(scheme, loops: bool | None = None) -> bool:
+    """Whether the module of ``scheme`` loops over families of like terms.
+
+    ``loops=None`` (default): where the scheme has a :class:`~methodgen.schemes.base.LoopPlan`
+    with a family of at least :data:`LOOP_MIN_INSTANCES` instances.  ``True`` forces loops
+    where there is a plan (a ValueError where there is none), ``False`` unrolls.
+    """
+    plan = getattr(scheme, "loops", None)
+    if loops is None:
+        return plan is not None and plan.largest >= LOOP_MIN_INSTANCES
+    if loops and plan is None:
+        raise ValueError(f"loops=True: {scheme.method} has no sums of like terms to loop over for this "
+                         "system (loops are built for energy-momentum with a separable H and a quadratic "
+                         "kinetic energy); use loops=None or False")
+    return bool(loops)
+
+
+def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -> ModuleIR:
     """Lower ``scheme`` to a :class:`ModuleIR` (deterministic).
 
     Parameters
@@ -476,6 +529,9 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         The signature hash to embed (see :func:`methodgen.emit.signature`).
     module_name : str
         Python module name of the generated file.
+    loops : bool or None
+        Loop over families of like terms instead of unrolling every term
+        (:func:`uses_loops`; default: where a family has ≥ 3 instances).
     """
     system = scheme.system
     user = [s.name for s in system.y] + list(system.param_names)
@@ -497,41 +553,72 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     # of A and d, not from the stage sums.
     cmp_ = ((lambda exprs, c: list(exprs)) if any(not u.name.startswith("_d_") for u in scheme.unknowns)
             else compensate)
-    res = cmp_(list(scheme.residual), comp)
-    jac = cmp_(list(scheme.jacobian), comp) if n else []
-    inc = cmp_(list(scheme.increment), comp)
-    guess = list(scheme.guess)
+    looped = uses_loops(scheme, loops) and n > 0
+    plan = scheme.loops if looped else None
+    if looped:
+        # The sums stay sums: the kernels below get loops over the families ahead of their
+        # straight-line code (methodgen.lower_loops), and the Newton matrix comes from the
+        # chain rule through the sums, never from the expanded residual.
+        res = cmp_(list(plan.residual), comp)
+        rows = jacobian_row_scales(plan.residual, scheme.unknowns, plan)
+        if rows is None:
+            jac_acc, _ = jacobian_via_sums(plan.residual, scheme.unknowns, plan)
+        jac = cmp_(rows if rows is not None else jac_acc, comp)
+        inc = cmp_(list(plan.increment), comp)
+        guess = list(plan.guess)
+    else:
+        res = cmp_(list(scheme.residual), comp)
+        jac = cmp_(list(scheme.jacobian), comp) if n else []
+        inc = cmp_(list(scheme.increment), comp)
+        guess = list(scheme.guess)
     invs: tuple[Invariant, ...] = scheme.invariants
     inv_exprs = [inv.expr for inv in invs]
+    dim = system.dim if not is_poisson(system) else 0
+    compensated = cmp_ is compensate
+
+    def kern(exprs, shape, printer, jac_rows=False):
+        k = _kernel(exprs, shape, printer, rename)
+        k = _with_loops(k, exprs, plan, printer, dim, compensated, ("_sB",) if jac_rows else ())
+        return replace(k, jac_rows=True) if jac_rows else k
 
     scalar = {}
     vector = {}
     if n:
-        scalar["guess"] = _kernel(guess, (n,), sp_, rename)
-        vector["guess"] = _kernel(guess, (n,), vp, rename)
-        scalar["resjac"] = _kernel(res + jac, (n + n * n,), sp_, rename)
-        vector["resjac"] = _kernel(res + jac, (n + n * n,), vp, rename)
-        scalar["res"] = _kernel(res, (n,), sp_, rename)
-        vector["res"] = _kernel(res, (n,), vp, rename)
+        scalar["guess"] = kern(guess, (n,), sp_)
+        vector["guess"] = kern(guess, (n,), vp)
+        # with row scales (looped modules): R then s, and J = I + diag(s) _sB in the module
+        scaled = looped and rows is not None
+        nj = n if scaled else n * n
+        scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
+        vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
+        scalar["res"] = kern(res, (n,), sp_)
+        vector["res"] = kern(res, (n,), vp)
         if scheme.unknown_scale is not None:
             scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
             vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
-    scalar["increment"] = _kernel(inc, (d2,), sp_, rename)
-    vector["increment"] = _kernel(inc, (d2,), vp, rename)
+    scalar["increment"] = kern(inc, (d2,), sp_)
+    vector["increment"] = kern(inc, (d2,), vp)
     # After each solve one kernel gives the increment together with what the checks
     # need at the new state y1 = y0 + Δy, sharing common subexpressions: the error
     # estimate's field values or E itself, and the domain conditions.
     # The checks are written in symbols _dy0, _dy1, ... bound to the increment, so the
     # increment's code is exactly that of the increment kernel (same trajectories).
     links = tuple(sp.Symbol(f"_dy{i}", real=True) for i in range(d2))
-    plan = local_error_plan(scheme, links)
+    # With loops, the force at the step's end is the sum _sK (Σ ∇U_t(q0 + Δq), Δq = z).
+    field1 = None
+    if looped:
+        sep = separable_split(system)
+        field1 = list(sep.Minv * sp.Matrix(system.p)) + [-sp.Symbol(f"_sK{i}", real=True) for i in range(dim)]
+    lplan = local_error_plan(scheme, links, field_at_end=field1)
     conds = domain_conditions(system)
     at1 = {s: s + dv for s, dv in zip(system.y, links)}
-    later = list(plan.extra if plan else ()) + [u.xreplace(at1) for _, u in conds]
-    shared = plan.shared if plan else ()
-    scalar["post"] = _chained_kernel(inc, later, links, sp_, rename,
-                                     CheckPrinter({"fully_qualified_modules": True}), shared)
-    vector["post"] = _chained_kernel(inc, later, links, vp, rename, shared=shared)
+    later = list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
+    shared = lplan.shared if lplan else ()
+    scalar["post"] = _with_loops(
+        _chained_kernel(inc, later, links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}), shared),
+        inc + later, plan, sp_, dim, compensated)
+    vector["post"] = _with_loops(_chained_kernel(inc, later, links, vp, rename, shared=shared),
+                                 inc + later, plan, vp, dim, compensated)
     # At the initial state: H and the whole vector field (the carried field values
     # of the first step are components of it), then the domain conditions.
     check = [system.H] + list(vector_field(system))
@@ -546,7 +633,7 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
     if n_cons:
         # Constraint machinery only where there are constraints: g, G = ∂g/∂q and M⁻¹
         # for checking and projecting initial values onto T*Q.
-        from .derive import constraint_jacobian, separable_split
+        from .derive import constraint_jacobian
         G = constraint_jacobian(system)
         Minv = separable_split(system).Minv
         vector["constraints"] = _kernel(list(system.constraints) + list(G), (n_cons + n_cons * system.dim,),
@@ -554,6 +641,8 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         vector["minv"] = _kernel(list(Minv), (system.dim * system.dim,), vp, rename)
 
     all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
+    if plan is not None:   # the helpers the loops' template terms call
+        all_exprs += [e for lf in plan.families for e in lf.dg + lf.grad]
     return ModuleIR(
         module_name=module_name,
         system_name=system.name or "system",
@@ -580,16 +669,36 @@ def lower(scheme, signature: str, module_name: str) -> ModuleIR:
         signature=signature,
         resolution=scheme.resolution,
         fixed_point=scheme.fixed_point,
-        local_error=plan.kind if plan else None,
-        lerr_index=plan.index if plan else (),
-        lerr_norm=plan.norm if plan else (),
-        lerr_scale=repr(float(plan.scale)) if plan else "1.0",
-        lerr_partner=plan.partner if plan else "",
+        local_error=lplan.kind if lplan else None,
+        lerr_index=lplan.index if lplan else (),
+        lerr_norm=lplan.norm if lplan else (),
+        lerr_scale=repr(float(lplan.scale)) if lplan else "1.0",
+        lerr_partner=lplan.partner if lplan else "",
         domain=tuple((kind, str(u)) for kind, u in conds),
         **_composition_fields(scheme),
         time_transform=_time_transform_fields(system, invs),
         poisson=_poisson_fields(system),
+        loop_tables=_loop_tables(plan),
     )
+
+
+def _with_loops(k: Kernel, exprs, plan, printer, dim: int, compensated: bool, whole=()) -> Kernel:
+    if plan is None:
+        return k
+    loops, accs = loop_prefix(exprs, plan, printer, dim, compensated, whole)
+    return Kernel(k.temps, k.outputs, k.shape, loops, accs)
+
+
+def _loop_tables(plan) -> tuple:
+    if plan is None:
+        return ()
+    out = []
+    for f, lf in enumerate(plan.families):
+        table, ptable = table_names(f)
+        out.append((table, lf.family.index))
+        if lf.family.pslots:
+            out.append((ptable, lf.family.pindex))
+    return tuple(out)
 
 
 def _poisson_fields(system) -> dict | None:

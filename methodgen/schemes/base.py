@@ -120,6 +120,62 @@ class Traits:
         return out
 
 
+@dataclass(frozen=True)
+class LoopFamily:
+    """One family of like potential terms, as a generated module loops over it.
+
+    Attributes
+    ----------
+    family : methodgen.families.TermFamily
+        The template, its slots ``u`` (coordinates at y0) and ``w`` (parameters), and the
+        index table of the instances.
+    vslots : tuple of sympy.Symbol, length k
+        The slots' increments ``v`` (``Δq`` of the slot's coordinate: the end point is
+        ``u + v``).
+    dg : tuple of sympy.Expr, length k
+        The template's discrete gradient ``∇̄U_t(u, u + v)`` per slot.
+    grad : tuple of sympy.Expr, length k
+        The template's gradient ``∇U_t(u)`` per slot.
+    """
+
+    family: object
+    vslots: tuple[sp.Symbol, ...]
+    dg: tuple[sp.Expr, ...]
+    grad: tuple[sp.Expr, ...]
+
+
+def loop_family(fam, dg_template) -> LoopFamily:
+    """:class:`LoopFamily` of ``fam`` from its discrete gradient in start slots ``u`` and
+    end slots ``next_symbol(u)`` (the end slots are rewritten as ``u + v``)."""
+    v = tuple(sp.Symbol(f"_v{j}", real=True) for j in range(len(fam.slots)))
+    end = {next_symbol(u): u + vj for u, vj in zip(fam.slots, v)}
+    return LoopFamily(fam, v, tuple(sp.sympify(e).xreplace(end) for e in dg_template),
+                      tuple(sp.diff(fam.template, u) for u in fam.slots))
+
+
+@dataclass(frozen=True)
+class LoopPlan:
+    """The step's equations with the potential's sums left as sums (loops in the module).
+
+    ``residual``, ``increment`` and ``guess`` are the scheme's, with
+    ``Σ_t ∇̄U_t(q0, q0 + Δq)`` replaced by the symbols ``A`` and ``Σ_t ∇U_t(q0)`` by ``F``
+    (length d each); substituting the sums over :attr:`families` gives the scheme's own
+    expressions back.
+    """
+
+    families: tuple[LoopFamily, ...]
+    A: tuple[sp.Symbol, ...]
+    F: tuple[sp.Symbol, ...]
+    residual: sp.Matrix
+    increment: sp.Matrix
+    guess: sp.Matrix
+
+    @property
+    def largest(self) -> int:
+        """Instances of the largest family."""
+        return max((lf.family.size for lf in self.families), default=0)
+
+
 @dataclass(frozen=True, eq=False)
 class Scheme:
     """A discretised system (see the module docstring).
@@ -176,6 +232,9 @@ class Scheme:
     #: The residual, increment etc. above are always those of the base step Φ_h; ``traits``
     #: are those of the composed method (order K).
     composition: object | None = None
+    #: The step's equations with the potential's sums of like terms kept as sums
+    #: (:class:`LoopPlan`), for modules that loop over them; None where not built.
+    loops: LoopPlan | None = None
 
     h = STEP
 
@@ -398,13 +457,17 @@ def dg_linear_invariants(system: Hamiltonian, grad_bar: sp.Matrix, exclude=()) -
 
 
 def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple], sp.Matrix],
-                    traits: Traits, description: str, reduce: bool = True) -> Scheme:
+                    traits: Traits, description: str, reduce: bool = True, loops=None) -> Scheme:
     """Build the scheme ``y1 = y0 + h J ∇̄H(y0, y1)``.
 
     Parameters
     ----------
     dg : callable (y0, y1) -> Matrix (2d, 1)
         The (discrete) gradient in terms of the start and end states.
+    loops : tuple of LoopFamily, optional
+        The q-part of ``dg`` as sums over families of like terms (their sum must be
+        ``dg``'s q-part); recorded as the scheme's :class:`LoopPlan` when the momenta are
+        eliminated.
 
     Notes
     -----
@@ -442,6 +505,13 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
         notes = ("momenta eliminated (separable H with quadratic kinetic energy): "
                  "Newton on Δq only",)
         resolution = "reduced"
+        plan = None
+        if loops:
+            A = sp.Matrix([sp.Symbol(f"_sA{i}", real=True) for i in range(d)])
+            F = sp.Matrix([sp.Symbol(f"_sF{i}", real=True) for i in range(d)])
+            plan = LoopPlan(tuple(loops), tuple(A), tuple(F),
+                            zq - h * sep.Minv * (p0 - h / 2 * A), sp.Matrix(list(zq) + list(-h * A)),
+                            h * sep.Minv * (p0 - h / 2 * F))
     else:
         z = tuple(increment_symbol(s) for s in y0)
         zv = sp.Matrix(z)
@@ -453,6 +523,7 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
         guess = h * vector_field(system)
         notes = ()
         resolution = "full"
+        plan = None
     if is_linear_field(system):
         # Linear f: the symmetric methods here are exact up to a phase error for
         # every h (Figure 1 of the notes uses h·ω ≈ 5 on purpose): no guard.
@@ -466,7 +537,7 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
                   invariants=invariants(system), description=description, resolution=resolution,
-                  fixed_point=True)
+                  fixed_point=True, loops=plan)
 
 
 def _poisson_gradient_scheme(system, method: str, dg: Callable[[tuple, tuple], sp.Matrix],

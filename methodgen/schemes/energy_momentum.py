@@ -63,10 +63,11 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
-from ..derive import first_integrals, separable_split
+from ..derive import _cache, first_integrals, separable_split
 from ..divdiff import divided_difference
+from ..families import term_families
 from ..problem import Hamiltonian
-from .base import Scheme, Traits, bilinear_invariants, gradient_scheme
+from .base import Scheme, Traits, bilinear_invariants, gradient_scheme, loop_family, next_symbol
 from .discrete_gradients import (_is_polynomial, additive_terms, linear_form_gradient,
                                  linear_form_term)
 
@@ -161,6 +162,32 @@ def _classify(t: sp.Expr, q) -> list[_Term] | None:
     return None
 
 
+def _instantiate(term: _Term, ren: dict) -> _Term:
+    """A template term (in a family's slot symbols) for one instance (``ren``: σ_k)."""
+    x = (lambda e: None if e is None else e.xreplace(ren))
+    return replace(term, expr=x(term.expr), var=x(term.var), E=x(term.E), L=x(term.L), V=x(term.V))
+
+
+@_cache
+def decompose_families(system: Hamiltonian) -> tuple | None:
+    """U's additive terms grouped into families of like terms
+    (:func:`methodgen.families.term_families`), each family's template classified once.
+
+    Returns a tuple of ``(family, template_terms)`` with ``template_terms`` the
+    :class:`_Term` s of the template in the family's slot symbols, or None when some
+    template fits no rule.  Classifying the template once instead of every term is what
+    makes a 6-body potential (15 pair terms) cost what one pair costs.
+    """
+    sep = separable_split(system)
+    out = []
+    for fam in term_families(sep.U, system.q, system.params):
+        found = _classify(fam.template, list(fam.slots))
+        if found is None:
+            return None
+        out.append((fam, tuple(found)))
+    return tuple(out)
+
+
 def decompose(system: Hamiltonian) -> tuple[_Term, ...] | None:
     """Split U into additive terms the method can treat (None if some term cannot be).
 
@@ -168,16 +195,14 @@ def decompose(system: Hamiltonian) -> tuple[_Term, ...] | None:
     rule that fits — one coordinate, a function of a quadratic form, a function of one
     affine form, a polynomial — and a term that fits none is distributed over its sums
     (:func:`~methodgen.schemes.discrete_gradients.additive_terms`) and its parts classified.
+    Like terms are classified once, as their family's template (:func:`decompose_families`).
     """
-    sep = separable_split(system)
-    q = list(system.q)
-    terms = []
-    for t in sp.Add.make_args(sep.U):
-        found = _classify(t, q)
-        if found is None:
-            return None
-        terms += found
-    return tuple(terms)
+    fams = decompose_families(system)
+    if fams is None:
+        return None
+    q, params = system.q, system.params
+    return tuple(_instantiate(t, fam.renaming(k, q, params))
+                 for fam, tterms in fams for k in range(fam.size) for t in tterms)
 
 
 def applies(system: Hamiltonian) -> str | None:
@@ -259,10 +284,20 @@ def _profile(term: _Term, q, q0, q1) -> tuple | None:
     return None
 
 
+def _template_pieces(fam, tterms):
+    """Each template term's discrete gradient and profile, once, in the family's slots
+    (start ``u``, end ``_n_u``): ``[(term, dg over slots, profile)]``."""
+    u = list(fam.slots)
+    u1 = [next_symbol(s) for s in u]
+    return [(t, _term_dg(t, u, u, u1), _profile(t, u, u, u1)) for t in tterms]
+
+
 def build(system: Hamiltonian) -> Scheme:
     sep = separable_split(system)
     d = system.dim
-    q = list(system.q)
+    q, params = list(system.q), list(system.params)
+    fams = decompose_families(system)
+    pieces = [(fam, _template_pieces(fam, tterms)) for fam, tterms in fams]
     terms = decompose(system)
     parts = []   # the term-wise pieces, recorded for the structural proof of the identity
 
@@ -272,12 +307,26 @@ def build(system: Hamiltonian) -> Scheme:
         Gq = [sp.S.Zero] * d
         parts.clear()
         zp = [sp.S.Zero] * d
-        for term in terms:
-            Gt = _term_dg(term, q, q0, q1)
-            Gq = [a + b for a, b in zip(Gq, Gt)]
-            prof = _profile(term, q, q0, q1)
-            parts.append({"expr": term.expr, "dg": Gt + zp,
-                          "profile": None if prof is None else prof[:3] + (list(prof[3]) + zp,)})
+        for fam, tpieces in pieces:
+            u1 = [next_symbol(s) for s in fam.slots]
+            for k in range(fam.size):
+                # σ_k on the template's start and end slots: the instance's q0 and q1
+                idx = fam.index[k]
+                ren = fam.renaming(k, q0, params)
+                ren.update({b: q1[i] for b, i in zip(u1, idx)})
+                ren0 = fam.renaming(k, q, params)
+                for t, tdg, tprof in tpieces:
+                    Gt = [sp.S.Zero] * d
+                    for j, i in enumerate(idx):
+                        Gt[i] = tdg[j].xreplace(ren)
+                    Gq = [a + b for a, b in zip(Gq, Gt)]
+                    prof = None
+                    if tprof is not None:
+                        w = [sp.S.Zero] * d
+                        for j, i in enumerate(idx):
+                            w[i] = sp.sympify(tprof[3][j]).xreplace(ren)
+                        prof = (tprof[0].xreplace(ren0), tprof[1], tprof[2].xreplace(ren0), w + zp)
+                    parts.append({"expr": t.expr.xreplace(ren0), "dg": Gt + zp, "profile": prof})
         Gp = sep.Minv * (p0 + p1) / 2
         parts.append({"expr": sep.T, "dg": [sp.S.Zero] * d + list(Gp), "profile": None})
         return sp.Matrix(Gq + list(Gp))
@@ -300,8 +349,10 @@ def build(system: Hamiltonian) -> Scheme:
     traits = Traits(order=2, symmetric=True, symplectic=False, energy_preserving=True,
                     preserved=("H",) + momenta, solve="newton", discrete_gradient=True,
                     notes=tuple(notes))
+    loops = tuple(loop_family(fam, [sum(col, sp.S.Zero) for col in zip(*(tdg for _, tdg, _ in tp))])
+                  for fam, tp in pieces)
     scheme = gradient_scheme(system, NAME, dg, traits,
-                             "y1 = y0 + h J [κ∇U(q̄); M⁻¹(p0 + p1)/2]")
+                             "y1 = y0 + h J [κ∇U(q̄); M⁻¹(p0 + p1)/2]", loops=loops)
     # ∇̄H = Σ_t ∇̄U_t + [0; M⁻¹p̄], each piece in the scheme's y0/y1 symbols (dg was called with
     # them once): methodgen.verify.structural proves the identity term by term from these.
     return replace(scheme, structure={"kind": "term-wise", "terms": tuple(parts)})

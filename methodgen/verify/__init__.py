@@ -80,6 +80,7 @@ from .poisson import REF_POISSON as POISSON_REF
 from .poisson import (casimir_certificates, jacobi_certificate, kahan_poisson_certificates, skew_certificate,
                       structure_symmetry)
 from .quadratic import retiming_certificate
+from .loops import REF_LOOPS, loop_certificates
 from .report import NUMERICAL, PROVED, REFUTED, STATUSES, UNDECIDED, Certificate, Report
 
 __all__ = ["verify", "Report", "Certificate", "PROVED", "REFUTED", "NUMERICAL", "UNDECIDED",
@@ -255,6 +256,10 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
     if system.declared_invariants or d >= 2:
         add("detected and declared invariants are first integrals of this H: {I, H} = 0", REF_FIRST_INTEGRALS,
             lambda: first_integral_certificates(system))
+    # Sums of like terms: what a looped module evaluates is the scheme's ∇̄U (lower_loops).
+    if getattr(scheme, "loops", None) is not None:
+        add(f"loops over like terms evaluate the scheme's discrete gradient ({step})", REF_LOOPS,
+            lambda: loop_certificates(scheme))
     # Claims 2, 4: discrete gradients.
     if traits.discrete_gradient and scheme.discrete_gradient is not None:
         what = "identity, consistency and κ" if m == "energy-momentum" else "identity and consistency"

@@ -288,13 +288,54 @@ def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True, cheap: bool = True) 
     return "; ".join(names)
 
 
-def _reduce_case(e: sp.Expr, allow_simplify: bool, cheap: bool) -> str | None:
+#: A sum of at least this many terms is first reduced group by group (:func:`_reduce_groups`).
+GROUP_MIN_TERMS = 8
+
+
+def _reduce_groups(e: sp.Expr, allow_simplify: bool) -> str | None:
+    """Reduce a large sum group by group: its terms (products distributed over sums, not
+    inside functions) grouped by their exact set of free symbols, each group reduced to 0
+    on its own.  Sound — the groups partition the sum — but not complete (terms with
+    different symbols may cancel only together): None then, and the whole is reduced.
+    A bracket {P, H} of an N-body H is a sum over pairs that cancels pair by pair: this
+    costs what one pair costs, times the pairs."""
+    # distribute each term's products over its sums (top level only, nothing inside functions)
+    args = [t for a in sp.Add.make_args(e) for t in sp.Add.make_args(sp.expand_mul(a, deep=False))]
+    if len(args) < GROUP_MIN_TERMS:
+        return None
+    groups: dict = {}
+    for a in args:
+        groups.setdefault(frozenset(a.free_symbols), []).append(a)
+    if len(groups) < 2:
+        return None
+    hows = []
+    for terms in groups.values():
+        part = sp.Add(*terms)
+        # expand first: a group is typically one term's pieces sharing a factor (a pair's
+        # divided difference), which expand cancels where together/cancel would combine
+        # the radicals first
+        if part == 0 or sp.expand(part) == 0:
+            m = "expand" if part != 0 else ZERO_AS_BUILT
+        else:
+            m = _reduce_case(part, allow_simplify, True, grouped=False)
+        if m is None:
+            return None
+        if m not in hows:
+            hows.append(m)
+    return f"{len(groups)} groups of terms by their symbols, each: " + ", ".join(hows)
+
+
+def _reduce_case(e: sp.Expr, allow_simplify: bool, cheap: bool, grouped: bool = True) -> str | None:
     if e == 0:
         return "0 by substitution"
     pre = ""
     if any(isinstance(f, (_RemovableFunction,) + _QUOTIENT_FUNCTIONS) for f in e.atoms(sp.Function)):
         e = to_elementary(e)
         pre = "special functions → their defining quotients + "
+    if cheap and grouped:
+        m = _reduce_groups(e, allow_simplify)
+        if m is not None:
+            return pre + m
     if cheap:
         if sp.cancel(sp.together(e)) == 0:
             return pre + "cancel"
