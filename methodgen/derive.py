@@ -218,7 +218,11 @@ def _zero_status(expr: sp.Expr, system: Hamiltonian, simplify_limit: int | None 
             break
         if abs(val) > 1e-20:
             return "nonzero"
-    if _zero_by_groups(expr):
+    try:
+        grouped = _zero_by_groups(expr)
+    except Exception:   # a group SymPy cannot reduce: reduce the whole below
+        grouped = False
+    if grouped:
         return "zero"
     for reduce in (sp.expand, sp.cancel, sp.simplify):
         if reduce is sp.simplify and simplify_limit is not None and sp.count_ops(expr) > simplify_limit:

@@ -195,7 +195,7 @@ def test_loop_certificates_prove_and_can_refute():
 
     scheme = mg.discretize(nbody_system(3), "energy-momentum")
     certs = loop_certificates(scheme)
-    assert len(certs) == 3 and {c.status for c in certs} == {"proved"}, [str(c) for c in certs]
+    assert len(certs) == 2 and {c.status for c in certs} == {"proved"}, [str(c) for c in certs]
     # negative controls on the identities the certificates reduce: a template gradient off
     # by a factor, and an instance table that double-counts one pair, leave them nonzero
     lf = scheme.loops.families[0]
@@ -211,19 +211,18 @@ def test_loop_certificates_prove_and_can_refute():
     wrong = dataclasses.replace(lf, dg=tuple(2 * g for g in lf.dg))
     bad = dataclasses.replace(scheme, loops=dataclasses.replace(scheme.loops, families=(wrong,)))
     vals = [value(e) for _, e in loop_identities(bad)]
-    assert vals[0] < 1e-25 and vals[1] > 1e-6 and vals[2] > 1e-6
+    assert vals[0] < 1e-25 and vals[1] > 1e-6
     fam = lf.family
     doubled = dataclasses.replace(fam, index=(fam.index[0], fam.index[0], fam.index[2]))
     bad = dataclasses.replace(scheme, loops=dataclasses.replace(
         scheme.loops, families=(dataclasses.replace(lf, family=doubled),)))
     vals = [value(e) for _, e in loop_identities(bad)]
-    assert vals[0] > 1e-6 and vals[2] > 1e-6
+    assert vals[0] > 1e-6 and vals[1] > 1e-6
 
 
 @pytest.mark.slow
 def test_verify_reports_the_loop_claims():
     rep = mg.verify(mg.discretize(nbody_system(3), "energy-momentum"), timeout=60)
-    loops = [c for c in rep.certificates if "looped" in c.claim or "loops over" in c.claim
-             or "discrete gradient of the term" in c.claim]
-    assert len(loops) == 3 and all(c.status == "proved" for c in loops)
+    loops = [c for c in rep.certificates if "looped" in c.claim or "loops over" in c.claim]
+    assert len(loops) == 2 and all(c.status == "proved" for c in loops)
     assert rep.ok and {c.status for c in rep.certificates} == {"proved"}, str(rep)

@@ -333,7 +333,10 @@ def _reduce_case(e: sp.Expr, allow_simplify: bool, cheap: bool, grouped: bool = 
         e = to_elementary(e)
         pre = "special functions → their defining quotients + "
     if cheap and grouped:
-        m = _reduce_groups(e, allow_simplify)
+        try:
+            m = _reduce_groups(e, allow_simplify)
+        except Exception:   # a group SymPy cannot reduce (PolynomialError...): reduce the whole
+            m = None
         if m is not None:
             return pre + m
     if cheap:
