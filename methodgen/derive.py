@@ -232,35 +232,37 @@ def _zero_status(expr: sp.Expr, system: Hamiltonian, simplify_limit: int | None 
     return "unknown"
 
 
-#: Below this many terms an expression is reduced whole (:func:`_zero_by_groups`).
+#: Below this many terms an expression is reduced whole (:func:`term_groups`).
 GROUP_MIN_TERMS = 8
 
 
-def _zero_by_groups(expr: sp.Expr) -> bool:
-    """A sum of many terms shown to be 0 group by group: the terms (after distributing
-    products over sums, not inside functions) grouped by their exact set of free symbols,
-    each group reduced by ``expand`` then ``cancel``.  Sound: the groups partition the
-    sum, so the sum of the groups' zeros is 0.  Not complete (terms with different
-    symbols may cancel only together): False then, and the caller reduces the whole.
+def term_groups(expr: sp.Expr) -> list[sp.Expr] | None:
+    """A large sum split into the sums of its terms grouped by their exact set of free
+    symbols (products distributed over sums at top level only, nothing inside functions),
+    or None when there are fewer than :data:`GROUP_MIN_TERMS` terms or only one group.
 
-    A bracket ``{P, H}`` of a pair potential is a sum over pairs whose terms cancel within
-    each pair (the same symbols), so this costs what one pair costs, times the pairs,
-    where reducing the whole sum costs far more (N-body systems).
+    If every group is 0, so is the sum (the groups partition it); the converse fails
+    (terms with different symbols may cancel only together).  A bracket ``{P, H}`` of a
+    pair potential is a sum over pairs that cancels pair by pair, so reducing the groups
+    costs what one pair costs, times the pairs (N-body systems).
     """
-    # distribute each term's products over its sums (top level only, nothing inside functions)
     args = [t for a in sp.Add.make_args(expr) for t in sp.Add.make_args(sp.expand_mul(a, deep=False))]
     if len(args) < GROUP_MIN_TERMS:
-        return False
+        return None
     groups: dict = {}
     for a in args:
         groups.setdefault(frozenset(a.free_symbols), []).append(a)
     if len(groups) < 2:
-        return False
-    for terms in groups.values():
-        part = sp.Add(*terms)
-        if part != 0 and sp.expand(part) != 0 and sp.cancel(part) != 0:
-            return False
-    return True
+        return None
+    return [sp.Add(*terms) for terms in groups.values()]
+
+
+def _zero_by_groups(expr: sp.Expr) -> bool:
+    """``expr ≡ 0`` shown group by group (:func:`term_groups`), each by expand then cancel;
+    False when not shown (the caller reduces the whole)."""
+    parts = term_groups(expr)
+    return parts is not None and all(
+        part == 0 or sp.expand(part) == 0 or sp.cancel(part) == 0 for part in parts)
 
 
 def _is_zero(expr: sp.Expr, system: Hamiltonian) -> bool:

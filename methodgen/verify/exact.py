@@ -30,6 +30,7 @@ from math import gcd, isqrt
 
 import sympy as sp
 
+from ..derive import term_groups
 from ..special import DividedDifference, _RemovableFunction, datan_dd, to_elementary
 
 _QUOTIENT_FUNCTIONS = (DividedDifference, datan_dd)
@@ -288,29 +289,15 @@ def reduce_to_zero(e: sp.Expr, allow_simplify: bool = True, cheap: bool = True) 
     return "; ".join(names)
 
 
-#: A sum of at least this many terms is first reduced group by group (:func:`_reduce_groups`).
-GROUP_MIN_TERMS = 8
-
-
 def _reduce_groups(e: sp.Expr, allow_simplify: bool) -> str | None:
-    """Reduce a large sum group by group: its terms (products distributed over sums, not
-    inside functions) grouped by their exact set of free symbols, each group reduced to 0
-    on its own.  Sound — the groups partition the sum — but not complete (terms with
-    different symbols may cancel only together): None then, and the whole is reduced.
-    A bracket {P, H} of an N-body H is a sum over pairs that cancels pair by pair: this
-    costs what one pair costs, times the pairs."""
-    # distribute each term's products over its sums (top level only, nothing inside functions)
-    args = [t for a in sp.Add.make_args(e) for t in sp.Add.make_args(sp.expand_mul(a, deep=False))]
-    if len(args) < GROUP_MIN_TERMS:
-        return None
-    groups: dict = {}
-    for a in args:
-        groups.setdefault(frozenset(a.free_symbols), []).append(a)
-    if len(groups) < 2:
+    """Reduce a large sum group by group (:func:`methodgen.derive.term_groups`: terms grouped
+    by their symbols), each group to 0 on its own.  Sound — the groups partition the sum —
+    but not complete: None then, and the whole is reduced."""
+    parts = term_groups(e)
+    if parts is None:
         return None
     hows = []
-    for terms in groups.values():
-        part = sp.Add(*terms)
+    for part in parts:
         # expand first: a group is typically one term's pieces sharing a factor (a pair's
         # divided difference), which expand cancels where together/cancel would combine
         # the radicals first
@@ -322,7 +309,7 @@ def _reduce_groups(e: sp.Expr, allow_simplify: bool) -> str | None:
             return None
         if m not in hows:
             hows.append(m)
-    return f"{len(groups)} groups of terms by their symbols, each: " + ", ".join(hows)
+    return f"{len(parts)} groups of terms by their symbols, each: " + ", ".join(hows)
 
 
 def _reduce_case(e: sp.Expr, allow_simplify: bool, cheap: bool, grouped: bool = True) -> str | None:
