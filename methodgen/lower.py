@@ -514,7 +514,7 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
         return plan is not None and plan.largest >= LOOP_MIN_INSTANCES
     if loops and plan is None:
         raise ValueError(f"loops=True: {scheme.method} has no sums of like terms to loop over for this "
-                         "system (loops are built for energy-momentum with a separable H and a quadratic "
+                         "system (loops are built for energy-momentum and midpoint, with a separable H and a quadratic "
                          "kinetic energy); use loops=None or False")
     return bool(loops)
 

@@ -84,6 +84,7 @@ def test_default_stepper_has_no_systematic_round_off_drift(tmp_path, monkeypatch
     np.testing.assert_allclose(Ye, Y, rtol=0, atol=1e-13)
 
 
+@pytest.mark.slow   # two numba compiles (~20 s); the numpy test above runs the same kernels' expressions
 def test_numba_stepper_has_no_systematic_round_off_drift(tmp_path, monkeypatch, pair):
     """The same measurement on the numba backend (its kernels are the same expressions)."""
     pytest.importorskip("numba")

@@ -49,21 +49,24 @@ def test_default_solver_by_size(tt_avf):
     assert np.array_equal(a, np_mod.integrate(y0, h, 50, solver="auto"))
 
 
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("solver", ["auto", "reuse", "fixed-point"])
-def test_same_steps_as_newton(tt_avf, solver):
+def test_same_steps_as_newton(tt_avf, solver, backend):
+    # numba only with -m slow: compiling this 8-unknown module costs ~40 s of the default
+    # run, and its kernels are the numpy module's expressions (tests/test_numba.py checks
+    # the backends agree, Gaussian elimination included)
     np_mod, nb_mod, y0, h = tt_avf
+    mod = np_mod if backend == "numpy" else nb_mod
     steps = 400  # beyond the first pericentre passage (fictive step, |q| down to 0.01)
     ref = np_mod.integrate(y0, h, steps, solver="newton")
-    for mod in (np_mod, nb_mod):
-        info = {}
-        y = mod.integrate(y0, h, steps, solver=solver, info=info)
-        assert _rel(y, ref) < 1e-12, (mod.BACKEND, solver)
-        assert info["newton_iterations"].min() >= 1
+    info = {}
+    y = mod.integrate(y0, h, steps, solver=solver, info=info)
+    assert _rel(y, ref) < 1e-12, (mod.BACKEND, solver)
+    assert info["newton_iterations"].min() >= 1
     # batches: every row as its single run, to round-off
     Y0 = np.array([y0, y0 + 1e-4 * np.eye(len(y0))[0]])
-    for mod in (np_mod, nb_mod):
-        Y = mod.integrate(Y0, h, 100, solver=solver)
-        assert _rel(Y[:, 0], mod.integrate(y0, h, 100, solver=solver)) < 1e-12
+    Y = mod.integrate(Y0, h, 100, solver=solver)
+    assert _rel(Y[:, 0], mod.integrate(y0, h, 100, solver=solver)) < 1e-12
 
 
 def test_auto_switches_to_newton_where_the_fixed_point_is_slow():
@@ -108,8 +111,9 @@ def test_reuse_refreshes_the_kept_matrix():
     assert info_stale["newton_iterations"].sum() > 1.3 * info["newton_iterations"].sum()
 
 
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("solver", ["auto", "reuse"])
-def test_guards_still_fire(tt_avf, solver):
+def test_guards_still_fire(tt_avf, solver, backend):
     # Plain Kepler from pericentre with a step that does not resolve it: refused, with a
     # ResolutionError, whatever the solver.
     mod = load_generated("kepler_energy_momentum")
@@ -119,9 +123,9 @@ def test_guards_still_fire(tt_avf, solver):
     # Through the pericentre of e = 0.99 at 40x the fictive step: a named error, never an
     # orbit (a linearly converging iteration may give up before the estimate sees the step).
     np_mod, nb_mod, y0t, h = tt_avf
-    for m in (np_mod, nb_mod):
-        with pytest.raises((m.ResolutionError, m.ConvergenceError)):
-            m.integrate(y0t, 40 * h, 400, solver=solver)
+    m = np_mod if backend == "numpy" else nb_mod
+    with pytest.raises((m.ResolutionError, m.ConvergenceError)):
+        m.integrate(y0t, 40 * h, 400, solver=solver)
 
 
 @pytest.mark.parametrize("solver", ["auto", "reuse"])

@@ -34,11 +34,13 @@ from dataclasses import replace
 import numpy as np
 import sympy as sp
 
-from ..derive import gradient
+from ..derive import gradient, separable_split
 from ..divdiff import divided_difference
+from ..families import term_families
+from ..poisson import is_poisson
 from ..special import safe_div
 from ..problem import Hamiltonian
-from .base import Scheme, Traits, gradient_scheme
+from .base import Scheme, Traits, gradient_scheme, loop_family, next_symbol
 
 GAUSS_NODES = 8
 
@@ -208,12 +210,43 @@ class AVF:
                             "H kept only up to the quadrature error O(|Δy|^%d) per step (not exactly; "
                             "its certificates are numerical)" % (2 * nodes),)))
         scheme = gradient_scheme(system, AVF.NAME, dg, traits,
-                                 "y1 = y0 + h J ∫₀¹ ∇H((1-σ) y0 + σ y1) dσ")
+                                 "y1 = y0 + h J ∫₀¹ ∇H((1-σ) y0 + σ y1) dσ", loops=AVF._loops(system, cs, ws))
         if not exact:
             return scheme
         # ∇̄H = (AVF integral of the polynomial terms) + Σ G[L0, L1] ∇L, in the scheme's y0/y1
         # symbols: the identity is proved term by term from these pieces.
         return replace(scheme, structure={"kind": "term-wise", "terms": tuple(parts)})
+
+
+    @staticmethod
+    def _loops(system: Hamiltonian, cs, ws) -> tuple:
+        """U's families of like terms, each template's AVF integral taken once by the rule
+        :meth:`build` applies to a term (the integral is linear in U, so the sum of the
+        instances' integrals is the scheme's): the module loops over them.  Empty unless
+        the momenta can be eliminated (separable H, quadratic kinetic energy)."""
+        if is_poisson(system) or system.constraints:
+            return ()
+        sep = separable_split(system)
+        if sep is None or sep.Minv is None:
+            return ()
+        sigma = sp.Symbol("_sigma", real=True)
+        out = []
+        for fam in term_families(sep.U, system.q, system.params):
+            u = list(fam.slots)
+            u1 = [next_symbol(s) for s in u]
+            t = fam.template
+            if _is_polynomial(t, u):
+                path = {a: a + sigma * (b - a) for a, b in zip(u, u1)}
+                dg = [sp.integrate(sp.expand(sp.diff(t, s).xreplace(path)), (sigma, 0, 1)) for s in u]
+            else:
+                lf = linear_form_term(t, u)
+                if lf is not None:
+                    dg = linear_form_gradient(lf, u, u, u1)
+                else:
+                    dg = [sp.Add(*[wk * sp.diff(t, s).xreplace({a: a + ck * (b - a) for a, b in zip(u, u1)})
+                                   for ck, wk in zip(cs, ws)]) for s in u]
+            out.append(loop_family(fam, dg))
+        return tuple(out)
 
 
 # --- Gonzalez -------------------------------------------------------------------------

@@ -11,8 +11,14 @@ References
 
 from __future__ import annotations
 
+import sympy as sp
+
+from ..derive import separable_split
+from ..families import term_families
+from ..poisson import is_poisson
 from ..problem import Hamiltonian
-from .base import Scheme, Traits, gradient_scheme, midpoint_gradient, quadratic_invariants
+from .base import (Scheme, Traits, gradient_scheme, loop_family, midpoint_gradient, next_symbol,
+                   quadratic_invariants)
 
 NAME = "midpoint"
 SUMMARY = "implicit midpoint rule (symplectic, symmetric, order 2)"
@@ -24,9 +30,25 @@ def applies(system: Hamiltonian) -> str | None:
     return None
 
 
+def _loops(system: Hamiltonian) -> tuple:
+    """U's families of like terms with each template's gradient at the slots' midpoint
+    (``∇U`` is linear in U, so ``∇U(q̄) = Σ_t ∇U_t(q̄)``): the module loops over them.
+    Empty unless the momenta can be eliminated (separable H, quadratic kinetic energy)."""
+    if is_poisson(system) or system.constraints:
+        return ()
+    sep = separable_split(system)
+    if sep is None or sep.Minv is None:
+        return ()
+    out = []
+    for fam in term_families(sep.U, system.q, system.params):
+        mid = {u: (u + next_symbol(u)) / 2 for u in fam.slots}
+        out.append(loop_family(fam, [sp.diff(fam.template, u).xreplace(mid) for u in fam.slots]))
+    return tuple(out)
+
+
 def build(system: Hamiltonian) -> Scheme:
     preserved = quadratic_invariants(system)
     traits = Traits(order=2, symmetric=True, symplectic=True, energy_preserving="H" in preserved,
                     preserved=preserved, solve="newton")
     return gradient_scheme(system, NAME, midpoint_gradient(system), traits,
-                           "y1 = y0 + h J ∇H((y0 + y1)/2)")
+                           "y1 = y0 + h J ∇H((y0 + y1)/2)", loops=_loops(system))
