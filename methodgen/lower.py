@@ -30,7 +30,7 @@ from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 from .compensate import compensate, compensation_symbols
-from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, table_names
+from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, sum_pattern, table_names
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .poisson import is_poisson
 from .schemes.base import STEP, is_linear_field
@@ -251,6 +251,12 @@ class ModuleIR:
     #: Index tables of the loops over families of like terms: ``(name, rows)``, rows of
     #: ints (coordinates' positions in q, or parameters' positions); empty without loops.
     loop_tables: tuple = ()
+    #: Lower and upper bandwidth ``(kl, ku)`` of the Newton matrix (its structural nonzeros:
+    #: ``J[i, j] ≡ 0`` for ``i - j > kl`` or ``j - i > ku``); ``(n - 1, n - 1)`` when dense.
+    #: Gaussian elimination with partial pivoting then touches only the band (the pivot
+    #: rows' fill stays within ``kl + ku``): a chain costs O(n), not O(n³), per solve
+    #: (:func:`jacobian_band`).
+    band: tuple[int, int] = (0, 0)
 
     @property
     def stages(self) -> int:
@@ -591,6 +597,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         nj = n if scaled else n * n
         scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
         vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
+        band = _newton_band(n, scalar["resjac"], plan, scaled)
         scalar["res"] = kern(res, (n,), sp_)
         vector["res"] = kern(res, (n,), vp)
         if scheme.unknown_scale is not None:
@@ -679,7 +686,27 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         time_transform=_time_transform_fields(system, invs),
         poisson=_poisson_fields(system),
         loop_tables=_loop_tables(plan),
+        band=band if n else (0, 0),
     )
+
+
+def jacobian_band(n: int, entries) -> tuple[int, int]:
+    """``(kl, ku)``: the largest distance below and above the diagonal of the structurally
+    nonzero entries ``(i, j)`` of an ``n × n`` Newton matrix (the diagonal counts; ``(0, 0)``
+    for ``n = 0``).  Entries outside are zero for every input (exact zeros of the
+    derivation), so elimination restricted to the band is Gaussian elimination itself:
+    every pivot it chooses and every value it computes is the dense routine's."""
+    kl = ku = 0
+    for i, j in entries:
+        kl, ku = max(kl, i - j), max(ku, j - i)
+    return (min(kl, max(n - 1, 0)), min(ku, max(n - 1, 0)))
+
+
+def _newton_band(n: int, resjac: Kernel, plan, scaled: bool) -> tuple[int, int]:
+    if scaled:   # J = I + diag(s) _sB: the pattern of the accumulated _sB
+        return jacobian_band(n, sum_pattern(plan))
+    entries = [divmod(idx[0] - n, n) for idx, code in resjac.outputs if idx[0] >= n]
+    return jacobian_band(n, entries)
 
 
 def _with_loops(k: Kernel, exprs, plan, printer, dim: int, compensated: bool, whole=()) -> Kernel:

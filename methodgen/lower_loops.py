@@ -33,7 +33,7 @@ import sympy as sp
 from .compensate import compensate
 
 __all__ = ["Loop", "Accumulator", "ACC_PREFIXES", "acc_symbol", "jacobian_row_scales", "jacobian_via_sums", "loop_prefix",
-           "table_names"]
+           "sum_pattern", "table_names"]
 
 #: Accumulator array → what it sums (documentation and the symbols' name prefixes).
 ACC_PREFIXES = ("_sA", "_sB", "_sF", "_sK")
@@ -98,11 +98,9 @@ def _used(exprs) -> dict[str, set]:
     return used
 
 
-def jacobian_via_sums(residual: sp.Matrix, unknowns, plan) -> tuple[list[sp.Expr], list]:
-    """``∂R/∂z`` of a residual written in the sums ``A`` (chain rule, row-major list), with
-    ``∂A_i/∂z_l`` as the symbols ``_sB<i>_<l>`` where some family's term couples them,
-    and that pattern ``[(i, l)]``."""
-    z = list(unknowns)
+def sum_pattern(plan) -> list[tuple[int, int]]:
+    """``[(i, l)]`` where some family's term couples ``A_i`` to ``Δq_l`` (``∂A_i/∂Δq_l`` is
+    not identically 0): the sparsity pattern of ``_sB``, sorted."""
     pattern = set()
     for lf in plan.families:
         fam = lf.family
@@ -110,7 +108,15 @@ def jacobian_via_sums(residual: sp.Matrix, unknowns, plan) -> tuple[list[sp.Expr
                  if sp.diff(lf.dg[a], lf.vslots[b]) != 0]
         for idx in fam.index:
             pattern.update((idx[a], idx[b]) for a, b in pairs)
-    pattern = sorted(pattern)
+    return sorted(pattern)
+
+
+def jacobian_via_sums(residual: sp.Matrix, unknowns, plan) -> tuple[list[sp.Expr], list]:
+    """``∂R/∂z`` of a residual written in the sums ``A`` (chain rule, row-major list), with
+    ``∂A_i/∂z_l`` as the symbols ``_sB<i>_<l>`` where some family's term couples them,
+    and that pattern ``[(i, l)]``."""
+    z = list(unknowns)
+    pattern = sum_pattern(plan)
     n = len(z)
     J = [[sp.diff(r, zl) for zl in z] for r in residual]
     for r in range(n):

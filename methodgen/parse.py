@@ -245,6 +245,22 @@ class _Builder:
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
             arg = self.build(node.operand, depth + 1)
             return -arg if isinstance(node.op, ast.USub) else arg
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult)):
+            # A sum a + b - c + ... (or a product) is one level, not one per term: Python
+            # parses it as a left-leaning chain, which would make a chain of 64 particles
+            # (130 terms) "deeper than MAX_DEPTH".  Walk the chain iteratively.
+            product = isinstance(node.op, ast.Mult)
+            ops = (ast.Mult,) if product else (ast.Add, ast.Sub)
+            links = []
+            cur = node
+            while isinstance(cur, ast.BinOp) and isinstance(cur.op, ops):
+                links.append((cur.op, cur.right))
+                cur = cur.left
+            parts = [self.build(cur, depth + 1)]
+            for op, right in reversed(links):
+                term = self.build(right, depth + 1)
+                parts.append(-term if isinstance(op, ast.Sub) else term)
+            return sp.Mul(*parts) if product else sp.Add(*parts)
         if isinstance(node, ast.BinOp):
             if isinstance(node.op, ast.Pow):
                 return self.power(node, depth)

@@ -9,6 +9,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from methodgen.emit import _environment
+from methodgen.problem import Hamiltonian
 from methodgen.special import SPECIAL_FUNCTIONS
 
 
@@ -30,3 +31,14 @@ def oracle_namespace() -> dict:
     """Numerical implementations keyed by the SymPy function names, for lambdify oracles."""
     helpers = special_helpers()
     return {cls.__name__: helpers["_v" + name] for cls, name in SPECIAL_FUNCTIONS.items()}
+
+
+def fpu_chain(n):
+    """A Fermi-Pasta-Ulam-beta chain of n unit masses between fixed walls: the nearest-neighbour
+    springs (n - 1 of them) form one family, the two wall springs others."""
+    q = [f"q{i}" for i in range(n)]
+    springs = [f"(q{i + 1} - q{i})**2/2 + beta*(q{i + 1} - q{i})**4/4" for i in range(n - 1)]
+    walls = ["q0**2/2 + beta*q0**4/4", f"q{n - 1}**2/2 + beta*q{n - 1}**4/4"]
+    T = " + ".join(f"p{i}**2/2" for i in range(n))
+    return Hamiltonian(" + ".join([T] + springs + walls), q=q, p=[f"p{i}" for i in range(n)],
+                       params={"beta": 0.7}, name=f"fpu{n}")

@@ -14,6 +14,8 @@ from methodgen.emit import load_module, render, write_atomic
 from methodgen.families import term_families
 from methodgen.lower import LOOP_MIN_INSTANCES, lower, uses_loops
 
+from helpers import fpu_chain
+
 
 # --- families -----------------------------------------------------------------------------
 
@@ -188,24 +190,11 @@ def test_numba_loops_agree_with_numpy(tmp_path):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
-def _fpu_chain(n):
-    """A Fermi-Pasta-Ulam-beta chain of n unit masses between fixed walls: the nearest-neighbour
-    springs (n - 1 of them) form one family, the two wall springs others."""
-    from methodgen.problem import Hamiltonian
-
-    q = [f"q{i}" for i in range(n)]
-    springs = [f"(q{i + 1} - q{i})**2/2 + beta*(q{i + 1} - q{i})**4/4" for i in range(n - 1)]
-    walls = [f"q0**2/2 + beta*q0**4/4", f"q{n - 1}**2/2 + beta*q{n - 1}**4/4"]
-    T = " + ".join(f"p{i}**2/2" for i in range(n))
-    return Hamiltonian(" + ".join([T] + springs + walls), q=q, p=[f"p{i}" for i in range(n)],
-                       params={"beta": 0.7}, name=f"fpu{n}")
-
-
 @pytest.mark.parametrize("method", ["avf", "midpoint", "energy-momentum"])
 def test_chain_loops_agree_with_unrolled(tmp_path, method):
     """A polynomial nearest-neighbour chain (the AVF integral of the template taken once)."""
     n = 6
-    scheme = mg.discretize(_fpu_chain(n), method)
+    scheme = mg.discretize(fpu_chain(n), method)
     assert scheme.loops is not None and scheme.loops.largest == n - 1 and uses_loops(scheme)
     loop, flat = _module(scheme, True, tmp_path), _module(scheme, False, tmp_path)
     rng = np.random.default_rng(3)

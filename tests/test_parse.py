@@ -123,3 +123,18 @@ def test_non_smooth_text_is_refused_with_the_reason(text, fragment):
 def test_rational_powers_of_signed_expressions_are_smooth_and_accepted():
     e = parse_expr("x**(1/3) + (x - y)**(3/2) + sqrt(x**4) + sqrt(x**2 + y**2)", SYMS)
     assert not e.has(sp.Abs)
+
+
+def test_long_sums_and_products_are_not_deep():
+    """A chain of 64 particles is a sum of ~130 terms: Python parses it as a left-leaning
+    chain, which must not count as nesting (it did: "nested deeper than 60 levels")."""
+    q = sp.symbols("q0:100", real=True)
+    names = {s.name: s for s in q}
+    text = " + ".join(f"(q{i + 1} - q{i})**4" for i in range(99)) + " - q0*q1*" + "*".join(f"q{i}" for i in range(2, 99))
+    e = parse_expr(text, names)
+    assert e == sp.Add(*[(q[i + 1] - q[i])**4 for i in range(99)]) - sp.Mul(*q[:99])
+    # negative control: real nesting is still limited
+    with pytest.raises(ParseError, match="deeper than"):
+        parse_expr("(" * 80 + "q0" + ")**2" * 80, names)
+    with pytest.raises(ParseError, match="deeper than"):
+        parse_expr("sin(" * 80 + "q0" + ")" * 80, names)
