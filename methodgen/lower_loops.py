@@ -105,7 +105,7 @@ def sum_pattern(plan) -> list[tuple[int, int]]:
     for lf in plan.families:
         fam = lf.family
         pairs = [(a, b) for a in range(len(fam.slots)) for b in range(len(fam.slots))
-                 if sp.diff(lf.dg[a], lf.vslots[b]) != 0]
+                 if lf.jacobian[a][b] != 0]
         for idx in fam.index:
             pattern.update((idx[a], idx[b]) for a, b in pairs)
     return sorted(pattern)
@@ -185,34 +185,59 @@ def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
     loops = []
     for f, lf in enumerate(plan.families):
         fam = lf.family
-        k = len(fam.slots)
-        contrib = []   # (accumulator, slot columns, expression)
-        if "_sA" in used:
-            contrib += [("_sA", (j,), lf.dg[j]) for j in range(k)]
-        if "_sB" in used:
-            contrib += [("_sB", (a, b), sp.diff(lf.dg[a], lf.vslots[b])) for a in range(k) for b in range(k)]
-        if compensated:
-            cslots = {u: sp.Symbol(f"_cu{j}", real=True) for j, u in enumerate(fam.slots)}
-            contrib = [(a, c, e) for (a, c, _), e in zip(contrib, compensate([e for *_, e in contrib], cslots))]
-        if "_sF" in used:
-            contrib += [("_sF", (j,), lf.grad[j]) for j in range(k)]
-        if "_sK" in used:
-            end = {u: u + v for u, v in zip(fam.slots, lf.vslots)}
-            contrib += [("_sK", (j,), lf.grad[j].xreplace(end)) for j in range(k)]
-        contrib = [(a, c, e) for a, c, e in contrib if e != 0]
-        temps, reduced = sp.cse([e for *_, e in contrib], symbols=sp.numbered_symbols(f"_t{f}_"),
-                                order="canonical")
-        free = set()
-        for e in list(reduced) + [e for _, e in temps]:
-            free |= e.free_symbols
-        loads = []
-        for j, u in enumerate(fam.slots):
-            for sym, src in ((u, "y"), (lf.vslots[j], "z"), (sp.Symbol(f"_cu{j}", real=True), "c")):
-                if sym in free:
-                    loads.append((sym.name, src, j))
-        loads += [(w.name, "p", j) for j, w in enumerate(fam.pslots) if w in free]
+        temps, reduced, contrib, loads = _template_code(f, lf, frozenset(used), compensated)
         table, ptable = table_names(f)
-        loops.append(Loop(table, ptable if fam.pslots else "", fam.size, tuple(loads),
+        loops.append(Loop(table, ptable if fam.pslots else "", fam.size, loads,
                           tuple((str(s), printer.doprint(e)) for s, e in temps),
                           tuple((a, c, printer.doprint(e)) for (a, c, _), e in zip(contrib, reduced))))
     return tuple(loops), tuple(accs)
+
+
+#: (family number, accumulators, compensated) -> (family, its reduced template code): the
+#: scalar and vector flavours of a kernel, and kernels that read the same sums, share it.
+_TEMPLATE_CACHE: dict = {}
+
+
+def _template_code(f: int, lf, used: frozenset, compensated: bool):
+    """The template's contributions to the accumulators ``used`` (common subexpressions
+    eliminated), memoised per family: ``(temps, reduced, contributions, loads)``."""
+    key = (f, used, compensated)
+    hit = _TEMPLATE_CACHE.get(key)
+    if hit is not None and hit[0] is lf:
+        return hit[1]
+    out = _template_code_uncached(f, lf, used, compensated)
+    if len(_TEMPLATE_CACHE) > 64:
+        _TEMPLATE_CACHE.clear()
+    _TEMPLATE_CACHE[key] = (lf, out)
+    return out
+
+
+def _template_code_uncached(f: int, lf, used: frozenset, compensated: bool):
+    fam = lf.family
+    k = len(fam.slots)
+    contrib = []   # (accumulator, slot columns, expression)
+    if "_sA" in used:
+        contrib += [("_sA", (j,), lf.dg[j]) for j in range(k)]
+    if "_sB" in used:
+        contrib += [("_sB", (a, b), lf.jacobian[a][b]) for a in range(k) for b in range(k)]
+    if compensated:
+        cslots = {u: sp.Symbol(f"_cu{j}", real=True) for j, u in enumerate(fam.slots)}
+        contrib = [(a, c, e) for (a, c, _), e in zip(contrib, compensate([e for *_, e in contrib], cslots))]
+    if "_sF" in used:
+        contrib += [("_sF", (j,), lf.grad[j]) for j in range(k)]
+    if "_sK" in used:
+        end = {u: u + v for u, v in zip(fam.slots, lf.vslots)}
+        contrib += [("_sK", (j,), lf.grad[j].xreplace(end)) for j in range(k)]
+    contrib = [(a, c, e) for a, c, e in contrib if e != 0]
+    temps, reduced = sp.cse([e for *_, e in contrib], symbols=sp.numbered_symbols(f"_t{f}_"),
+                            order="canonical")
+    free = set()
+    for e in list(reduced) + [e for _, e in temps]:
+        free |= e.free_symbols
+    loads = []
+    for j, u in enumerate(fam.slots):
+        for sym, src in ((u, "y"), (lf.vslots[j], "z"), (sp.Symbol(f"_cu{j}", real=True), "c")):
+            if sym in free:
+                loads.append((sym.name, src, j))
+    loads += [(w.name, "p", j) for j, w in enumerate(fam.pslots) if w in free]
+    return temps, reduced, contrib, tuple(loads)

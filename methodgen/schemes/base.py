@@ -143,6 +143,12 @@ class LoopFamily:
     dg: tuple[sp.Expr, ...]
     grad: tuple[sp.Expr, ...]
 
+    @cached_property
+    def jacobian(self) -> tuple[tuple[sp.Expr, ...], ...]:
+        """``∂dg_a/∂v_b`` (k × k), derived once: the Newton matrix's accumulated part and
+        its sparsity pattern both read it."""
+        return tuple(tuple(sp.diff(g, v) for v in self.vslots) for g in self.dg)
+
 
 def loop_family(fam, dg_template) -> LoopFamily:
     """:class:`LoopFamily` of ``fam`` from its discrete gradient in start slots ``u`` and
