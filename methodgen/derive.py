@@ -79,8 +79,46 @@ def _cache(fn):
 
 @_cache
 def gradient(system: Hamiltonian) -> sp.Matrix:
-    """∇H as a column of length 2d: ``(∂H/∂q, ∂H/∂p)``."""
+    """∇H as a column of length 2d: ``(∂H/∂q, ∂H/∂p)``.
+
+    Where the potential is a sum of like terms (:func:`methodgen.families.term_families`:
+    pair potentials, chains) each family's template is differentiated once and its
+    derivatives renamed onto the instances, which is the derivative of each instance (a
+    renaming of distinct symbols commutes with ∂; the sums are built as ``sp.diff`` builds
+    them, term by term, so the result is the same expression): N = 6 bodies 0.39 → 0.03 s.
+    """
+    fast = _gradient_by_families(system)
+    if fast is not None:
+        return fast
     return sp.Matrix([sp.diff(system.H, s) for s in system.y])
+
+
+def _gradient_by_families(system: Hamiltonian) -> sp.Matrix | None:
+    """∇H from U's families of like terms, or None (no family of ≥ 2 instances; not a
+    canonical separable H written as T(p) + U(q) term by term)."""
+    if is_poisson(system) or system.time_transform is not None:
+        return None
+    sep = separable_split(system)
+    if sep is None or sep.T + sep.U != system.H:
+        return None
+    from .families import term_families
+
+    q, params = list(system.q), list(system.params)
+    fams = term_families(sep.U, q, params)
+    if not any(f.size >= 2 for f in fams):
+        return None
+    parts: dict = {s: [] for s in system.y}
+    for fam in fams:
+        tgrad = [sp.diff(fam.template, u) for u in fam.slots]
+        for k in range(fam.size):
+            ren = fam.renaming(k, q, params)
+            for j, i in enumerate(fam.index[k]):
+                parts[q[i]].append(tgrad[j].xreplace(ren))
+    ps = set(system.p)
+    for t in sp.Add.make_args(sep.T):
+        for s in t.free_symbols & ps:
+            parts[s].append(sp.diff(t, s))
+    return sp.Matrix([sp.Add(*parts[s]) for s in system.y])
 
 
 @_cache
@@ -473,13 +511,68 @@ def _total_angular_candidates(system: Hamiltonian):
 
 def _commutes(system: Hamiltonian, I: sp.Expr) -> bool:
     """``{I, H} = 0`` and ``{I, g_i} = 0`` for every constraint, shown exactly ({I, H} from
-    the cached gradient of H)."""
+    the cached gradient of H, or family by family: :func:`_commutes_by_families`)."""
+    if not system.constraints:
+        by_families = _commutes_by_families(system, I)
+        if by_families is not None:
+            return by_families
     g = gradient(system)
     d = system.dim
     IH = sp.Add(*[sp.diff(I, qi) * g[d + k] - sp.diff(I, pi) * g[k]
                   for k, (qi, pi) in enumerate(zip(system.q, system.p))])
     return _is_zero(IH, system) and all(_is_zero(poisson_bracket(system, I, F), system)
                                         for F in system.constraints)
+
+
+def _commutes_by_families(system: Hamiltonian, I: sp.Expr) -> bool | None:
+    """``{I, H} = 0`` for a separable ``H = T(p) + Σ_k U_k(q)`` over families of like terms,
+    shown once per family and *pattern* instead of on the whole sum; None where this does
+    not apply (the caller reduces the whole bracket).
+
+    With ``w_i = ∂I/∂p_i`` a function of q (I linear or bilinear: a total momentum, an
+    angular momentum), ``{I, U_k} = -Σ_j w_{i_j} ∂U_k/∂q_{i_j}`` over instance k's coordinates
+    ``i_j``.  Where every ``w_{i_j}`` is a function of the instance's own coordinates, it is
+    the renaming σ_k of ``E = -Σ_j σ_k⁻¹(w_{i_j}) ∂T/∂u_j`` on the template T; instances with
+    the same weights ``σ_k⁻¹(w)`` share E, and E ≡ 0 (shown exactly) gives ``{I, U_k} = 0``
+    for each of them (a renaming maps 0 to 0).  With ``{I, T} = Σ ∂I/∂q_i ∂T/∂p_i`` shown 0
+    as well, ``{I, H} = 0``.  Never answers False: where some piece is not shown 0 the
+    bracket may still cancel across pieces, and None sends the caller to the whole."""
+    if is_poisson(system) or system.time_transform is not None:
+        return None
+    sep = separable_split(system)
+    if sep is None or sep.T + sep.U != system.H:
+        return None
+    from .families import term_families
+
+    q, p, params = list(system.q), list(system.p), list(system.params)
+    qset = set(q)
+    w = [sp.diff(I, pi) for pi in p]
+    if any(wi.free_symbols & set(p) for wi in w):
+        return None
+    fams = term_families(sep.U, q, params)
+    if not any(f.size >= 2 for f in fams):
+        return None
+    pieces = [sp.Add(*[sp.diff(I, qi) * sp.diff(sep.T, pi) for qi, pi in zip(q, p)])]
+    for fam in fams:
+        seen = set()
+        tgrad = [sp.diff(fam.template, u) for u in fam.slots]
+        for k in range(fam.size):
+            idx = fam.index[k]
+            back = {q[i]: u for u, i in zip(fam.slots, idx)}
+            weights = []
+            for i in idx:
+                if w[i].free_symbols & qset - set(back):
+                    return None       # a weight reads coordinates outside the instance
+                weights.append(w[i].xreplace(back))
+            weights = tuple(weights)
+            if weights in seen:
+                continue
+            seen.add(weights)
+            pieces.append(-sp.Add(*[wj * gj for wj, gj in zip(weights, tgrad)]))
+    status = [_zero_status(e, system) for e in pieces]
+    if all(st == "zero" for st in status):
+        return True
+    return None
 
 
 @_cache
