@@ -33,7 +33,7 @@ from .compensate import compensate, compensation_symbols
 from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, sum_pattern, table_names
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .poisson import is_poisson
-from .schemes.base import STEP, is_linear_field
+from .schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
@@ -503,11 +503,6 @@ def domain_conditions(system) -> tuple[tuple[str, sp.Expr], ...]:
     return tuple(seen[k] for k in sorted(seen))
 
 
-#: A family of like terms with at least this many instances makes the module loop over
-#: the families (:func:`uses_loops`); below it the unrolled code is as small and faster.
-LOOP_MIN_INSTANCES = 3
-
-
 def uses_loops(scheme, loops: bool | None = None) -> bool:
     """Whether the module of ``scheme`` loops over families of like terms.
 
@@ -517,7 +512,7 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
     """
     plan = getattr(scheme, "loops", None)
     if loops is None:
-        return plan is not None and plan.largest >= LOOP_MIN_INSTANCES
+        return plan is not None and plan.looped
     if loops and plan is None:
         raise ValueError(f"loops=True: {scheme.method} has no sums of like terms to loop over for this "
                          "system (loops are built for energy-momentum and midpoint, with a separable H and a quadratic "

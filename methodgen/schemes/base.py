@@ -159,6 +159,11 @@ def loop_family(fam, dg_template) -> LoopFamily:
                       tuple(sp.diff(fam.template, u) for u in fam.slots))
 
 
+#: A family of like terms with at least this many instances makes the module loop over
+#: the families (:attr:`LoopPlan.looped`); below it the unrolled code is as small and faster.
+LOOP_MIN_INSTANCES = 3
+
+
 @dataclass(frozen=True)
 class LoopPlan:
     """The step's equations with the potential's sums left as sums (loops in the module).
@@ -180,6 +185,12 @@ class LoopPlan:
     def largest(self) -> int:
         """Instances of the largest family."""
         return max((lf.family.size for lf in self.families), default=0)
+
+    @property
+    def looped(self) -> bool:
+        """Whether the scheme's module loops by default (a family of at least
+        :data:`LOOP_MIN_INSTANCES` instances; :func:`methodgen.lower.uses_loops`)."""
+        return self.largest >= LOOP_MIN_INSTANCES
 
 
 @dataclass(frozen=True, eq=False)

@@ -256,8 +256,9 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
     if system.declared_invariants or d >= 2:
         add("detected and declared invariants are first integrals of this H: {I, H} = 0", REF_FIRST_INTEGRALS,
             lambda: first_integral_certificates(system))
-    # Sums of like terms: what a looped module evaluates is the scheme's ∇̄U (lower_loops).
-    if getattr(scheme, "loops", None) is not None:
+    # Sums of like terms: what a looped module evaluates is the scheme's ∇̄U (lower_loops);
+    # claimed where the module loops (a one-instance "family" is the unrolled term itself).
+    if getattr(scheme, "loops", None) is not None and scheme.loops.looped:
         add(f"loops over like terms evaluate the scheme's discrete gradient ({step})", REF_LOOPS,
             lambda: loop_certificates(scheme))
     # Claims 2, 4: discrete gradients.
