@@ -508,14 +508,16 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
 
     ``loops=None`` (default): where the scheme has a :class:`~methodgen.schemes.base.LoopPlan`
     with a family of at least :data:`LOOP_MIN_INSTANCES` instances.  ``True`` forces loops
-    where there is a plan (a ValueError where there is none), ``False`` unrolls.
+    where there is a plan (a ValueError where there is none), ``False`` unrolls.  Forcing
+    is for tests and benchmarks: :func:`methodgen.verify` certifies the loops of the
+    default choice (``LoopPlan.looped``), not of a module forced to loop below it.
     """
     plan = getattr(scheme, "loops", None)
     if loops is None:
         return plan is not None and plan.looped
     if loops and plan is None:
         raise ValueError(f"loops=True: {scheme.method} has no sums of like terms to loop over for this "
-                         "system (loops are built for energy-momentum and midpoint, with a separable H and a quadratic "
+                         "system (loops are built for energy-momentum, midpoint and AVF, with a separable H and a quadratic "
                          "kinetic energy); use loops=None or False")
     return bool(loops)
 
@@ -689,8 +691,9 @@ def jacobian_band(n: int, entries) -> tuple[int, int]:
     """``(kl, ku)``: the largest distance below and above the diagonal of the structurally
     nonzero entries ``(i, j)`` of an ``n × n`` Newton matrix (the diagonal counts; ``(0, 0)``
     for ``n = 0``).  Entries outside are zero for every input (exact zeros of the
-    derivation), so elimination restricted to the band is Gaussian elimination itself:
-    every pivot it chooses and every value it computes is the dense routine's."""
+    derivation), so for a finite matrix elimination restricted to the band is Gaussian
+    elimination itself: every pivot it chooses and every value it computes is the dense
+    routine's (a non-finite entry spreads NaN further in the dense routine; both fail)."""
     kl = ku = 0
     for i, j in entries:
         kl, ku = max(kl, i - j), max(ku, j - i)

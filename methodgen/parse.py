@@ -260,7 +260,15 @@ class _Builder:
             for op, right in reversed(links):
                 term = self.build(right, depth + 1)
                 parts.append(-term if isinstance(op, ast.Sub) else term)
-            return sp.Mul(*parts) if product else sp.Add(*parts)
+            if not product:
+                return sp.Add(*parts)
+            # a product folded left to right, as the nested evaluation did: SymPy
+            # distributes a number over a sum only in a two-factor product, so Mul(*parts)
+            # would give 2*x*(y + 1) where the text 2*(y+1)*x has always given x*(2*y + 2)
+            out = parts[0]
+            for factor in parts[1:]:
+                out = out * factor
+            return out
         if isinstance(node, ast.BinOp):
             if isinstance(node.op, ast.Pow):
                 return self.power(node, depth)

@@ -138,3 +138,16 @@ def test_long_sums_and_products_are_not_deep():
         parse_expr("(" * 80 + "q0" + ")**2" * 80, names)
     with pytest.raises(ParseError, match="deeper than"):
         parse_expr("sin(" * 80 + "q0" + ")" * 80, names)
+
+
+def test_flattened_chains_give_the_nested_expressions():
+    """Walking a chain iteratively changes nothing: the same SymPy expression, structurally,
+    as the operators applied pairwise left to right (SymPy distributes a number over a sum
+    only in a two-factor product, so the order of folding is visible)."""
+    x, y, z = sp.symbols("x y z", real=True)
+    names = {"x": x, "y": y, "z": z}
+    for text, want in (("2*(y+1)*x", (2 * (y + 1)) * x), ("2*(x+y)*(x-y)", (2 * (x + y)) * (x - y)),
+                       ("x - y - z", (x - y) - z), ("x - (y - z)", x - (y - z)), ("-x - y", -x - y),
+                       ("x*y/z*x", ((x * y) / z) * x), ("3*(x+1) + 2*(y+1)*z", 3 * (x + 1) + (2 * (y + 1)) * z)):
+        got = parse_expr(text, names)
+        assert got == want and sp.srepr(got) == sp.srepr(want), text

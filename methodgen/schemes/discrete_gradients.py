@@ -227,24 +227,32 @@ class AVF:
         if is_poisson(system) or system.constraints:
             return ()
         sep = separable_split(system)
-        if sep is None or sep.Minv is None:
+        # the families must be H's own terms (not those of an expanded H), so that the
+        # pieces below are exactly the terms build() integrates, each by the same rule
+        if sep is None or sep.Minv is None or sep.T + sep.U != system.H:
             return ()
         sigma = sp.Symbol("_sigma", real=True)
         out = []
         for fam in term_families(sep.U, system.q, system.params):
             u = list(fam.slots)
             u1 = [next_symbol(s) for s in u]
-            t = fam.template
-            if _is_polynomial(t, u):
-                path = {a: a + sigma * (b - a) for a, b in zip(u, u1)}
-                dg = [sp.integrate(sp.expand(sp.diff(t, s).xreplace(path)), (sigma, 0, 1)) for s in u]
-            else:
-                lf = linear_form_term(t, u)
-                if lf is not None:
-                    dg = linear_form_gradient(lf, u, u, u1)
+            dg = [sp.S.Zero] * len(u)
+            # a template k*(cos(u0 - u1) + cos(u2 - u3)) is two of build()'s terms: each
+            # piece by its own rule (two exact divided differences, not one quadrature)
+            for t in additive_terms(fam.template):
+                if not t.free_symbols & set(u):
+                    continue
+                if _is_polynomial(t, u):
+                    path = {a: a + sigma * (b - a) for a, b in zip(u, u1)}
+                    piece = [sp.integrate(sp.expand(sp.diff(t, s).xreplace(path)), (sigma, 0, 1)) for s in u]
                 else:
-                    dg = [sp.Add(*[wk * sp.diff(t, s).xreplace({a: a + ck * (b - a) for a, b in zip(u, u1)})
-                                   for ck, wk in zip(cs, ws)]) for s in u]
+                    lf = linear_form_term(t, u)
+                    if lf is not None:
+                        piece = linear_form_gradient(lf, u, u, u1)
+                    else:
+                        piece = [sp.Add(*[wk * sp.diff(t, s).xreplace({a: a + ck * (b - a) for a, b in zip(u, u1)})
+                                          for ck, wk in zip(cs, ws)]) for s in u]
+                dg = [a + b for a, b in zip(dg, piece)]
             out.append(loop_family(fam, dg))
         return tuple(out)
 
