@@ -93,9 +93,11 @@ def gradient(system: Hamiltonian) -> sp.Matrix:
     return sp.Matrix([sp.diff(system.H, s) for s in system.y])
 
 
-def _gradient_by_families(system: Hamiltonian) -> sp.Matrix | None:
-    """∇H from U's families of like terms, or None (no family of ≥ 2 instances; not a
-    canonical separable H written as T(p) + U(q) term by term)."""
+@_cache
+def potential_families(system: Hamiltonian) -> tuple | None:
+    """The families of like terms of U (:func:`methodgen.families.term_families`) for a
+    canonical H written term by term as ``T(p) + U(q)`` (not split only after ``expand``),
+    or None.  What the derivations and schemes that work per family start from."""
     if is_poisson(system) or system.time_transform is not None:
         return None
     sep = separable_split(system)
@@ -103,10 +105,17 @@ def _gradient_by_families(system: Hamiltonian) -> sp.Matrix | None:
         return None
     from .families import term_families
 
-    q, params = list(system.q), list(system.params)
-    fams = term_families(sep.U, q, params)
-    if not any(f.size >= 2 for f in fams):
+    return term_families(sep.U, system.q, system.params)
+
+
+def _gradient_by_families(system: Hamiltonian) -> sp.Matrix | None:
+    """∇H from U's families of like terms, or None (no family of ≥ 2 instances; not a
+    canonical separable H written as T(p) + U(q) term by term)."""
+    fams = potential_families(system)
+    if fams is None or not any(f.size >= 2 for f in fams):
         return None
+    sep = separable_split(system)
+    q, params = list(system.q), list(system.params)
     parts: dict = {s: [] for s in system.y}
     for fam in fams:
         tgrad = [sp.diff(fam.template, u) for u in fam.slots]
@@ -537,20 +546,14 @@ def _commutes_by_families(system: Hamiltonian, I: sp.Expr) -> bool | None:
     for each of them (a renaming maps 0 to 0).  With ``{I, T} = Σ ∂I/∂q_i ∂T/∂p_i`` shown 0
     as well, ``{I, H} = 0``.  Never answers False: where some piece is not shown 0 the
     bracket may still cancel across pieces, and None sends the caller to the whole."""
-    if is_poisson(system) or system.time_transform is not None:
+    fams = potential_families(system)
+    if fams is None or not any(f.size >= 2 for f in fams):
         return None
     sep = separable_split(system)
-    if sep is None or sep.T + sep.U != system.H:
-        return None
-    from .families import term_families
-
-    q, p, params = list(system.q), list(system.p), list(system.params)
+    q, p = list(system.q), list(system.p)
     qset = set(q)
     w = [sp.diff(I, pi) for pi in p]
     if any(wi.free_symbols & set(p) for wi in w):
-        return None
-    fams = term_families(sep.U, q, params)
-    if not any(f.size >= 2 for f in fams):
         return None
     pieces = [sp.Add(*[sp.diff(I, qi) * sp.diff(sep.T, pi) for qi, pi in zip(q, p)])]
     for fam in fams:

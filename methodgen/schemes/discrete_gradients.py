@@ -34,10 +34,8 @@ from dataclasses import replace
 import numpy as np
 import sympy as sp
 
-from ..derive import gradient, separable_split
+from ..derive import gradient, potential_families, separable_split
 from ..divdiff import divided_difference
-from ..families import term_families
-from ..poisson import is_poisson
 from ..special import safe_div
 from ..problem import Hamiltonian
 from .base import Scheme, Traits, gradient_scheme, loop_family, next_symbol
@@ -224,16 +222,14 @@ class AVF:
         :meth:`build` applies to a term (the integral is linear in U, so the sum of the
         instances' integrals is the scheme's): the module loops over them.  Empty unless
         the momenta can be eliminated (separable H, quadratic kinetic energy)."""
-        if is_poisson(system) or system.constraints:
-            return ()
-        sep = separable_split(system)
-        # the families must be H's own terms (not those of an expanded H), so that the
-        # pieces below are exactly the terms build() integrates, each by the same rule
-        if sep is None or sep.Minv is None or sep.T + sep.U != system.H:
+        # the families are H's own terms (not those of an expanded H), so the pieces
+        # below are exactly the terms build() integrates, each by the same rule
+        fams = potential_families(system)
+        if fams is None or system.constraints or separable_split(system).Minv is None:
             return ()
         sigma = sp.Symbol("_sigma", real=True)
         out = []
-        for fam in term_families(sep.U, system.q, system.params):
+        for fam in fams:
             u = list(fam.slots)
             u1 = [next_symbol(s) for s in u]
             dg = [sp.S.Zero] * len(u)

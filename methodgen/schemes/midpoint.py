@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from ..derive import separable_split
-from ..families import term_families
-from ..poisson import is_poisson
+from ..derive import potential_families, separable_split
 from ..problem import Hamiltonian
 from .base import (Scheme, Traits, gradient_scheme, loop_family, midpoint_gradient, next_symbol,
                    quadratic_invariants)
@@ -34,13 +32,11 @@ def _loops(system: Hamiltonian) -> tuple:
     """U's families of like terms with each template's gradient at the slots' midpoint
     (``∇U`` is linear in U, so ``∇U(q̄) = Σ_t ∇U_t(q̄)``): the module loops over them.
     Empty unless the momenta can be eliminated (separable H, quadratic kinetic energy)."""
-    if is_poisson(system) or system.constraints:
-        return ()
-    sep = separable_split(system)
-    if sep is None or sep.Minv is None:
+    fams = potential_families(system)
+    if fams is None or system.constraints or separable_split(system).Minv is None:
         return ()
     out = []
-    for fam in term_families(sep.U, system.q, system.params):
+    for fam in fams:
         mid = {u: (u + next_symbol(u)) / 2 for u in fam.slots}
         out.append(loop_family(fam, [sp.diff(fam.template, u).xreplace(mid) for u in fam.slots]))
     return tuple(out)
