@@ -473,7 +473,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 state_names=list(module.STATE_NAMES),
                 # g(q) of a time transformation ("" without): the states are then extended,
                 # (q, t, p, e), their column t the physical time; h is a fictive step.
-                time_transform=scene.time_transform or "")
+                time_transform=scene.time_transform or "",
+                # what the rows cover after a failure or a kill (methodgen.runio.extent)
+                steps=steps, time_column=(getattr(module, "TIME_TRANSFORM", None) or {}).get("time", ""))
     if n_stages is not None:
         meta["stages"] = n_stages
     if every > 1:
@@ -554,7 +556,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 pass  # target.failed is set: close() keeps the complete chunks
             try:
                 saved_rows = target.saved_rows
-                saved = target.close(steps_done=max(saved_rows - 1, 0), complete=False,
+                saved = target.close(complete=False,   # steps_done, t_final: what the rows cover
                                      reason="write-error" if io_fault else type(exc).__name__)
             except OSError as cexc:
                 note, saved_rows = str(cexc), None

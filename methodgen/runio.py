@@ -20,6 +20,15 @@ Faults lose nothing that was already written:
   orphaned save into ``NAME.recovered.npz`` (entries are checked against
   their CRC and ``.npy`` header; a cut-off last chunk is dropped) and removes
   the temporary file.  The CLI does this at the start of every ``--save``.
+* **A run that fails or is interrupted** never replaces an existing file: an
+  incomplete save (closed with ``complete=False``, or finished by
+  :meth:`ChunkWriter.rescue`) goes to ``NAME.partial.npz`` (``NAME.partial-2.npz``,
+  …) when ``NAME.npz`` exists, with a :class:`RuntimeWarning` naming both.  Only
+  a complete run replaces a file.
+
+The metadata of every file says what its rows cover (:func:`extent`):
+``steps_done = min((rows - 1) * save_every, steps)`` and ``t_final``, also in a
+file rebuilt from a killed run.
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ import socket
 import struct
 import tempfile
 import time
+import warnings
 import zipfile
 import zlib
 from pathlib import Path
@@ -46,7 +56,7 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None
 
 __all__ = ["ChunkWriter", "load_trajectory", "recover_orphans", "storage_error", "make_temp",
-           "find_orphans", "umask"]
+           "find_orphans", "umask", "extent"]
 
 #: A temporary file younger than this and still empty may be between its creation
 #: and its lock (``mkstemp`` then ``flock``): never judged an orphan.
@@ -200,6 +210,86 @@ def _finish_zip(fd: int, entries: list, end: int, meta: dict) -> None:
             pass
 
 
+def _scalar(meta: dict, key: str, default=None):
+    """``meta[key]`` as a Python scalar (values read back from a file are 0-d arrays)."""
+    if key not in meta:
+        return default
+    value = np.asarray(meta[key])
+    return value.item() if value.ndim == 0 else value.tolist()
+
+
+def extent(rows: int, meta: dict, last_row=None) -> dict:
+    """``steps_done`` and ``t_final`` that ``rows`` saved states cover.
+
+    Row i of a saved trajectory is the state after ``min(i * save_every, steps)``
+    steps, so ``steps_done = min((rows - 1) * save_every, steps)``.
+
+    Parameters
+    ----------
+    rows : int
+        Saved states (the initial one included).
+    meta : dict
+        The file's metadata as written when it was opened: ``save_every`` (1 when
+        absent), ``steps`` (the planned number; no cap when absent), ``h``,
+        ``t0`` (0 when absent) and ``time_column`` (the state's physical-time
+        coordinate of a time transformation or a time-dependent H; ``""``: none).
+    last_row : array_like, optional
+        The last saved state, to read ``time_column`` from.
+
+    Returns
+    -------
+    dict
+        ``steps_done``, and ``t_final`` when it follows from the metadata: the
+        ``time_column`` of ``last_row``, else ``t0 + h * steps_done`` (a fictive
+        step ``h`` of a time transformation gives no physical time: then the
+        column is needed).
+    """
+    every = int(_scalar(meta, "save_every", 1) or 1)
+    steps_done = max(int(rows) - 1, 0) * every
+    planned = _scalar(meta, "steps")
+    if planned is not None:
+        steps_done = min(steps_done, int(planned))
+    out = {"steps_done": steps_done}
+    column = str(_scalar(meta, "time_column", "") or "")
+    names = [str(n) for n in (_scalar(meta, "state_names", []) or [])]
+    if column:
+        if last_row is not None and column in names:
+            out["t_final"] = float(np.asarray(last_row).reshape(-1)[names.index(column)])
+    elif "h" in meta and not str(_scalar(meta, "time_transform", "") or ""):
+        out["t_final"] = float(_scalar(meta, "t0", 0.0)) + float(_scalar(meta, "h")) * steps_done
+    return out
+
+
+def _free_name(path: Path, tag: str):
+    """``NAME.TAG.npz``, ``NAME.TAG-2.npz``, … for ``path`` = ``NAME.npz`` (candidates, in order)."""
+    stem = path.name[:-4] if path.name.endswith(".npz") else path.name
+    for i in range(1, 1000):
+        yield path.with_name(f"{stem}.{tag}.npz" if i == 1 else f"{stem}.{tag}-{i}.npz")
+
+
+def _place_new(tmp: str, candidates) -> Path:
+    """Move ``tmp`` to the first of the paths ``candidates`` where no file is.
+
+    Never over an existing file: ``os.link`` fails instead of replacing (atomic,
+    also against another run finishing at the same moment).  Returns where it went.
+    """
+    for target in candidates:
+        try:
+            os.link(tmp, target)
+        except FileExistsError:
+            continue
+        except OSError as exc:  # pragma: no cover - no hard links here: check, then rename
+            if exc.errno not in (_errno.EPERM, _errno.EOPNOTSUPP, _errno.EXDEV, _errno.EMLINK):
+                raise
+            if os.path.lexists(target):
+                continue
+            os.replace(tmp, target)
+            return target
+        os.unlink(tmp)
+        return target
+    raise FileExistsError(_errno.EEXIST, "no free name for the file", str(tmp))  # pragma: no cover
+
+
 class ChunkWriter:
     """Write a trajectory chunk by chunk into ``path`` (an ``.npz``).
 
@@ -209,7 +299,15 @@ class ChunkWriter:
         Final file name (``.npz`` is appended if missing).
     meta : dict, optional
         Metadata arrays written at once (a file rebuilt after a crash has them).
-        More can be given to :meth:`close`.
+        More can be given to :meth:`close`.  ``save_every``, ``steps``, ``h``,
+        ``t0`` and ``time_column`` here let :meth:`close`, :meth:`rescue` and a
+        rebuild after a kill record what the rows cover (:func:`extent`).
+
+    Attributes
+    ----------
+    path : Path
+        The requested file; :meth:`close` returns where the file went (another
+        name for an incomplete run when ``path`` exists).
 
     Raises
     ------
@@ -224,6 +322,8 @@ class ChunkWriter:
         self.path = path
         self.chunks = 0
         self.rows = 0
+        self._start_meta = dict(meta or {})
+        self._last_row = None
         self.failed: StorageError | None = None
         self._good: list = []
         self._good_end = 0
@@ -282,19 +382,30 @@ class ChunkWriter:
         self._write(f"chunk_{self.chunks:05d}", states, rows=len(states))
         self.chunks += 1
         self.rows += len(states)
+        if len(states):
+            self._last_row = np.array(states[-1], copy=True)
 
     @property
     def saved_rows(self) -> int:
         """Rows of the chunks written completely."""
         return self._good_rows
 
-    def close(self, **meta) -> Path:
-        """Write metadata arrays, close, and move the file into place; returns its path.
+    def _extent(self, meta: dict) -> dict:
+        """``meta`` with ``steps_done``/``t_final`` of the complete chunks filled in where not given."""
+        return {**extent(self._good_rows, self._start_meta, self._last_row), **meta}
 
+    def close(self, **meta) -> Path:
+        """Write metadata arrays, close, and move the file into place; returns where it went.
+
+        ``steps_done`` and ``t_final`` default to what the rows cover (:func:`extent`).
+        A run closed with ``complete=False`` (failed, interrupted) replaces no
+        file: when :attr:`path` exists it is kept and this file goes to
+        ``NAME.partial.npz`` (or ``NAME.partial-2.npz``, …), with a RuntimeWarning.
         After a failed write (disk full) this is :meth:`rescue`.
         """
         if self.failed is not None:
             return self.rescue(**meta)
+        meta = self._extent(meta)
         try:
             for key, value in meta.items():
                 if key not in self._meta_keys:
@@ -303,13 +414,26 @@ class ChunkWriter:
             self._fh.flush()
             os.fsync(self._fh.fileno())
             self._fh.close()
-            os.replace(self._tmp, self.path)
+            if bool(meta.get("complete", True)):
+                os.replace(self._tmp, self.path)
+                where = self.path
+            else:
+                where = self._place_incomplete()
         except OSError as exc:
             if self.failed is None:
                 self.failed = storage_error(exc, "write", self.path)
             return self.rescue(**meta)
         self._release()
-        return self.path
+        return where
+
+    def _place_incomplete(self) -> Path:
+        """Move the finished temporary file of an incomplete run into place, never over a file."""
+        where = _place_new(self._tmp, [self.path, *_free_name(self.path, "partial")])
+        if where != self.path:
+            warnings.warn(f"{self.path} exists and this run did not complete, so it is kept as it was; "
+                          f"the {self._good_rows} states of this run are saved to {where}",
+                          RuntimeWarning, stacklevel=4)
+        return where
 
     def rescue(self, **meta) -> Path:
         """Keep every complete chunk after a failed write: cut, finish, move into place.
@@ -318,10 +442,14 @@ class ChunkWriter:
         (``meta``; dropped if even that does not fit) and the zip directory are
         written and the file is renamed to :attr:`path`.
 
+        The file is marked ``complete = False``, ``reason = "write-error"``, with the
+        ``steps_done``/``t_final`` its rows cover; like any incomplete save it
+        replaces no existing file (see :meth:`close`).
+
         Returns
         -------
         Path
-            :attr:`path`, a readable ``.npz`` with :attr:`saved_rows` states.
+            Where the readable ``.npz`` with :attr:`saved_rows` states went.
 
         Raises
         ------
@@ -331,16 +459,19 @@ class ChunkWriter:
             the same folder rebuilds it).
         """
         self._abandon_zip()
+        # What is kept is incomplete (a chunk or the metadata did not fit): say so, count its rows.
+        meta = {**meta, **extent(self._good_rows, self._start_meta, self._last_row),
+                "complete": False, "reason": "write-error"}
         last = None
         for extra in (meta, {}):
             try:
                 _finish_zip(self._lock, self._good, self._good_end, extra)
-                os.replace(self._tmp, self.path)
+                where = self._place_incomplete()
             except OSError as exc:
                 last = exc
                 continue
             self._release()
-            return self.path
+            return where
         tmp = self._tmp
         self._release()  # unlocked: a later run sees an orphan and rebuilds it
         raise StorageError(f"cannot finish {self.path}: {last.strerror or last}; the {len(self._good)} "
@@ -463,6 +594,27 @@ def _complete_entries(fd: int) -> tuple[list, int, int]:
     return entries, pos, rows
 
 
+def _entry_array(fd: int, info: zipfile.ZipInfo) -> np.ndarray:
+    """The ``.npy`` array of a complete stored entry (found by :func:`_complete_entries`)."""
+    fh = os.fdopen(os.dup(fd), "rb")
+    try:
+        fh.seek(info.header_offset + 26)
+        nlen, xlen = struct.unpack("<HH", fh.read(4))
+        fh.seek(info.header_offset + 30 + nlen + xlen)
+        return np.lib.format.read_array(io.BytesIO(fh.read(info.compress_size)), allow_pickle=False)
+    finally:
+        fh.close()
+
+
+def _rebuilt_meta(fd: int, entries: list, chunks: list, rows: int) -> dict:
+    """Metadata of a save rebuilt after a kill: what its complete chunks cover (:func:`extent`)."""
+    keys = ("save_every", "steps", "h", "t0", "time_column", "state_names", "time_transform")
+    start = {e.filename[:-4]: _entry_array(fd, e) for e in entries if e.filename[:-4] in keys}
+    last = _entry_array(fd, chunks[-1])
+    last_row = last[-1] if len(last) else None
+    return {**extent(rows, start, last_row), "complete": False, "reason": "killed"}
+
+
 def _fmt_size(n: int) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":
@@ -476,7 +628,9 @@ def recover_orphans(folder) -> list[str]:
 
     The complete chunks of an orphan go to ``NAME.recovered.npz`` (or
     ``NAME.recovered-2.npz``, …, never over an existing file), marked
-    ``complete = False`` and ``reason = "killed"``; an orphan without a
+    ``complete = False`` and ``reason = "killed"``, with the ``steps_done`` and
+    ``t_final`` its rows cover (:func:`extent`, from the metadata the run wrote
+    first: ``save_every``, ``steps``, ``h``, ``time_column``); an orphan without a
     complete chunk is removed.  Temporary files of older methodgen versions
     (no owner in the name, no lock) are only reported.
 
@@ -500,19 +654,8 @@ def recover_orphans(folder) -> list[str]:
                 notes.append(f"removed {tmp} ({_fmt_size(size)}): the temporary file of a killed save "
                              "with no complete chunk")
                 continue
-            steps = {"steps_done": max(rows - 1, 0), "complete": False, "reason": "killed"}
-            _finish_zip(fd, entries, end, steps)
-            stem = name[:-4]
-            for i in range(1, 1000):
-                target = folder / (f"{stem}.recovered.npz" if i == 1 else f"{stem}.recovered-{i}.npz")
-                try:
-                    os.link(tmp, target)
-                except FileExistsError:
-                    continue
-                os.unlink(tmp)
-                break
-            else:  # pragma: no cover
-                continue
+            _finish_zip(fd, entries, end, _rebuilt_meta(fd, entries, chunks, rows))
+            target = _place_new(str(tmp), _free_name(folder / name, "recovered"))
             notes.append(f"recovered {len(chunks)} complete chunks ({rows} states) of a killed save to "
                          f"{name} into {target}; removed {tmp}")
         except OSError as exc:
