@@ -13,35 +13,84 @@ PoissonSystem(H, y, S, params=None, invariants=None, name=None)   (y' = S(y)∇H
 discretize(system, method) -> Scheme
 generate(scheme, path=None, backend="numpy") -> module   (backend="numba": compiled loop)
 build(system, method, path=None, backend="numpy") -> module  (reuses an up-to-date file without deriving)
+build_text(H, q, p, method, params=..., ...) -> module  (warm start: no SymPy when the module is cached)
 verify(scheme) -> Report                        (exact certificates of the method's claims)
 load_scene(name_or_path) -> Scene
 methods() / scenes()
+
+``import methodgen`` imports numpy but not SymPy: the names that need SymPy
+(Hamiltonian, discretize, verify, load_scene …) are imported on first use
+(PEP 562), so loading a cached module through :func:`build_text` stays light.
 """
 
+import importlib
+import types
+
 from ._version import __version__
+from .build import build, build_text, generate
 from .errors import (GenerationError, InputError, MethodgenError, MethodNotApplicable,
                      ParseError, SceneError)
-from .problem import Hamiltonian
-from .poisson import PoissonSystem
-from .schemes import Scheme, Traits, applicable_methods, discretize, method_names
-from .build import build, generate
-from .scene import Scene, load_scene, scene_names
-from .timetransform import autonomise, time_transform
-from .verify import verify
 
 __all__ = [
-    "__version__", "Hamiltonian", "PoissonSystem", "discretize", "generate", "build", "Scheme", "Traits",
-    "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods", "verify",
-    "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
+    "__version__", "Hamiltonian", "PoissonSystem", "discretize", "generate", "build", "build_text",
+    "Scheme", "Traits", "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
+    "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
     "GenerationError", "time_transform", "autonomise",
 ]
+
+#: Public names imported on first use (they import SymPy and the derivation code).
+_LAZY = {
+    "Hamiltonian": ".problem", "PoissonSystem": ".poisson",
+    "Scheme": ".schemes", "Traits": ".schemes", "applicable_methods": ".schemes",
+    "discretize": ".schemes", "method_names": ".schemes",
+    "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
+    "autonomise": ".timetransform", "time_transform": ".timetransform",
+    "verify": ".verify",
+}
+
+
+def __getattr__(name: str):
+    where = _LAZY.get(name)
+    if where is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(where, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+class _Package(types.ModuleType):
+    """Keeps ``methodgen.verify`` the function when the subpackage of that name is imported.
+
+    Importing a subpackage binds it as an attribute of its parent; the eager
+    ``from .verify import verify`` used to rebind the function right after.  With
+    the lazy import the subpackage may be imported first (by a test or by the
+    CLI): the function must still win, as before.
+    """
+
+    def __setattr__(self, name, value):
+        if name == "verify" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+import sys as _sys  # noqa: E402
+
+_sys.modules[__name__].__class__ = _Package
 
 
 def methods() -> list[str]:
     """Names of all methods in the library."""
+    from .schemes import method_names
+
     return method_names()
 
 
 def scenes() -> list[str]:
     """Names of the built-in scenes."""
+    from .scene import scene_names
+
     return scene_names()

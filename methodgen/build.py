@@ -6,20 +6,36 @@ content is intact.  Only otherwise does it derive, lower and emit.  A file
 whose content does not match its hash (edited, truncated) — or, in the
 per-user cache, that lacks this user's key tag — is never trusted: it is
 regenerated and a warning says so.
+
+:func:`build_text` takes the Hamiltonian as text and keeps a small index in
+the cache from a hash of that text (and everything else passed) to the module
+built for it and its signature, so that a warm start — the module is already
+there — imports neither SymPy nor the derivation code: only numpy and the
+generated module.  Derivation imports (problem, schemes) happen on the cold
+path only.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
+import json
+import warnings
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
-from .emit import (cache_dir, check_cache_folder, emit_source, file_status, load_module, module_filename,
-                   resolve_backend, signature, warn_regenerating, write_module)
-from .problem import Hamiltonian
-from .schemes import composition_for, discretize, method_key, scheme_options
+from ._version import __version__
+from .emit import (cache_dir, cache_root_of, check_cache_folder, emit_source, file_status, generator_hash,
+                   load_module, module_filename, resolve_backend, signature, template_hash,
+                   warn_regenerating, write_atomic, write_module)
+from .errors import InputError, StorageError
 
-__all__ = ["build", "generate", "default_path", "generated_dir", "scene_module_path", "scene_targets",
-           "target_key", "scene_system_name"]
+if TYPE_CHECKING:  # the derivation is imported by the cold path only (see build_text)
+    from .problem import Hamiltonian
+
+__all__ = ["build", "build_text", "generate", "default_path", "generated_dir", "scene_module_path",
+           "scene_targets", "target_key", "scene_system_name", "text_key"]
 
 
 def generated_dir() -> Path | None:
@@ -47,6 +63,8 @@ def scene_targets(scene) -> list[tuple[str, int, str | None, dict]]:
 
 def target_key(method: str, order: int, composition: str | None, options: dict) -> str:
     """The method key (file names, signatures) of a ``scene_targets`` entry."""
+    from .schemes import composition_for, method_key, scheme_options
+
     return method_key(method, composition_for(order, composition), scheme_options(method, options))
 
 
@@ -128,7 +146,7 @@ def default_path(system: Hamiltonian, method: str, backend: str = "numpy") -> Pa
     return cache_dir() / module_filename(f"{system.name or 'system'}_{sig[:12]}", method, backend)
 
 
-def generate(scheme, path=None, backend: str = "numpy") -> ModuleType:
+def generate(scheme, path=None, backend: str = "numpy", *, progress=None) -> ModuleType:
     """Emit ``scheme`` as a solver module, write it, import it and return the module.
 
     Parameters
@@ -144,17 +162,46 @@ def generate(scheme, path=None, backend: str = "numpy") -> ModuleType:
         ``"numba"``: kernels, Newton's method and the integration loop compiled
         with ``numba.njit(cache=True)`` (same interface, same results to
         round-off).  Without numba installed: a RuntimeWarning and the numpy module.
+    progress : callable, optional
+        ``progress(phase, elapsed, done)`` for the phases lower, render, write and
+        load (:mod:`methodgen.progress`); default: the installed reporter (silent in the API).
     """
     from .emit import generate as emit_generate
 
     backend = resolve_backend(backend)
     if path is None:
         path = default_path(scheme.system, scheme.key, backend)
-    return emit_generate(scheme, path, backend)
+    return emit_generate(scheme, path, backend, progress=progress)
+
+
+def _build(system, method: str, path, backend: str, order: int, composition, options: dict,
+           progress) -> tuple[ModuleType, Path, str]:
+    """:func:`build`, also returning the module's path and signature."""
+    from .progress import phase
+    from .schemes import composition_for, discretize, method_key, scheme_options
+    from .timetransform import autonomise
+
+    system = autonomise(system)   # a time-dependent H: its autonomous extension K = H + e
+    backend = resolve_backend(backend, stacklevel=4)
+    key = method_key(method, composition_for(order, composition), scheme_options(method, options))
+    sig = signature(system, key, backend)
+    path = default_path(system, key, backend) if path is None else Path(path)
+    check_cache_folder(path)  # a cache others can write to is refused before any derivation
+    status = file_status(path, sig)
+    if status != "ok":
+        warn_regenerating(path, status, stacklevel=4)
+        with phase("derive", progress):
+            scheme = discretize(system, method, order=order, composition=composition, **options)
+        text = emit_source(scheme, sig, backend=backend, progress=progress)
+        with phase("write", progress):
+            write_module(path, text)
+    with phase("load", progress):
+        module = load_module(path)
+    return module, path, sig
 
 
 def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *, order: int = 2,
-          composition: str | None = None, **options) -> ModuleType:
+          composition: str | None = None, progress=None, **options) -> ModuleType:
     """Return the generated module for ``system`` and ``method``, generating it only if needed.
 
     A file in the per-user cache is imported only when it carries this user's
@@ -177,21 +224,180 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     order : {2, 4, 6, 8, 10}
     composition : str, optional
         For ``order > 2``: the composition family (see :func:`methodgen.discretize`).
+    progress : callable, optional
+        ``progress(phase, elapsed, done)``, called at the start and the end of each
+        phase of a cold build — derive, lower, render, write — and of load
+        (:mod:`methodgen.progress`; :func:`methodgen.progress.tqdm_reporter` for tqdm
+        bars).  Default: the installed reporter, none in the API (silent).
     **options
         Method options (e.g. ``stages=3`` for ``"gauss"``), passed to :func:`methodgen.discretize`.
     """
-    from .timetransform import autonomise
+    return _build(system, method, path, backend, order, composition, options, progress)[0]
 
-    system = autonomise(system)   # a time-dependent H: its autonomous extension K = H + e
+
+# --- warm start from the Hamiltonian's text ------------------------------------------------------
+
+#: Folder of the cache with the warm-start index (one small JSON file per text key).
+WARM_INDEX = "warm-index"
+
+
+def _plain(value, what: str):
+    """``value`` as JSON-able text/numbers (the key of :func:`build_text`); anything else is refused."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, float):
+        return repr(value)   # repr round-trips: one key per float
+    if isinstance(value, dict):
+        return {str(k): _plain(v, f"{what}[{k!r}]") for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, what) for v in value]
+    raise InputError(f"build_text takes text and numbers: {what} is a {type(value).__name__}; use "
+                     "methodgen.Hamiltonian(...) with methodgen.build(...) for SymPy objects")
+
+
+def _dist_version(name: str) -> str | None:
+    """The installed version of the distribution ``name``, read from its metadata (not imported)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def text_key(H: str, q, p, method: str, *, params=None, constraints=(), name=None, invariants=None,
+             time=None, path=None, backend: str = "numpy", order: int = 2, composition=None,
+             options=None) -> str | None:
+    """Hash of everything :func:`build_text` is given and of what the module depends on besides.
+
+    The text of the system, the method and its options, the backend and path,
+    and the versions of methodgen and SymPy (from SymPy's metadata: SymPy is not
+    imported), the templates and the generator's sources — so a key made by
+    other code never finds a module.  None when SymPy's version is unknown (then
+    there is no warm start).
+
+    Raises
+    ------
+    InputError
+        An argument that is not text or numbers.
+    """
+    if not isinstance(H, str):
+        raise InputError(f"build_text takes H as text, got a {type(H).__name__}; use "
+                         "methodgen.Hamiltonian(...) with methodgen.build(...) for SymPy objects")
+    args = {"H": H, "q": list(q), "p": list(p), "params": dict(params or {}),
+            "constraints": list(constraints or ()), "name": name, "invariants": dict(invariants or {}),
+            "time": time, "path": str(Path(path).resolve()) if path is not None else None,
+            "method": method, "order": order, "composition": composition, "options": dict(options or {})}
+    parts = {k: _plain(v, k) for k, v in args.items()}
+    sympy_version = _dist_version("sympy")
+    if sympy_version is None:
+        return None
+    blob = json.dumps({"inputs": parts, "methodgen": __version__, "sympy": sympy_version,
+                       "backend": backend, "templates": template_hash(backend),
+                       "generator": generator_hash()}, sort_keys=True)
+    return hashlib.sha256(b"methodgen-text-key-v1\0" + blob.encode()).hexdigest()
+
+
+def _index_file(key: str) -> Path:
+    return cache_dir() / WARM_INDEX / f"{key[:40]}.json"
+
+
+def _index_tag(root: Path, body: str) -> str | None:
+    from .emit import _cache_key, _keyed_tag
+
+    secret = _cache_key(root, create=False)
+    return None if secret is None else _keyed_tag(secret, "warm-index", body)
+
+
+def _index_lookup(key: str) -> tuple[Path, str] | None:
+    """``(module path, signature)`` the index holds for ``key``; None if absent or not this user's."""
+    entry = _index_file(key)
+    root = check_cache_folder(entry)
+    try:
+        data = json.loads(entry.read_text(encoding="utf-8"))
+        body = json.dumps(data["entry"], sort_keys=True)
+        tag = data["tag"]
+        path, sig = Path(data["entry"]["path"]), str(data["entry"]["signature"])
+        if data["entry"]["key"] != key:
+            return None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    expected = _index_tag(root, body) if root is not None else None
+    if expected is None or not hmac.compare_digest(str(tag), expected):
+        return None   # not written by this user's methodgen: ignored (the cold path decides)
+    return path, sig
+
+
+def _index_record(key: str, path: Path, sig: str) -> None:
+    """Remember that ``key`` was built into ``path`` with signature ``sig`` (keyed with the user's secret)."""
+    entry = _index_file(key)
+    root = cache_root_of(entry)
+    if root is None:  # pragma: no cover - the index lives in the cache by construction
+        return
+    body = {"key": key, "path": str(Path(path).resolve()), "signature": sig}
+    try:
+        check_cache_folder(entry)
+        tag = _index_tag(root, json.dumps(body, sort_keys=True))
+        if tag is None:  # no key yet: only a module in the cache makes one
+            from .emit import _cache_key
+            _cache_key(root, create=True)
+            tag = _index_tag(root, json.dumps(body, sort_keys=True))
+        entry.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        write_atomic(entry, json.dumps({"entry": body, "tag": tag}, sort_keys=True) + "\n")
+    except StorageError as exc:   # the module is built; only the next start is cold
+        warnings.warn(f"cannot record the warm-start index ({exc}); the next start derives again",
+                      RuntimeWarning, stacklevel=3)
+
+
+def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: str | None = None,
+               invariants=None, time: str | None = None, path=None, backend: str = "numpy",
+               order: int = 2, composition: str | None = None, progress=None, **options) -> ModuleType:
+    """The generated module for a Hamiltonian given as text: warm starts without SymPy.
+
+    The same as ``build(Hamiltonian(H, q, p, params=..., ...), method, ...)``, but
+    a module already built for exactly these arguments is found through an index
+    in the cache (:func:`text_key` → module path and signature) and imported
+    without importing SymPy or the derivation code: the warm path computes a
+    hash, reads one small file, checks the module (signature, content hash and
+    this user's key tag, as :func:`build` does) and imports it.  Anything else —
+    no entry, a module edited, replaced by another signature (stale) or untrusted,
+    other methodgen or SymPy versions, templates or generator sources — goes the
+    cold way, :func:`build`, which derives and rewrites the module when needed
+    and records the entry.
+
+    Parameters
+    ----------
+    H : str
+        The Hamiltonian as text (parsed, never evaluated, on the cold path only).
+    q, p, params, constraints, name, invariants, time
+        As for :class:`methodgen.Hamiltonian`, as text and numbers.
+    method, path, backend, order, composition, progress, **options
+        As for :func:`build`.
+
+    Raises
+    ------
+    InputError
+        An argument that is not text or numbers (SymPy objects: use :func:`build`).
+    """
     backend = resolve_backend(backend)
-    key = method_key(method, composition_for(order, composition), scheme_options(method, options))
-    sig = signature(system, key, backend)
-    path = default_path(system, key, backend) if path is None else Path(path)
-    check_cache_folder(path)  # a cache others can write to is refused before any derivation
-    status = file_status(path, sig)
-    if status == "ok":
-        return load_module(path)
-    warn_regenerating(path, status)
-    scheme = discretize(system, method, order=order, composition=composition, **options)
-    write_module(path, emit_source(scheme, sig, backend=backend))
-    return load_module(path)
+    key = text_key(H, q, p, method, params=params, constraints=constraints, name=name, invariants=invariants,
+                   time=time, path=path, backend=backend, order=order, composition=composition,
+                   options=options)
+    if key is not None:
+        found = _index_lookup(key)
+        if found is not None:
+            module_path, sig = found
+            check_cache_folder(module_path)
+            if file_status(module_path, sig) == "ok":   # stale, edited, untrusted: the cold path rebuilds
+                from .progress import phase
+
+                with phase("load", progress):
+                    return load_module(module_path)
+    from .problem import Hamiltonian
+
+    system = Hamiltonian(H, q, p, params=params, constraints=constraints, name=name, invariants=invariants,
+                         time=time)
+    module, module_path, sig = _build(system, method, path, backend, order, composition, options, progress)
+    if key is not None:
+        _index_record(key, module_path, sig)
+    return module

@@ -30,6 +30,7 @@ from .build import build, generated_dir, scene_module_path, scene_system_name, s
 from .emit import BACKENDS, emit_source, file_status, module_filename, signature, write_atomic
 from .errors import BAD_PATH_ERRNOS, InputError, MethodgenError, MethodNotApplicable, StorageError
 from .scene import check_g_positive, check_order, check_stages, load_scene, scene_names, with_time_transform
+from .progress import phase, stderr_reporting
 from .runio import ChunkWriter
 from .schemes import METHODS, SYMMETRIC_METHODS, composition_for, discretize, method_key, scheme_options
 
@@ -458,7 +459,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if getattr(module, "BACKEND", "numpy") == "numba":
         # Compile (or load from numba's disk cache) before the timed region.
         try:
-            module.step(y, h, params)
+            with phase("compile"):
+                module.step(y, h, params)
         except (RuntimeError, FloatingPointError, ValueError):
             pass
     every = 1 if save_every is None else int(save_every)
@@ -1170,7 +1172,8 @@ def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     warnings.showwarning = _one_line_warning
     try:
-        return args.func(args)
+        with stderr_reporting():   # a line per phase that runs over 2 s (methodgen.progress)
+            return args.func(args)
     except StorageError as exc:
         # A path that cannot be used is bad input (2); a full disk is a fault of the run (3).
         print(f"methodgen: error: {exc}", file=sys.stderr)

@@ -17,6 +17,9 @@
   plain, deterministic bytes.
 * Generated modules are imported from their file (never ``exec`` of a string),
   from exactly the bytes that were checked.
+* Loading and checking a module needs neither SymPy, jinja2 nor the lowering:
+  those are imported by the functions that derive and render (a warm start from
+  the cache stays light, see :func:`methodgen.build.build_text`).
 """
 
 from __future__ import annotations
@@ -35,14 +38,15 @@ import sys
 import warnings
 from pathlib import Path
 from types import ModuleType
-
-import jinja2
-import sympy
+from typing import TYPE_CHECKING
 
 from ._version import __version__
 from .errors import GenerationError, InputError, StorageError, UntrustedCacheError
-from .lower import Kernel, ModuleIR, lower
+from .progress import phase
 from .runio import find_orphans, make_temp, storage_error
+
+if TYPE_CHECKING:  # imported where rendering needs them (never on the loading path)
+    from .lower import Kernel, ModuleIR
 
 __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
            "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available",
@@ -94,7 +98,7 @@ def template_hash(backend: str = "numpy") -> str:
 #: makes signatures change more often — never a stale module believed current.
 _NOT_GENERATOR = frozenset({
     "__main__.py", "bench.py", "build.py", "cli.py", "figures.py", "figures_cli.py", "peers.py",
-    "plots.py", "runio.py", "scene.py", "sweep.py", "sweep_cli.py", "verify_cli.py",
+    "plots.py", "progress.py", "runio.py", "scene.py", "sweep.py", "sweep_cli.py", "verify_cli.py",
 })
 _NOT_GENERATOR_DIRS = frozenset({"verify", "scenes"})
 
@@ -136,6 +140,8 @@ def signature(system, method: str, backend: str = "numpy") -> str:
     the hash only when it is not ``"numpy"``; a numpy and a numba module never
     share a signature.
     """
+    import sympy  # the signature of a system needs SymPy anyway (its fingerprint)
+
     parts = [system.fingerprint(), method, __version__, sympy.__version__, template_hash(backend),
              generator_hash()]
     if backend != "numpy":
@@ -192,7 +198,9 @@ def cache_dir() -> Path:
 
 # --- rendering --------------------------------------------------------------
 
-def _environment() -> jinja2.Environment:
+def _environment():
+    import jinja2
+
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(template_dir())),
         undefined=jinja2.StrictUndefined,
@@ -239,6 +247,8 @@ def _docsafe(text: str) -> str:
 
 def render(ir: ModuleIR, backend: str = "numpy") -> str:
     """Render the module source for ``ir`` with the templates of ``backend`` (deterministic)."""
+    import sympy
+
     _check_backend(backend)
     template = _TEMPLATES[backend]
     n, d2 = ir.n_unknowns, ir.n_state
@@ -631,7 +641,8 @@ def warn_regenerating(path, status: str, stacklevel: int = 3) -> None:
                       "regenerating it", RuntimeWarning, stacklevel=stacklevel)
 
 
-def generate(scheme, path: str | os.PathLike | None = None, backend: str = "numpy") -> ModuleType:
+def generate(scheme, path: str | os.PathLike | None = None, backend: str = "numpy", *,
+             progress=None) -> ModuleType:
     """Emit ``scheme`` as a solver module, write it, import it and return the module.
 
     Parameters
@@ -647,6 +658,9 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
         with ``numba.njit(cache=True)`` (same interface and results to
         round-off).  Without numba installed a RuntimeWarning is issued and the
         numpy module is returned.
+    progress : callable, optional
+        ``progress(phase, elapsed, done)`` for lower, render, write and load
+        (:mod:`methodgen.progress`); default: the installed reporter.
 
     Returns
     -------
@@ -664,13 +678,24 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
     if status != "ok":
         if status == "untrusted":
             warn_regenerating(path, status)
-        write_module(path, emit_source(scheme, sig, path.stem, backend))
-    return load_module(path)
+        text = emit_source(scheme, sig, path.stem, backend, progress=progress)
+        with phase("write", progress):
+            write_module(path, text)
+    with phase("load", progress):
+        return load_module(path)
 
 
 def emit_source(scheme, sig: str | None = None, module_name: str | None = None,
-                backend: str = "numpy") -> str:
-    """The full source text of the generated module for ``scheme`` (no fallback: any backend renders)."""
+                backend: str = "numpy", *, progress=None) -> str:
+    """The full source text of the generated module for ``scheme`` (no fallback: any backend renders).
+
+    ``progress``: reporter of the phases lower and render (:mod:`methodgen.progress`).
+    """
+    from .lower import lower
+
     sig = sig or signature(scheme.system, scheme.key, backend)
     name = module_name or module_filename(scheme.system.name or "system", scheme.key, backend)[:-3]
-    return render(lower(scheme, sig, name), backend)
+    with phase("lower", progress):
+        ir = lower(scheme, sig, name)
+    with phase("render", progress):
+        return render(ir, backend)

@@ -106,3 +106,11 @@ def pair(modules, tmp_path_factory):
         return cache[scene_name, method]
 
     return get
+
+
+# Progress lines on stderr depend on how long a phase takes (methodgen.progress: over 2 s), so
+# on a loaded machine they would come and go; the suite runs without them (subprocesses too)
+# unless a test sets the threshold itself (tests/test_progress.py).
+import os as _os  # noqa: E402
+
+_os.environ.setdefault("METHODGEN_PROGRESS_SECONDS", "1e9")

@@ -90,7 +90,7 @@ def test_build_reuses_an_up_to_date_file_without_deriving(tmp_path, kepler, monk
     def boom(*a, **k):
         raise AssertionError("re-derived although nothing changed")
 
-    monkeypatch.setattr(sys.modules["methodgen.build"], "discretize", boom)
+    monkeypatch.setattr(sys.modules["methodgen.schemes"], "discretize", boom)  # build imports it on the cold path
     mod = mg.build(kepler, "energy-momentum", path)
     assert mod.METHOD == "energy-momentum" and path.stat().st_mtime_ns == mtime
     # A different system has a different signature: it must derive (and here hits the trap).

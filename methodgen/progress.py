@@ -1,0 +1,160 @@
+"""Progress of long work: one report per phase (derive, lower, render, write, load, compile …).
+
+A *reporter* is any callable ``progress(phase: str, elapsed: float, done: bool)``:
+called with ``done=False`` and ``elapsed=0.0`` when a phase starts and with
+``done=True`` and the phase's wall time in seconds when it ends (also when it
+fails).  :func:`phase` is how the pipeline reports; it costs nothing when
+nobody listens.
+
+* The API is silent by default: pass ``progress=`` to :func:`methodgen.build`
+  (a callable, or :func:`tqdm_reporter` for tqdm bars), or :func:`install` a
+  reporter for the whole process.
+* The CLI installs :class:`StderrReporter`: a line on stderr when a phase has
+  run for more than 2 s (``$METHODGEN_PROGRESS_SECONDS`` changes the threshold;
+  0 reports every phase) and a line with its time when it ends after more than
+  that.  A slow derivation is then never silent.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from typing import Callable, Iterator
+
+__all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "threshold_from_env",
+           "stderr_reporting", "PHASES"]
+
+#: The phases the pipeline reports, in the order a cold build runs them.
+PHASES = ("derive", "lower", "render", "write", "load", "compile")
+
+Reporter = Callable[[str, float, bool], None]
+
+_installed: Reporter | None = None
+
+
+def install(reporter: Reporter | None) -> Reporter | None:
+    """Make ``reporter`` the process-wide default (None: silent again); returns the previous one."""
+    global _installed
+    previous, _installed = _installed, reporter
+    return previous
+
+
+def installed() -> Reporter | None:
+    """The process-wide reporter (None when silent)."""
+    return _installed
+
+
+@contextmanager
+def phase(name: str, progress: Reporter | None = None) -> Iterator[None]:
+    """Report the phase ``name`` to ``progress`` (default: the installed reporter), start and end."""
+    report = progress if progress is not None else _installed
+    if report is None:
+        yield
+        return
+    t0 = time.perf_counter()
+    report(name, 0.0, False)
+    try:
+        yield
+    finally:
+        report(name, time.perf_counter() - t0, True)
+
+
+def threshold_from_env(default: float = 2.0) -> float:
+    """``$METHODGEN_PROGRESS_SECONDS`` as a threshold in seconds (``default`` when unset or not a number ≥ 0)."""
+    text = os.environ.get("METHODGEN_PROGRESS_SECONDS", "")
+    try:
+        value = float(text)
+    except ValueError:
+        return default
+    return value if value >= 0 else default
+
+
+@contextmanager
+def stderr_reporting(threshold: float | None = None) -> Iterator[StderrReporter]:
+    """Install a :class:`StderrReporter` for the ``with`` block (the CLI's commands run inside one).
+
+    ``threshold`` defaults to :func:`threshold_from_env`; the previous reporter is
+    put back afterwards.
+    """
+    reporter = StderrReporter(threshold_from_env() if threshold is None else threshold)
+    previous = install(reporter)
+    try:
+        yield reporter
+    finally:
+        install(previous)
+
+
+class StderrReporter:
+    """Lines ``methodgen: <phase> …`` on a stream for phases that take longer than ``threshold`` s.
+
+    When a phase is still running after ``threshold`` seconds a line says so (from
+    a timer thread, so a derivation that takes minutes is visible while it runs);
+    when it ends after more than ``threshold`` seconds a line gives its time.
+    ``threshold=0`` reports every phase, at its start and its end.
+    """
+
+    def __init__(self, threshold: float = 2.0, stream=None):
+        self.threshold = float(threshold)
+        self.stream = stream
+        self._timers: dict[str, threading.Timer] = {}
+        self._lock = threading.Lock()
+
+    def _write(self, text: str) -> None:
+        stream = self.stream if self.stream is not None else sys.stderr
+        with self._lock:
+            try:
+                stream.write(f"methodgen: {text}\n")
+                stream.flush()
+            except (OSError, ValueError):  # stderr closed: progress is not worth a failure
+                pass
+
+    def _running(self, name: str) -> None:
+        after = f" (still running after {self.threshold:g} s)" if self.threshold > 0 else ""
+        self._write(f"{name} …{after}")
+
+    def __call__(self, name: str, elapsed: float, done: bool) -> None:
+        if not done:
+            if self.threshold <= 0:
+                self._running(name)
+                return
+            timer = threading.Timer(self.threshold, self._running, args=(name,))
+            timer.daemon = True
+            self._timers[name] = timer
+            timer.start()
+            return
+        timer = self._timers.pop(name, None)
+        if timer is not None:
+            timer.cancel()
+        if elapsed >= self.threshold:
+            self._write(f"{name} done in {elapsed:.1f} s")
+
+
+def tqdm_reporter(**kwargs) -> Reporter:
+    """A reporter that shows each phase as a tqdm bar (elapsed time); needs ``pip install tqdm``.
+
+    ``kwargs`` go to :class:`tqdm.tqdm` (e.g. ``leave=False``, ``file=...``).
+
+    Raises
+    ------
+    ImportError
+        tqdm is not installed (one line saying how to install it).
+    """
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        raise ImportError("progress bars need tqdm: pip install tqdm") from None
+    bars: dict = {}
+
+    def report(name: str, elapsed: float, done: bool) -> None:
+        if not done:
+            bars[name] = tqdm(total=1, desc=name, bar_format="{desc}: {elapsed}", **kwargs)
+            return
+        bar = bars.pop(name, None)
+        if bar is not None:
+            bar.update(1)
+            bar.close()
+
+    return report
