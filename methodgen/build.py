@@ -167,17 +167,19 @@ def generate(scheme, path=None, backend: str = "numpy", *, progress=None) -> Mod
         load (:mod:`methodgen.progress`); default: the installed reporter (silent in the API).
     """
     from .emit import generate as emit_generate
+    from .progress import about
 
     backend = resolve_backend(backend)
     if path is None:
         path = default_path(scheme.system, scheme.key, backend)
-    return emit_generate(scheme, path, backend, progress=progress)
+    with about(Path(path).name):
+        return emit_generate(scheme, path, backend, progress=progress)
 
 
 def _build(system, method: str, path, backend: str, order: int, composition, options: dict,
            progress) -> tuple[ModuleType, Path, str]:
     """:func:`build`, also returning the module's path and signature."""
-    from .progress import phase
+    from .progress import about, phase
     from .schemes import composition_for, discretize, method_key, scheme_options
     from .timetransform import autonomise
 
@@ -188,15 +190,16 @@ def _build(system, method: str, path, backend: str, order: int, composition, opt
     path = default_path(system, key, backend) if path is None else Path(path)
     check_cache_folder(path)  # a cache others can write to is refused before any derivation
     status = file_status(path, sig)
-    if status != "ok":
-        warn_regenerating(path, status, stacklevel=4)
-        with phase("derive", progress):
-            scheme = discretize(system, method, order=order, composition=composition, **options)
-        text = emit_source(scheme, sig, backend=backend, progress=progress)
-        with phase("write", progress):
-            write_module(path, text)
-    with phase("load", progress):
-        module = load_module(path)
+    with about(path.name):
+        if status != "ok":
+            warn_regenerating(path, status, stacklevel=4)
+            with phase("derive", progress):
+                scheme = discretize(system, method, order=order, composition=composition, **options)
+            text = emit_source(scheme, sig, backend=backend, progress=progress)
+            with phase("write", progress):
+                write_module(path, text)
+        with phase("load", progress):
+            module = load_module(path)
     return module, path, sig
 
 
@@ -389,9 +392,9 @@ def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: 
             module_path, sig = found
             check_cache_folder(module_path)
             if file_status(module_path, sig) == "ok":   # stale, edited, untrusted: the cold path rebuilds
-                from .progress import phase
+                from .progress import about, phase
 
-                with phase("load", progress):
+                with about(module_path.name), phase("load", progress):
                     return load_module(module_path)
     from .problem import Hamiltonian
 

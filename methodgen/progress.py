@@ -17,6 +17,7 @@ nobody listens.
 
 from __future__ import annotations
 
+import contextvars
 import os
 import sys
 import threading
@@ -25,7 +26,7 @@ from contextlib import contextmanager
 from typing import Callable, Iterator
 
 __all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "threshold_from_env",
-           "stderr_reporting", "PHASES"]
+           "stderr_reporting", "about", "subject", "PHASES"]
 
 #: The phases the pipeline reports, in the order a cold build runs them.
 PHASES = ("derive", "lower", "render", "write", "load", "compile")
@@ -33,6 +34,9 @@ PHASES = ("derive", "lower", "render", "write", "load", "compile")
 Reporter = Callable[[str, float, bool], None]
 
 _installed: Reporter | None = None
+
+#: What the phases are about (a module file name), for reporters that print lines.
+_subject: contextvars.ContextVar[str] = contextvars.ContextVar("methodgen_progress_subject", default="")
 
 
 def install(reporter: Reporter | None) -> Reporter | None:
@@ -45,6 +49,21 @@ def install(reporter: Reporter | None) -> Reporter | None:
 def installed() -> Reporter | None:
     """The process-wide reporter (None when silent)."""
     return _installed
+
+
+@contextmanager
+def about(text: str) -> Iterator[None]:
+    """Within the block, phases are about ``text`` (e.g. the module's file name; see :func:`subject`)."""
+    token = _subject.set(text)
+    try:
+        yield
+    finally:
+        _subject.reset(token)
+
+
+def subject() -> str:
+    """What the current phases are about (``""`` outside :func:`about`)."""
+    return _subject.get()
 
 
 @contextmanager
@@ -88,7 +107,7 @@ def stderr_reporting(threshold: float | None = None) -> Iterator[StderrReporter]
 
 
 class StderrReporter:
-    """Lines ``methodgen: <phase> …`` on a stream for phases that take longer than ``threshold`` s.
+    """Lines ``methodgen: <phase> <subject> …`` on a stream for phases longer than ``threshold`` s.
 
     When a phase is still running after ``threshold`` seconds a line says so (from
     a timer thread, so a derivation that takes minutes is visible while it runs);
@@ -111,16 +130,17 @@ class StderrReporter:
             except (OSError, ValueError):  # stderr closed: progress is not worth a failure
                 pass
 
-    def _running(self, name: str) -> None:
+    def _running(self, name: str, what: str) -> None:
         after = f" (still running after {self.threshold:g} s)" if self.threshold > 0 else ""
-        self._write(f"{name} …{after}")
+        self._write(f"{name}{what} …{after}")
 
     def __call__(self, name: str, elapsed: float, done: bool) -> None:
+        what = f" {subject()}" if subject() else ""
         if not done:
             if self.threshold <= 0:
-                self._running(name)
+                self._running(name, what)
                 return
-            timer = threading.Timer(self.threshold, self._running, args=(name,))
+            timer = threading.Timer(self.threshold, self._running, args=(name, what))
             timer.daemon = True
             self._timers[name] = timer
             timer.start()
@@ -129,7 +149,7 @@ class StderrReporter:
         if timer is not None:
             timer.cancel()
         if elapsed >= self.threshold:
-            self._write(f"{name} done in {elapsed:.1f} s")
+            self._write(f"{name}{what} done in {elapsed:.1f} s")
 
 
 def tqdm_reporter(**kwargs) -> Reporter:
