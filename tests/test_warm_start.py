@@ -32,7 +32,8 @@ PROBE = r"""
 import json, sys
 import numpy as np
 import methodgen as mg
-mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k": 2.0}, name="osc")
+mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k": 2.0}, name="osc",
+                    backend=sys.argv[2])
 y = mod.step(np.array([1.0, 0.0]), 0.1)
 print(json.dumps({"y": list(map(float, y)), "module": mod.__file__,
                   "loaded": sorted(m for m in sys.modules if m == "sympy" or m.startswith(("sympy.", "jinja2",
@@ -41,9 +42,9 @@ print(json.dumps({"y": list(map(float, y)), "module": mod.__file__,
 """
 
 
-def probe(cache: Path, text: str = H) -> dict:
+def probe(cache: Path, text: str = H, backend: str = "numpy") -> dict:
     env = {**os.environ, "METHODGEN_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
-    out = subprocess.run([sys.executable, "-c", PROBE, text], capture_output=True, text=True, env=env,
+    out = subprocess.run([sys.executable, "-c", PROBE, text, backend], capture_output=True, text=True, env=env,
                          cwd=cache.parent, check=True)
     return json.loads(out.stdout)
 
@@ -62,6 +63,17 @@ def test_a_cached_module_imports_and_runs_without_sympy(tmp_path):
     # Another text is another key: cold again (and its own module).
     other = probe(cache, "p**2/(2*m) + k*q**4/4")
     assert "sympy" in other["loaded"] and other["module"] != cold["module"]
+
+
+@pytest.mark.slow
+def test_a_cached_numba_module_imports_and_runs_without_sympy(tmp_path):
+    """The numba backend (a cold compile of 10-40 s: slow); the numpy test above is its fast sibling."""
+    pytest.importorskip("numba")
+    cache = tmp_path / "cache"
+    cold = probe(cache, backend="numba")
+    assert "sympy" in cold["loaded"]
+    warm = probe(cache, backend="numba")
+    assert warm["loaded"] == [] and warm["y"] == cold["y"] and warm["module"].endswith("_numba.py")
 
 
 def test_import_methodgen_itself_does_not_import_sympy(tmp_path):
