@@ -12,17 +12,23 @@ nobody listens.
 * The CLI installs :class:`StderrReporter`: a line on stderr when a phase has
   run for more than 2 s (``$METHODGEN_PROGRESS_SECONDS`` changes the threshold;
   0 reports every phase) and a line with its time when it ends after more than
-  that.  A slow derivation is then never silent.
+  that.  A slow derivation is then never silent.  As an estimate, the line of a
+  running phase gives the time the same phase of the same module took the last
+  time it was reported (kept in ``progress-times.json`` in the cache).
 """
 
 from __future__ import annotations
 
 import contextvars
+import json
 import os
+import re
 import sys
+import tempfile
 import threading
 import time
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Callable, Iterator
 
 __all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "threshold_from_env",
@@ -32,6 +38,17 @@ __all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "
 PHASES = ("derive", "lower", "render", "write", "load", "compile")
 
 Reporter = Callable[[str, float, bool], None]
+
+#: The file in the cache with the last reported time of each phase (the estimates).
+HISTORY_FILE = "progress-times.json"
+_HISTORY_KEEP = 500
+
+
+def _history_key(name: str, about_text: str) -> str:
+    """``phase:module`` with the module's file name freed of its 12-hex signature prefix ("" without one)."""
+    if not about_text:
+        return ""
+    return f"{name}:{re.sub(r'_[0-9a-f]{12}(?=_)', '', about_text)}"
 
 _installed: Reporter | None = None
 
@@ -98,7 +115,7 @@ def stderr_reporting(threshold: float | None = None) -> Iterator[StderrReporter]
     ``threshold`` defaults to :func:`threshold_from_env`; the previous reporter is
     put back afterwards.
     """
-    reporter = StderrReporter(threshold_from_env() if threshold is None else threshold)
+    reporter = StderrReporter(threshold_from_env() if threshold is None else threshold, history=True)
     previous = install(reporter)
     try:
         yield reporter
@@ -113,13 +130,63 @@ class StderrReporter:
     a timer thread, so a derivation that takes minutes is visible while it runs);
     when it ends after more than ``threshold`` seconds a line gives its time.
     ``threshold=0`` reports every phase, at its start and its end.
+
+    With ``history`` (True: ``progress-times.json`` in the per-user cache; or a
+    path) the time of each reported phase is kept, per phase and module (its file
+    name without the signature), and the line of a running phase adds
+    ``… s last time`` when the same phase of the same module was reported before.
     """
 
-    def __init__(self, threshold: float = 2.0, stream=None):
+    def __init__(self, threshold: float = 2.0, stream=None, history: bool | str | os.PathLike = False):
         self.threshold = float(threshold)
         self.stream = stream
         self._timers: dict[str, threading.Timer] = {}
         self._lock = threading.Lock()
+        self._history = history
+
+    def _history_file(self) -> Path | None:
+        if not self._history:
+            return None
+        if self._history is True:
+            from .emit import cache_dir
+
+            return cache_dir() / HISTORY_FILE
+        return Path(self._history)
+
+    def _estimate(self, key: str) -> float | None:
+        path = self._history_file()
+        if path is None or not key:
+            return None
+        try:
+            value = json.loads(path.read_text(encoding="utf-8")).get(key)
+        except (OSError, ValueError, AttributeError):
+            return None
+        return float(value) if isinstance(value, (int, float)) and value >= 0 else None
+
+    def _remember(self, key: str, elapsed: float) -> None:
+        path = self._history_file()
+        if path is None or not key or not path.parent.is_dir():
+            return
+        tmp = None
+        try:
+            try:
+                times = json.loads(path.read_text(encoding="utf-8"))
+                times = times if isinstance(times, dict) else {}
+            except (OSError, ValueError):
+                times = {}
+            times.pop(key, None)
+            times[key] = round(elapsed, 1)
+            times = dict(list(times.items())[-_HISTORY_KEEP:])   # the most recent ones
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(times, fh, sort_keys=False)
+            os.replace(tmp, path)
+        except OSError:  # an estimate is not worth a failure
+            if tmp is not None:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
 
     def _write(self, text: str) -> None:
         stream = self.stream if self.stream is not None else sys.stderr
@@ -130,17 +197,21 @@ class StderrReporter:
             except (OSError, ValueError):  # stderr closed: progress is not worth a failure
                 pass
 
-    def _running(self, name: str, what: str) -> None:
-        after = f" (still running after {self.threshold:g} s)" if self.threshold > 0 else ""
-        self._write(f"{name}{what} …{after}")
+    def _running(self, name: str, what: str, key: str) -> None:
+        notes = [f"still running after {self.threshold:g} s"] if self.threshold > 0 else []
+        last = self._estimate(key)
+        if last is not None:
+            notes.append(f"{last:.1f} s last time")
+        self._write(f"{name}{what} …" + (f" ({'; '.join(notes)})" if notes else ""))
 
     def __call__(self, name: str, elapsed: float, done: bool) -> None:
         what = f" {subject()}" if subject() else ""
+        key = _history_key(name, subject())
         if not done:
             if self.threshold <= 0:
-                self._running(name, what)
+                self._running(name, what, key)
                 return
-            timer = threading.Timer(self.threshold, self._running, args=(name, what))
+            timer = threading.Timer(self.threshold, self._running, args=(name, what, key))
             timer.daemon = True
             self._timers[name] = timer
             timer.start()
@@ -150,6 +221,7 @@ class StderrReporter:
             timer.cancel()
         if elapsed >= self.threshold:
             self._write(f"{name}{what} done in {elapsed:.1f} s")
+            self._remember(key, elapsed)
 
 
 def tqdm_reporter(**kwargs) -> Reporter:

@@ -127,3 +127,26 @@ def test_tqdm_reporter_when_installed():
     with phase("derive", report):
         pass
     assert "derive" in out.getvalue()
+
+
+def test_the_running_line_gives_the_last_time_as_an_estimate(tmp_path):
+    history = tmp_path / "times.json"
+    first = io.StringIO()
+    rep = StderrReporter(threshold=0, stream=first, history=history)
+    with progress.about("big_0123456789ab_energy_momentum.py"):
+        rep("derive", 0.0, False)
+        rep("derive", 472.0, True)
+    assert "last time" not in first.getvalue()          # nothing known the first time
+    again = io.StringIO()
+    rep = StderrReporter(threshold=0, stream=again, history=history)
+    # The same module after a generator change: another signature, the same phase and module.
+    with progress.about("big_fedcba987654_energy_momentum.py"):
+        rep("derive", 0.0, False)
+    assert again.getvalue() == "methodgen: derive big_fedcba987654_energy_momentum.py … (472.0 s last time)\n"
+    # Negative control: another module (or another phase) has no estimate.
+    other = io.StringIO()
+    rep = StderrReporter(threshold=0, stream=other, history=history)
+    with progress.about("small_0123456789ab_midpoint.py"):
+        rep("derive", 0.0, False)
+        rep("lower", 0.0, False)
+    assert "last time" not in other.getvalue()
