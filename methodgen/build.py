@@ -337,15 +337,19 @@ def _index_record(key: str, path: Path, sig: str) -> None:
     root = cache_root_of(entry)
     if root is None:  # pragma: no cover - the index lives in the cache by construction
         return
+    from .emit import _cache_key
+
     body = {"key": key, "path": str(Path(path).resolve()), "signature": sig}
     try:
+        try:
+            root.mkdir(mode=0o700, parents=True, exist_ok=True)   # as for a module in the cache
+            entry.parent.mkdir(mode=0o700, exist_ok=True)
+        except OSError as exc:
+            raise StorageError(f"cannot create {entry.parent}: {exc.strerror or exc}", entry.parent,
+                               exc.errno) from None
         check_cache_folder(entry)
+        _cache_key(root, create=True)
         tag = _index_tag(root, json.dumps(body, sort_keys=True))
-        if tag is None:  # no key yet: only a module in the cache makes one
-            from .emit import _cache_key
-            _cache_key(root, create=True)
-            tag = _index_tag(root, json.dumps(body, sort_keys=True))
-        entry.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
         write_atomic(entry, json.dumps({"entry": body, "tag": tag}, sort_keys=True) + "\n")
     except StorageError as exc:   # the module is built; only the next start is cold
         warnings.warn(f"cannot record the warm-start index ({exc}); the next start derives again",
