@@ -249,7 +249,7 @@ def _plain(value, what: str):
     if value is None or isinstance(value, (bool, int, str)):
         return value
     if isinstance(value, float):
-        return repr(value)   # repr round-trips: one key per float
+        return {"float": repr(value)}   # repr round-trips; tagged: never the same key as a text
     if isinstance(value, dict):
         return {str(k): _plain(v, f"{what}[{k!r}]") for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
     if isinstance(value, (list, tuple)):
