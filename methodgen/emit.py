@@ -93,10 +93,10 @@ def template_hash(backend: str = "numpy") -> str:
 #: of the generator and enters :func:`generator_hash`.  A file missing from this list only
 #: makes signatures change more often — never a stale module believed current.
 _NOT_GENERATOR = frozenset({
-    "__main__.py", "bench.py", "build.py", "cli.py", "figures.py", "figures_cli.py", "peers.py",
-    "plots.py", "runio.py", "scene.py", "sweep.py", "sweep_cli.py", "verify_cli.py",
+    "__main__.py", "bench.py", "build.py", "figures.py", "peers.py", "plots.py", "runio.py", "scene.py",
+    "sweep.py",
 })
-_NOT_GENERATOR_DIRS = frozenset({"verify", "scenes"})
+_NOT_GENERATOR_DIRS = frozenset({"cli", "verify", "scenes"})
 
 
 @functools.lru_cache(maxsize=None)

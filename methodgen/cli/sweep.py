@@ -31,7 +31,7 @@ def _count(minimum: int):
     return parse
 
 
-def _fmt(x, spec: str = ".2e") -> str:
+def fmt(x, spec: str = ".2e") -> str:
     return "-" if x is None else format(x, spec)
 
 
@@ -48,9 +48,9 @@ def _print_report(rep: dict) -> None:
         if r["constraint_error"] is not None:
             others.append(r["constraint_error"])
         line = f"{r['method']:<18} {r['h']:9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
-        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {_fmt(r['energy_error']):>10} " \
-                f"{_fmt(max(others) if others else None):>10} {_fmt(r['final_error']):>10} " \
-                f"{_fmt(r['newton_mean'], '.2f'):>6} {_fmt(r['cpu_seconds'], '.3f'):>8}"
+        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {fmt(r['energy_error']):>10} " \
+                f"{fmt(max(others) if others else None):>10} {fmt(r['final_error']):>10} " \
+                f"{fmt(r['newton_mean'], '.2f'):>6} {fmt(r['cpu_seconds'], '.3f'):>8}"
         print(line)
         if r["error"]:
             print(f"{'':<18} {r['error'][:200]}")
@@ -59,16 +59,16 @@ def _print_report(rep: dict) -> None:
     rate = rep["trajectory_steps_per_second"]
     print(f"{rep['ok']} ok, {rep['numerical_errors']} numerical errors, {rep['failed']} failed; "
           f"{rep['trajectory_steps']} trajectory-steps in {rep['wall_seconds']:.2f} s wall "
-          f"({_fmt(rate, '.3g')} steps/s, {rep['cpu_seconds']:.2f} CPU s) {where}")
+          f"({fmt(rate, '.3g')} steps/s, {rep['cpu_seconds']:.2f} CPU s) {where}")
 
 
 def cmd_sweep(args) -> int:
     """Run the sweep of ``args.spec``; return the exit status."""
     # Imported here: the other commands do not need the sweep layer.
-    from .cli import dump_json
-    from .emit import write_atomic
-    from .errors import InputError
-    from .sweep import run_sweep, rows_to_csv
+    from .common import dump_json
+    from ..emit import write_atomic
+    from ..errors import InputError
+    from ..sweep import run_sweep, rows_to_csv
 
     if args.csv:
         # Checked before the run, which may take hours, not after it.
