@@ -94,7 +94,7 @@ def template_hash(backend: str = "numpy") -> str:
 #: makes signatures change more often — never a stale module believed current.
 _NOT_GENERATOR = frozenset({
     "__main__.py", "bench.py", "build.py", "figures.py", "peers.py", "plots.py", "runio.py", "scene.py",
-    "sweep.py",
+    "stats.py", "sweep.py",
 })
 _NOT_GENERATOR_DIRS = frozenset({"cli", "verify", "scenes"})
 
@@ -185,7 +185,8 @@ def cache_dir() -> Path:
     """Per-user cache for generated modules (``$METHODGEN_CACHE`` or the XDG cache)."""
     env = os.environ.get("METHODGEN_CACHE")
     if env:
-        return Path(env)
+        # "~/x" is the home folder's x (as a shell would expand it), never a folder named "~".
+        return Path(env).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "methodgen"
 

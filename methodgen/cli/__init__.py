@@ -24,9 +24,10 @@ import sys
 import warnings
 
 from .. import __version__
-from ..errors import BAD_PATH_ERRNOS, MethodgenError, StorageError
+from ..errors import BAD_PATH_ERRNOS, MethodgenError, NumericalError, StorageError
 from . import bench, figures, generate, run, scenes, sweep, verify
-from .common import EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, Parser, one_line_warning, oserror_line
+from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, Parser, join_negative_values, one_line_warning,
+                     oserror_line)
 
 __all__ = ["main", "make_parser", "EXIT_INPUT", "EXIT_NUMERICAL"]
 
@@ -44,7 +45,8 @@ def make_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` and run the command; return the exit status (see the module docstring)."""
-    args = make_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = make_parser().parse_args(join_negative_values([str(a) for a in argv]))
     warnings.showwarning = one_line_warning
     try:
         return args.func(args)
@@ -52,6 +54,10 @@ def main(argv: list[str] | None = None) -> int:
         # A path that cannot be used is bad input (2); a full disk is a fault of the run (3).
         print(f"methodgen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT if exc.bad_path else EXIT_NUMERICAL
+    except NumericalError as exc:
+        # A computation of methodgen's own failed on valid input (a reference solution).
+        print(f"methodgen: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return EXIT_NUMERICAL
     except MethodgenError as exc:
         print(f"methodgen: error: {exc}", file=sys.stderr)
         return EXIT_INPUT

@@ -8,6 +8,7 @@ import math
 
 from ..emit import BACKENDS
 from ..errors import InputError
+from ..limits import check_steps
 from ..scene import load_scene
 from ..schemes import METHODS
 from .common import dump_json, fmt, parse_params, parse_y0, positive_int, step_size
@@ -131,6 +132,11 @@ def cmd_bench(args) -> int:
     from .. import bench
 
     scene = _bench_overrides(load_scene(args.scene), args)
+    # A y0 at a singularity of H: one line now, not a failed reference solution minutes later.
+    bench.check_initial_state(bench.extended_scene(scene))
+    for flag in ("long_steps", "brouwer_steps"):
+        if getattr(args, flag, None) is not None:
+            check_steps(getattr(args, flag), f"--{flag.replace('_', '-')} {getattr(args, flag)}")
     orders = getattr(args, "orders", None)
     if orders is not None and not args.peers and orders != (2,):
         raise InputError("--orders above 2 (compositions) are benchmarked with --peers; "

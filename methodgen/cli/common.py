@@ -11,6 +11,8 @@ import argparse
 import contextlib
 import json
 import math
+import os
+import re
 import sys
 from pathlib import Path
 
@@ -104,6 +106,43 @@ def finite_number(text: str, what: str) -> float:
     if not math.isfinite(v):
         raise InputError(f"{what}: {text!r} is not finite")
     return v
+
+
+def check_output_file(text, option: str) -> Path:
+    """The path of an output file (``--save``, ``--csv``) checked before any work: a file name
+    (not empty, not a folder) in a folder that exists and can be written.  The folder is never
+    created: a typo in it would otherwise scatter results.  One-line :class:`InputError` else."""
+    if text is None or not str(text).strip():
+        raise InputError(f"{option} needs a file name, got {str(text or '')!r}")
+    text = str(text)
+    path = Path(text).expanduser()
+    if text.endswith(("/", os.sep)) or path.is_dir():
+        raise InputError(f"{option} {text}: is a folder; give a file name in it, e.g. {path / 'run.npz'}")
+    folder = path.parent
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{option} {text}: {folder} is a file, not a folder")
+    if not folder.is_dir():
+        raise InputError(f"{option} {text}: the folder {folder} does not exist (it is not created; make it "
+                         "first)")
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"{option} {text}: {folder} is not a writable folder")
+    return path
+
+
+def join_negative_values(argv: list[str], options=("--y0", "--h", "--t-final")) -> list[str]:
+    """``--y0 -1,0`` as ``--y0=-1,0``: argparse takes a value that starts with ``-`` for an
+    option unless it is a plain negative number; a comma list or ``-1e3`` is not."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        a = argv[i]
+        if a in options and i + 1 < len(argv) and re.match(r"-[0-9.]", argv[i + 1]):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
 
 
 def parse_y0(text: str, n: int) -> list[float]:
@@ -206,8 +245,13 @@ def effective_stages(method: str, options: dict) -> int | None:
 
 
 
-def fmt(x, spec=".2e"):
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+def fmt(x, spec: str = ".2e") -> str:
+    """A table cell: ``-`` for no value, ``non-finite`` for NaN/±inf (never a number), else ``x``."""
+    if x is None:
+        return "-"
+    if not math.isfinite(x):
+        return "non-finite"
+    return format(x, spec)
 
 
 
@@ -221,6 +265,13 @@ def add_order_args(p, generate: bool = False) -> None:
     p.add_argument("--composition", metavar="FAMILY",
                    help=f"composition family for order > 2: {', '.join(FAMILIES)} (default: the scene's, "
                         "else the default of the order; `methodgen methods` lists them)")
+
+
+def add_resolution_arg(p) -> None:
+    """``--no-check-resolution``: ``check_resolution=False`` for the generated modules' ``integrate``."""
+    p.add_argument("--no-check-resolution", dest="check_resolution", action="store_false",
+                   help="do not refuse a step size h estimated to under-resolve the motion "
+                        "(integrate(..., check_resolution=False)); the run is then yours to judge")
 
 
 def add_variant_args(p, command: str = "run") -> None:

@@ -12,11 +12,13 @@ import numpy as np
 from ..build import build, scene_module_path
 from ..emit import BACKENDS
 from ..errors import InputError
+from ..limits import check_memory, check_steps
 from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
 from ..schemes import METHODS, composition_for, method_key, scheme_options
-from .common import (EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_variant_args, apply_overrides,
-                     dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
+from ..stats import ErrorMax
+from .common import (EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
+                     apply_overrides, check_output_file, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
                      print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
 
@@ -34,13 +36,13 @@ class RunFailure(Exception):
 
 def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: dict | None = None,
                      stride: int = 1) -> dict:
-    """Update running max errors of every monitored invariant with ``traj`` (rows of states).
+    """Update the running max errors of every monitored invariant with ``traj`` (rows of states).
 
-    ``offset`` is the step index of ``traj[0]``, ``stride`` the steps between rows (``--save-every``:
-    the maxima are then over the kept states).  NaN never disappears into a
-    maximum (the builtin ``max(x, nan)`` returns x): the first step at which
-    an invariant is not finite is recorded, and the maximum is taken over the
-    finite values only, to be reported as null with a status.
+    ``acc`` maps each name to ``{"initial", "final", "error"}``, ``error`` an
+    :class:`~methodgen.stats.ErrorMax` (NaN never disappears into the maximum: the
+    first step at which an invariant is not finite is recorded, to be reported as
+    null with a status).  ``offset`` is the step index of ``traj[0]``, ``stride`` the
+    steps between rows (``--save-every``: the maxima are then over the kept states).
     """
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN is tracked below
         inv = module.invariants(traj) if params is None else module.invariants(traj, params)
@@ -48,17 +50,11 @@ def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: di
     for name in module.INVARIANT_NAMES:
         vals = np.asarray(inv[name], dtype=float).reshape(len(traj), -1)
         if name not in acc:
-            acc[name] = {"initial": float(vals[0, 0]) if vals.size else math.nan, "max_abs_error": 0.0,
-                         "nonfinite_step": None}
+            acc[name] = {"initial": float(vals[0, 0]) if vals.size else math.nan, "error": ErrorMax()}
         entry = acc[name]
         if len(vals):
-            err = np.abs(vals - entry["initial"])
-            bad = ~np.isfinite(err).all(axis=1)
-            if bad.any() and entry["nonfinite_step"] is None:
-                entry["nonfinite_step"] = offset + stride * int(np.argmax(bad))
-            good = err[~bad]
-            if good.size:
-                entry["max_abs_error"] = max(entry["max_abs_error"], float(good.max()))
+            with np.errstate(invalid="ignore", over="ignore"):
+                entry["error"].update(vals - entry["initial"], offset=offset, stride=stride)
             entry["final"] = float(vals[-1, 0])
     return acc
 
@@ -119,7 +115,7 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
     # the state's scale: an invariant whose start is at round-off level of it "starts at 0"
     scale = max([1.0] + [abs(float(v)) for v in y_final if math.isfinite(float(v))])
     for name, v in (inv_acc or {}).items():
-        init, abs_err, bad = v["initial"], v["max_abs_error"], v.get("nonfinite_step")
+        init, abs_err, bad = v["initial"], v["error"].finite_max, v["error"].nonfinite_step
         if bad is not None:
             # Not a number: reported as null with the reason, never as an error of 0.
             report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": None,
@@ -168,8 +164,8 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "y_final": y_final,
         "state_names": names,
         "invariants": report_inv,
-        "newton": {"mean_iterations": float(its.mean()) if its.size else 0.0,
-                   "max_iterations": int(its.max()) if its.size else 0,
+        "newton": {"mean_iterations": its.mean,
+                   "max_iterations": its.max,
                    "solver": getattr(module, "DEFAULT_SOLVER", None)},
         "seconds": seconds,
         "us_per_step": seconds / steps_done * 1e6 if steps_done else 0.0,
@@ -179,10 +175,50 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
 
 
 
+class _Iterations:
+    """Mean and maximum of the Newton iterations per step, chunk after chunk (8 bytes a step
+    would not fit in memory over a long run; the module's per-chunk array is dropped)."""
+
+    def __init__(self):
+        self.count, self.total, self.max = 0, 0, 0
+
+    def add(self, iterations) -> None:
+        its = np.asarray(iterations)
+        if its.size:
+            self.count += int(its.size)
+            self.total += int(its.sum())
+            self.max = max(self.max, int(its.max()))
+
+    @property
+    def mean(self) -> float:
+        return self.total / self.count if self.count else 0.0
+
+
+def _check_size(scene, steps: int, h: float, t_final, every: int, save, chunk) -> None:
+    """Refuse, before any work, a run beyond :data:`~methodgen.limits.MAX_STEPS` or whose
+    states kept at once do not fit in memory (all of them without ``--save``, one chunk with it)."""
+    what = (f"--t-final {t_final:g} with h = {h:g}" if t_final is not None and steps != scene.steps
+            else f"--steps {steps}")
+    check_steps(steps, what)
+    width = len(scene.run_system.y)
+    at_once = min(steps, chunk or steps) if save else steps
+    # the states kept (8 bytes a value) and the module's per-step iteration counts of a chunk
+    need = 8 * (at_once // every + 2) * width + 8 * min(steps, chunk or steps)
+    if save:
+        hint = "pass --chunk N to write the states N steps at a time"
+    else:
+        hint = ("pass --save FILE.npz --chunk N to write them in chunks"
+                + (", or --save-every K to keep fewer" if every == 1 else ""))
+    check_memory(need, f"{what} holds {at_once // every + 1:.3g} states of {width} values and "
+                       f"{min(steps, chunk or steps):.3g} steps' Newton counts at once", hint)
+
+
 def _steps_for(t_final: float, h: float) -> int:
     if not (math.isfinite(t_final) and t_final > 0):
         raise InputError(f"--t-final must be a positive finite time, got {t_final!r}")
     steps = t_final / abs(h)
+    if not math.isfinite(steps):
+        raise InputError(f"--t-final {t_final:g} with h = {h:g} is more steps than a number can hold")
     n = round(steps)
     if abs(steps - n) > 1e-9 * max(1.0, steps):
         n = math.ceil(steps)   # the last step ends at or just after t_final; the report says where
@@ -195,7 +231,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
               interrupted_path: str | None = None, plot: str | None = None,
               backend: str = "numpy", extended: bool = False, y0=None, params: dict | None = None,
               t_final: float | None = None, order=None, composition: str | None = None,
-              stages=None, time_transform: str | None = None, save_every: int | None = None) -> dict:
+              stages=None, time_transform: str | None = None, save_every: int | None = None,
+              check_resolution: bool = True) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -220,9 +257,16 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     refused, and the report's ``t_final`` is the physical time reached.
     ``save_every`` = k keeps every k-th state (and the last): what ``save`` writes, what is
     plotted and what the invariant errors are the maximum over (``integrate(..., save_every=k)``).
+    ``t_final`` with ``steps`` (and no ``h``) takes ``h = t_final / steps``.
+    ``check_resolution=False`` (``--no-check-resolution``) passes the same to the module's
+    ``integrate``: no refusal of a step size estimated to under-resolve the motion.
+    Refused before any work (:class:`InputError`): more than :data:`~methodgen.limits.MAX_STEPS`
+    steps, or more states kept at once than fit in half the machine's memory.
     """
     if extended and backend != "numpy":
         raise InputError("--extended needs the numpy backend (numba has no long double)")
+    if save is not None:
+        save = str(check_output_file(save, "--save"))
     if plot:
         from ..plots import check_available
         check_available()  # a missing matplotlib is reported before the run, not after
@@ -233,11 +277,10 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     order, composition = resolve_order(scene, order, composition)
     options = scene.options(method, resolve_stages(scene, [method], stages))
     key = method_key(method, composition_for(order, composition), scheme_options(method, options))
+    h_given = h is not None
     h = scene.h if h is None else h
     scene, params = apply_overrides(scene, y0, params)
     if t_final is not None:
-        if steps is not None:
-            raise InputError("give either --steps or --t-final, not both")
         if scene.transformed is not None:
             raise InputError(f"--t-final is a physical time, but with the time transformation g = "
                              f"{scene.time_transform} h and steps are in fictive time τ (dt = g(q) dτ: the "
@@ -248,8 +291,23 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 raise InputError(f"--t-final is the final time of the time-dependent H; it must be after "
                                  f"t0 = {scene.t0:g}, got {t_final!r}")
             t_final = t_final - scene.t0
-        steps = _steps_for(t_final, h)
+        if steps is not None:
+            # h = T/N, as numpy.linspace(t0, T, N + 1) spaces the times.
+            if h_given:
+                raise InputError("give two of --h, --steps, --t-final, not all three (with --t-final T "
+                                 "--steps N, h = T/N)")
+            if steps < 1:
+                raise InputError(f"--steps must be at least 1 with --t-final, got {steps}")
+            if not (math.isfinite(t_final) and t_final > 0):
+                raise InputError(f"--t-final must be a positive finite time, got {t_final!r}")
+            h = t_final / steps
+        else:
+            steps = _steps_for(t_final, h)
     steps = scene.steps if steps is None else steps
+    every = 1 if save_every is None else int(save_every)
+    if isinstance(save_every, bool) or every < 1:
+        raise InputError(f"--save-every must be a positive integer, got {save_every!r}")
+    _check_size(scene, steps, h, t_final, every, save, chunk)
     system = scene.run_system
     if scene.transformed is not None:
         check_g_positive(system, scene.y0, params)
@@ -269,9 +327,6 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             module.step(y, h, params)
         except (RuntimeError, FloatingPointError, ValueError):
             pass
-    every = 1 if save_every is None else int(save_every)
-    if isinstance(save_every, bool) or every < 1:
-        raise InputError(f"--save-every must be a positive integer, got {save_every!r}")
     chunk = steps if not chunk else chunk
     # chunks end on kept steps, so chunk after chunk the rows stay every-th states
     chunk = -(-chunk // every) * every
@@ -288,7 +343,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         meta["save_every"] = every   # row i is the state after min(i * save_every, steps) steps
     kept: list[np.ndarray] = []
     inv_acc = None
-    its_all: list[np.ndarray] = []
+    its = _Iterations()   # a running summary: the counts of a long run do not fit in memory
     done = 0
     seconds = 0.0
     first = True
@@ -306,12 +361,13 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             n = min(chunk, steps - done)
             t0 = time.perf_counter()
             try:
-                part = module.integrate(y, h, n, params, info=info, extended=extended, **stride)
+                part = module.integrate(y, h, n, params, info=info, extended=extended,
+                                        check_resolution=check_resolution, **stride)
             finally:
                 seconds += time.perf_counter() - t0
             rows = part if first else part[1:]
             inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params, stride=every)
-            its_all.append(info.get("newton_iterations", np.zeros(0)))
+            its.add(info.get("newton_iterations", ()))
             if writer is not None:
                 writer.append(rows)
             elif save is None:
@@ -366,11 +422,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                                      reason="write-error" if io_fault else type(exc).__name__)
             except OSError as cexc:
                 note, saved_rows = str(cexc), None
-        its = np.concatenate(its_all) if its_all else np.zeros(0)
         rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
         code = 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL
         raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
-    its = np.concatenate(its_all) if its_all else np.zeros(0)
     rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
     if every > 1:
         rep["save_every"] = every   # invariant errors are maxima over the kept states
@@ -464,7 +518,8 @@ def cmd_run(args) -> int:
                         plot=args.plot, backend=args.backend, extended=args.extended, y0=y0,
                         params=params, t_final=args.t_final, order=args.order,
                         composition=args.composition, stages=args.stages,
-                        time_transform=args.time_transform, save_every=args.save_every)
+                        time_transform=args.time_transform, save_every=args.save_every,
+                        check_resolution=args.check_resolution)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         if fail.saved:
@@ -507,8 +562,10 @@ def add_parser(sub) -> None:
     p.add_argument("--h", type=step_size, help="step size (default: the scene's)")
     p.add_argument("--steps", type=positive_int, help="number of steps (default: the scene's)")
     p.add_argument("--t-final", type=float, metavar="T",
-                   help="final time instead of --steps (steps = T/h, rounded; the report gives t_final); "
-                        "not with a time transformation (its steps are in fictive time)")
+                   help="final time: with --h, steps = T/h rounded (the report gives t_final); with --steps N, "
+                        "h = T/N (as numpy.linspace); not with a time transformation (its steps are in "
+                        "fictive time)")
+    add_resolution_arg(p)
     p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE",
                    help="parameter value for this run (repeatable; passed at run time, nothing re-derived)")

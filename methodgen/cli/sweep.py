@@ -14,9 +14,11 @@ not installed, scheduler unreachable, a ``--csv`` path that cannot be written),
 from __future__ import annotations
 
 import argparse
-import os
+import dataclasses
 import sys
-from pathlib import Path
+
+from ..stats import max_value
+from .common import add_resolution_arg, check_output_file, dump_json, fmt
 
 
 def _count(minimum: int):
@@ -31,10 +33,6 @@ def _count(minimum: int):
     return parse
 
 
-def fmt(x, spec: str = ".2e") -> str:
-    return "-" if x is None else format(x, spec)
-
-
 def _print_report(rep: dict) -> None:
     """The human-readable table (one line per task) and a summary line."""
     params = list(rep["spec"]["params"])
@@ -44,12 +42,16 @@ def _print_report(rep: dict) -> None:
     print(f"sweep of {rep['scene']}: {rep['tasks']} tasks")
     print(head)
     for r in rep["rows"]:
-        others = [v for k, v in r["invariant_errors"].items() if k != "H" and v is not None]
-        if r["constraint_error"] is not None:
-            others.append(r["constraint_error"])
+        bad = r.get("nonfinite") or {}
+        # A quantity that stopped being a number is shown as "non-finite", never as an error of 0.
+        nonfinite = {k: float("nan") for k in bad}
+        others = [nonfinite.get(k, v) for k, v in r["invariant_errors"].items() if k != "H"]
+        others.append(nonfinite.get("constraints", r["constraint_error"]))
+        energy = nonfinite.get("H", r["energy_error"])
         line = f"{r['method']:<18} {r['h']:9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
-        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {fmt(r['energy_error']):>10} " \
-                f"{fmt(max(others) if others else None):>10} {fmt(r['final_error']):>10} " \
+        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {fmt(energy):>10} " \
+                f"{fmt(max_value(*others) if any(v is not None for v in others) else None):>10} " \
+                f"{fmt(r['final_error']):>10} " \
                 f"{fmt(r['newton_mean'], '.2f'):>6} {fmt(r['cpu_seconds'], '.3f'):>8}"
         print(line)
         if r["error"]:
@@ -65,17 +67,16 @@ def _print_report(rep: dict) -> None:
 def cmd_sweep(args) -> int:
     """Run the sweep of ``args.spec``; return the exit status."""
     # Imported here: the other commands do not need the sweep layer.
-    from .common import dump_json
     from ..emit import write_atomic
-    from ..errors import InputError
-    from ..sweep import run_sweep, rows_to_csv
+    from ..sweep import load_spec, run_sweep, rows_to_csv
 
     if args.csv:
         # Checked before the run, which may take hours, not after it.
-        folder = Path(args.csv).resolve().parent
-        if not folder.is_dir() or not os.access(folder, os.W_OK):
-            raise InputError(f"cannot write --csv {args.csv}: {folder} is not a writable folder")
-    rep = run_sweep(args.spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
+        check_output_file(args.csv, "--csv")
+    spec = load_spec(args.spec)
+    if not args.check_resolution:   # --no-check-resolution over the spec's check_resolution
+        spec = dataclasses.replace(spec, check_resolution=False)
+    rep = run_sweep(spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
                     progress=not args.json)
     if args.csv:
         # A StorageError (one line naming the file and the cause) if it fails: exit 2 for a
@@ -107,5 +108,6 @@ def add_parser(sub) -> None:
     p.add_argument("--retries", type=_count(0), default=2, metavar="K",
                    help="re-run a failed task up to K times before reporting it (default 2)")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV to FILE")
+    add_resolution_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_sweep)
