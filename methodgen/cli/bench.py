@@ -182,7 +182,6 @@ def cmd_bench(args) -> int:
     return 0
 
 
-
 def add_parser(sub) -> None:
     """Register ``bench`` on ``sub`` (an argparse subparsers object)."""
     p = sub.add_parser("bench", help="measure speed against accuracy: work-precision vs scipy, "

@@ -28,17 +28,21 @@ EXIT_NUMERICAL = 3
 
 
 class Parser(argparse.ArgumentParser):
+    """argparse with methodgen's exit status for bad input."""
+
     def error(self, message):  # argparse's own errors: usage + exit 2, no traceback
         self.print_usage(sys.stderr)
         self.exit(EXIT_INPUT, f"methodgen: error: {message}\n")
 
 
 def finite_or_none(x: float):
+    """``x`` as a float, or None if it is NaN or infinite."""
     x = float(x)
     return x if math.isfinite(x) else None
 
 
 def positive_int(text: str) -> int:
+    """argparse type: a non-negative integer (read with ``int()``)."""
     try:
         v = int(text)
     except ValueError:
@@ -49,6 +53,7 @@ def positive_int(text: str) -> int:
 
 
 def step_size(text: str) -> float:
+    """argparse type: a finite, non-zero step size h (read with ``float()``)."""
     try:
         v = float(text)
     except ValueError:
@@ -56,7 +61,6 @@ def step_size(text: str) -> float:
     if v == 0 or not math.isfinite(v):
         raise argparse.ArgumentTypeError(f"h must be finite and non-zero, got {text}")
     return v
-
 
 
 def json_clean(obj):
@@ -87,7 +91,6 @@ def _json_default(x):
 def dump_json(obj) -> str:
     """One JSON object: non-finite numbers become null, never ``NaN``/``Infinity``."""
     return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
-
 
 
 NUMERICAL_ERRORS = ("ConvergenceError", "NonFiniteError", "ResolutionError")
@@ -184,7 +187,6 @@ def apply_overrides(scene, y0, params):
     return scene, (values if params else None)
 
 
-
 def resolve_order(scene, order=None, composition=None) -> tuple[int, str | None]:
     """``(order, family or None)`` of a run: ``--order``/``--composition`` over the scene's ``[run]``.
 
@@ -244,7 +246,6 @@ def effective_stages(method: str, options: dict) -> int | None:
     return int(options.get("stages", mod.DEFAULT_STAGES))
 
 
-
 def fmt(x, spec: str = ".2e") -> str:
     """A table cell: ``-`` for no value, ``non-finite`` for NaN/±inf (never a number), else ``x``."""
     if x is None:
@@ -252,7 +253,6 @@ def fmt(x, spec: str = ".2e") -> str:
     if not math.isfinite(x):
         return "non-finite"
     return format(x, spec)
-
 
 
 def add_order_args(p, generate: bool = False) -> None:
@@ -286,7 +286,6 @@ def add_variant_args(p, command: str = "run") -> None:
                         "without); y0 stays in the original variables, h and steps are in fictive time")
 
 
-
 def one_line_warning(message, category, filename, lineno, file=None, line=None):
     """Warnings on the command line: one line each (``methodgen: warning: …``), no source excerpt."""
     stream = sys.stderr if file is None else file
@@ -300,4 +299,3 @@ def oserror_line(exc: OSError) -> str:
     cause = exc.strerror or str(exc) or type(exc).__name__
     where = exc.filename if exc.filename is not None else None
     return f"{where}: {cause}" if where else cause
-

@@ -128,7 +128,6 @@ def cmd_generate(args) -> int:
     return 1 if problems else 0
 
 
-
 def add_parser(sub) -> None:
     """Register ``generate`` on ``sub`` (an argparse subparsers object)."""
     p = sub.add_parser("generate", help="(re)generate the modules of the built-in scenes into generated/")

@@ -33,7 +33,6 @@ class RunFailure(Exception):
         self.saved_rows, self.note = saved_rows, note
 
 
-
 def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: dict | None = None,
                      stride: int = 1) -> dict:
     """Update the running max errors of every monitored invariant with ``traj`` (rows of states).
@@ -174,7 +173,6 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
     }
 
 
-
 class _Iterations:
     """Mean and maximum of the Newton iterations per step, chunk after chunk (8 bytes a step
     would not fit in memory over a long run; the module's per-chunk array is dropped)."""
@@ -223,7 +221,6 @@ def _steps_for(t_final: float, h: float) -> int:
     if abs(steps - n) > 1e-9 * max(1.0, steps):
         n = math.ceil(steps)   # the last step ends at or just after t_final; the report says where
     return max(1, int(n))
-
 
 
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
@@ -549,7 +546,6 @@ def cmd_run(args) -> int:
               file=sys.stderr)
         return EXIT_NUMERICAL
     return 0
-
 
 
 def add_parser(sub) -> None:

@@ -53,7 +53,6 @@ def cmd_methods(args) -> int:
     return 0
 
 
-
 def add_parser(sub) -> None:
     """Register ``scenes`` and ``methods`` on ``sub`` (an argparse subparsers object)."""
     p = sub.add_parser("scenes", help="list the built-in scenes")
