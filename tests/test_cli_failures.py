@@ -240,6 +240,24 @@ def test_run_report_prints_non_finite(capsys):
     rep = _no_nan_json(out)
     assert code == cli.EXIT_NUMERICAL and rep["invariants"]["H"]["max_abs_error"] is None
     assert rep["invariants"]["H"]["status"] == "non-finite"
+    # 5000 steps: H = inf - inf from step 3553 while the state is still finite (no error raised).
+    code, out, err = _main(capsys, "run", "harmonic", "--param", "m=-1", "--steps", "5000")
+    h_row = [line for line in out.splitlines() if line.split()[:1] == ["H"]][0]
+    assert code == cli.EXIT_NUMERICAL and "non-finite" in h_row and "0.000e+00" not in h_row
+
+
+def test_bench_table_prints_non_finite(capsys):
+    nan = math.nan
+    row = {"method": "midpoint", "h": 0.1, "steps": 10, "seconds": 0.1, "error": nan, "energy_error": nan,
+           "energy_rel_error": nan, "invariant_errors": {"H": nan, "L": 1e-16}, "newton_mean": 2.0}
+    cli_bench._print_bench({"work_precision": {"scene": "s", "T": 1.0, "reference": "r", "rows": [row]}})
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("midpoint")][0]
+    assert line.count("non-finite") == 3 and "e+00" not in line
+    # Negative control: a finite row prints its numbers.
+    cli_bench._print_bench({"work_precision": {"scene": "s", "T": 1.0, "reference": "r", "rows": [
+        {**row, "error": 0.0, "energy_error": 0.0, "energy_rel_error": 0.0, "invariant_errors": {"H": 0.0}}]}})
+    line = [x for x in capsys.readouterr().out.splitlines() if x.startswith("midpoint")][0]
+    assert "non-finite" not in line and "0.00e+00" in line
 
 
 def test_bench_errors_keep_nan_and_the_table_says_so():
