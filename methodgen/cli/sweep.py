@@ -1,14 +1,17 @@
-"""``methodgen sweep SPEC [--scheduler ADDRESS | --workers N] [--json] [--csv FILE] [--retries K]``.
+"""``methodgen sweep SPEC [--scheduler ADDRESS | --workers N] [--json] [--csv FILE] [--retries K]
+[--no-check-resolution]``.
 
 Runs a parameter sweep (:mod:`methodgen.sweep`): in-process by default, on a
 local Dask cluster with ``--workers N``, on a running Dask cluster with
 ``--scheduler ADDRESS``.  ``--json`` prints exactly one JSON object on stdout;
 ``--csv FILE`` also writes the rows as CSV.  Exit status: 0 when every task
 produced a result (a numerical error such as a non-converging Newton iteration
-*is* a result), 1 when some task failed even after ``--retries`` re-runs, 2 for
-bad input (spec, options, a spec whose memory estimate exceeds the machine, dask
-not installed, scheduler unreachable, a ``--csv`` path that cannot be written),
-3 when the disk is full writing ``--csv``.
+*is* a result, and so is an invariant that stopped being a number: status
+``numerical-error``, ``non-finite`` in the table), 1 when some task failed even
+after ``--retries`` re-runs, 2 for bad input (spec, options, a spec whose memory
+estimate exceeds the machine or whose steps exceed
+:data:`~methodgen.limits.MAX_STEPS`, dask not installed, scheduler unreachable,
+a ``--csv`` path that cannot be written), 3 when the disk is full writing ``--csv``.
 """
 
 from __future__ import annotations
