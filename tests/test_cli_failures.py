@@ -332,6 +332,16 @@ def test_bench_length_bound_is_where_it_says():
         bench.check_length(62500.0 * 1.01, 0.00625)
 
 
+def test_bench_long_steps_beyond_memory(capsys, monkeypatch):
+    monkeypatch.setattr(limits, "memory_limit", lambda: 10 ** 6)
+    code, out, err = _main(capsys, "bench", "harmonic", "--only-extras", "--long", "--long-steps", "100000")
+    assert code == cli.EXIT_INPUT and "--long-steps 100000 keeps the energy error" in _one_line(err)
+    # Negative control: 1000 steps fit in the same (pretended) 1 MB.
+    code, out, err = _main(capsys, "bench", "harmonic", "--only-extras", "--long", "--long-steps", "1000",
+                           "--json")
+    assert code == 0 and json.loads(out)["long"]["steps"] == 1000, err
+
+
 def test_sweep_step_limit(tmp_path, capsys):
     spec = tmp_path / "big.toml"
     spec.write_text('scene = "harmonic"\nmethods = ["midpoint"]\nh = [0.1]\nsteps = 100000000000000\n')

@@ -8,7 +8,7 @@ import math
 
 from ..emit import BACKENDS
 from ..errors import InputError
-from ..limits import check_steps
+from ..limits import check_memory, check_steps
 from ..scene import load_scene
 from ..schemes import METHODS
 from .common import dump_json, fmt, parse_params, parse_y0, positive_int, step_size
@@ -137,6 +137,10 @@ def cmd_bench(args) -> int:
     for flag in ("long_steps", "brouwer_steps"):
         if getattr(args, flag, None) is not None:
             check_steps(getattr(args, flag), f"--{flag.replace('_', '-')} {getattr(args, flag)}")
+    if args.long and args.long_steps:
+        # The long run keeps the time and energy error of every step (and their concatenation).
+        check_memory(32 * args.long_steps, f"--long-steps {args.long_steps} keeps the energy error of every "
+                     "step", "take fewer --long-steps")
     orders = getattr(args, "orders", None)
     if orders is not None and not args.peers and orders != (2,):
         raise InputError("--orders above 2 (compositions) are benchmarked with --peers; "
