@@ -62,7 +62,7 @@ def run_one(scene_path: Path, method: str, cap: float, extra: list[str]) -> dict
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     here = Path(__file__).resolve().parent.parent
-    ap.add_argument("--problems", default=str(here.parent / "shared" / "user-problems"))
+    ap.add_argument("--problems", default=str(here / "tests" / "user_problems"))
     ap.add_argument("--cap", type=float, default=120.0)
     ap.add_argument("--json")
     ap.add_argument("--only")

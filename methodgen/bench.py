@@ -55,10 +55,11 @@ import sympy as sp
 
 from .build import build, scene_module_path
 from .derive import constraint_jacobian, gradient, separable_split, vector_field
-from .errors import InputError, MethodgenError
+from .errors import InputError, MethodgenError, NumericalError
 from .scene import Scene
 from .schemes import SYMMETRIC_METHODS, composition_for, discretize, method_key
 from .schemes.base import is_linear_field
+from .stats import max_abs_error, max_value
 
 __all__ = ["Reference", "reference", "work_precision", "long_run", "brouwer", "solver_variants",
            "ode_rhs", "PEER_FACTORS", "PEER_ORDERS", "composed_steps", "row_label", "targets",
@@ -99,6 +100,41 @@ def _progress(iterable, enabled: bool, desc: str, total: int | None = None):
 
 
 # --- the ODE a peer integrates -------------------------------------------------------
+
+#: Most steps of the longest run of a work-precision diagram (T over its smallest h): each of
+#: its rows, the reference solution and the scipy rows run over the same T, and at 10 µs a
+#: step 10^7 steps are minutes per row.
+MAX_BENCH_STEPS = 10 ** 7
+
+
+def check_length(T: float, h_min: float) -> None:
+    """Refuse (:class:`InputError`) a work-precision final time ``T`` whose smallest step size
+    ``h_min`` would take more than :data:`MAX_BENCH_STEPS` steps."""
+    if not (math.isfinite(T) and T > 0):
+        raise InputError(f"--t-final must be a positive finite time, got {T!r}")
+    steps = T / h_min
+    if steps > MAX_BENCH_STEPS:
+        raise InputError(f"--t-final {T:g}: the work-precision runs down to h = {h_min:g} would take {steps:.3g} "
+                         f"steps each, beyond the bench's limit of {MAX_BENCH_STEPS:.0e}; give --t-final at most "
+                         f"{MAX_BENCH_STEPS * h_min:g} (or use --long / run for one long run)")
+
+
+def check_initial_state(scene) -> None:
+    """Refuse (:class:`InputError`) an initial state where the vector field is not finite (a
+    singularity of H, e.g. Kepler at r = 0): the reference solution and every method would
+    fail there, after minutes of work, instead of one line now."""
+    rhs, _ = ode_rhs(scene.system)
+    y0 = np.asarray(scene.y0, dtype=float)
+    with np.errstate(all="ignore"):
+        try:
+            f = np.asarray(rhs(0.0, y0), dtype=float)
+        except (ZeroDivisionError, ValueError, OverflowError, FloatingPointError):
+            f = np.array([math.nan])
+    if not np.isfinite(f).all():
+        raise InputError(f"the vector field is not finite at the initial state y0 = {list(map(float, y0))} "
+                         f"(parameters {dict(scene.system.param_values)}): y0 is outside the domain of H "
+                         "(a singularity such as r = 0); give another --y0")
+
 
 def ode_rhs(system):
     """``(f, jac)`` numpy callables of the ODE y' = f(y) that peers integrate.
@@ -179,7 +215,8 @@ def reference(system, y0: np.ndarray, T: float, *, heyoka: bool = False) -> Refe
     rhs, jac = ode_rhs(system)
     sol = solve_ivp(rhs, (0.0, T), y0, method="DOP853", rtol=1e-13, atol=1e-15)
     if not sol.success:
-        raise RuntimeError(f"the DOP853 reference solution failed: {sol.message}")
+        raise NumericalError(f"the DOP853 reference solution failed at t = {sol.t[-1]:.6g} of {T:g}: "
+                             f"{sol.message}")
     return Reference(sol.y[:, -1], "DOP853 at rtol=1e-13, atol=1e-15")
 
 
@@ -245,14 +282,14 @@ def _errors(module, traj, y_ref, monitors=None):
     inv = dict(module.invariants(traj))
     if monitors is not None:
         inv.update({k: v for k, v in monitors(traj).items() if k not in inv})
-    out = {"error": float(np.max(np.abs(traj[-1] - y_ref)))}
-    out["invariant_errors"] = {name: float(np.max(np.abs(v - v[0]))) for name, v in inv.items()}
+    out = {"error": max_abs_error(traj[-1], y_ref)}
+    out["invariant_errors"] = {name: max_abs_error(v, v[0]) for name, v in inv.items()}
     out["energy_error"] = out["invariant_errors"].get("H", float("nan"))
     H0 = abs(float(inv["H"][0])) if "H" in inv else 0.0
     out["energy_rel_error"] = out["energy_error"] / H0 if H0 > 0 else float("nan")
     if hasattr(module, "constraint_residuals"):
         g, gv = module.constraint_residuals(traj)
-        out["constraint_error"] = float(max(np.max(np.abs(g)), np.max(np.abs(gv))))
+        out["constraint_error"] = max_value(max_abs_error(g), max_abs_error(gv))
     return out
 
 
@@ -346,8 +383,9 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     backend = resolve_backend(backend)
     T = T if T is not None else (2.0 if quick else 20.0)
     y0 = np.array(scene.y0)
-    ref = reference(scene.system, y0, T)
     hs = [0.1, 0.05, 0.025] if quick else [0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625]
+    check_length(T, min(hs))   # before the reference solution, which may take as long
+    ref = reference(scene.system, y0, T)
     hs = [h for h in hs if h <= T]
     rows = []
     jobs = [(m, h) for m in methods for h in hs]
@@ -446,6 +484,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     T = float(T if T is not None else scene.h * scene.steps)
     if not T > 0:
         raise ValueError(f"the bench needs a positive final time, got T = {T}")
+    check_length(T, abs(scene.h) * min(QUICK_PEER_FACTORS if quick else PEER_FACTORS))
     y0 = np.array(scene.y0)
     notes = []
     if np.finfo(np.longdouble).nmant <= 52 and pe.import_peer("heyoka") is not None:
@@ -618,7 +657,7 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
         t = np.concatenate(times)
         e = np.concatenate(err_parts)
         te, me = _envelope(t, e)
-        out["rows"].append({"method": method, "seconds": sec, "max_energy_error": float(e.max()),
+        out["rows"].append({"method": method, "seconds": sec, "max_energy_error": max_abs_error(e),
                             "growth_exponent": growth_exponent(t, e),
                             "envelope": {"t": te.tolist(), "max_error": me.tolist()}})
     # DOP853 at the tolerance whose cost is closest to the geometric methods' (measured on
@@ -642,7 +681,7 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
     e = np.abs(H - H[0])
     te, me = _envelope(sol.t, e)
     out["rows"].append({"method": f"scipy DOP853 (rtol={tol:g})", "seconds": sec,
-                        "max_energy_error": float(e.max()), "growth_exponent": growth_exponent(sol.t, e),
+                        "max_energy_error": max_abs_error(e), "growth_exponent": growth_exponent(sol.t, e),
                         "envelope": {"t": te.tolist(), "max_error": me.tolist()}})
     return out
 
@@ -744,7 +783,7 @@ def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
             rows.append({"method": method, "solver": solver,
                          "mean_iterations": float(info["newton_iterations"].mean()),
                          "us_per_step": sec / steps * 1e6,
-                         "max_energy_error": float(np.max(np.abs(H - H[0])))})
+                         "max_energy_error": max_abs_error(H, H[0])})
     return {"scene": scene.name, "steps": steps, "h": scene.h, "rows": rows}
 
 
@@ -815,7 +854,7 @@ def generation_cost(bodies=(2, 3, 4, 5, 6, 7, 8), methods=("energy-momentum", "m
                 traj = module.integrate(y0, 0.01, steps, check_resolution=False)
                 row["us_per_step"] = (time.perf_counter() - t0) / steps * 1e6
                 H = module.hamiltonian(traj)
-                row["energy_error"] = float(np.max(np.abs(H - H[0])))
+                row["energy_error"] = max_abs_error(H, H[0])
             except (RuntimeError, FloatingPointError) as exc:
                 row["run_failed"] = str(exc)[:200]
             rows.append(row)

@@ -97,10 +97,10 @@ def template_hash(backend: str = "numpy") -> str:
 #: of the generator and enters :func:`generator_hash`.  A file missing from this list only
 #: makes signatures change more often — never a stale module believed current.
 _NOT_GENERATOR = frozenset({
-    "__main__.py", "bench.py", "build.py", "cli.py", "figures.py", "figures_cli.py", "peers.py",
-    "plots.py", "progress.py", "runio.py", "scene.py", "sweep.py", "sweep_cli.py", "verify_cli.py",
+    "__main__.py", "bench.py", "build.py", "figures.py", "limits.py", "peers.py", "plots.py",
+    "progress.py", "runio.py", "scene.py", "stats.py", "sweep.py",
 })
-_NOT_GENERATOR_DIRS = frozenset({"verify", "scenes"})
+_NOT_GENERATOR_DIRS = frozenset({"cli", "verify", "scenes"})
 
 
 @functools.lru_cache(maxsize=None)
@@ -191,7 +191,8 @@ def cache_dir() -> Path:
     """Per-user cache for generated modules (``$METHODGEN_CACHE`` or the XDG cache)."""
     env = os.environ.get("METHODGEN_CACHE")
     if env:
-        return Path(env)
+        # "~/x" is the home folder's x (as a shell would expand it), never a folder named "~".
+        return Path(env).expanduser()
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "methodgen"
 

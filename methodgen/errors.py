@@ -30,6 +30,11 @@ class MethodNotApplicable(InputError):
     """A method was asked for a system it does not apply to."""
 
 
+class NumericalError(MethodgenError, RuntimeError):
+    """A computation methodgen runs itself failed on valid input (a reference solution that did
+    not reach its end): exit status 3 on the command line, like a Newton failure."""
+
+
 class GenerationError(MethodgenError):
     """Code generation failed or a generated file cannot be trusted."""
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ast
 import keyword
+import math
 import re
 from typing import Mapping
 
@@ -162,7 +163,26 @@ def parse_expr(text: str, symbols: Mapping[str, sp.Symbol], *, what: str = "expr
     if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
         raise ParseError(f"{what} is not a finite real expression: {expr}")
     check_smooth(expr, what)
+    _check_double_range(expr, what)
     return expr
+
+
+def _check_double_range(expr: sp.Expr, what: str) -> None:
+    """Every number of ``expr`` (and its numerator and denominator, printed apart in the generated
+    code) must be a double: ``1e200*1e200`` folds to an exact integer no float can hold, which the
+    generated module would meet only at run time as an ``OverflowError``."""
+    for n in expr.atoms(sp.Rational):
+        parts = [(n, "")] if n.q == 1 else [(n, ""), (sp.Integer(n.p), "the numerator of "),
+                                            (sp.Integer(n.q), "the denominator of ")]
+        for part, role in parts:
+            try:
+                ok = math.isfinite(float(part))
+            except OverflowError:
+                ok = False
+            if not ok:
+                of = f" ({role}{sp.Float(n, 4)})" if role else ""
+                raise ParseError(f"{what}: the number {sp.Float(part, 4)}{of} is beyond the range of a double "
+                                 "(about ±1.8e308)")
 
 
 def _needs(what: str) -> str:

@@ -41,7 +41,6 @@ import csv
 import io
 import itertools
 import math
-import os
 import sys
 import threading
 import time
@@ -58,6 +57,8 @@ else:  # pragma: no cover - Python 3.10
 import numpy as np
 
 from .errors import InputError, MethodgenError
+from .limits import MAX_STEPS, fmt_bytes, memory_limit
+from .stats import ErrorMax
 
 __all__ = ["SpecError", "EngineError", "SweepSpec", "Task", "load_spec", "parse_spec", "plan_sweep",
            "run_sweep", "run_task", "compute_reference", "rows_to_csv"]
@@ -254,6 +255,14 @@ def parse_spec(data: Mapping, base: Path | None = None, source: str = "the sweep
         steps = data.get("steps", scene.steps)
         if steps < 0:
             raise SpecError(f"{source}: steps must be >= 0, got {steps}")
+    # Every task runs in bounded memory (in chunks), but not in bounded time: refuse a step
+    # count no one could wait for before any work, not after hours without a word.
+    most = steps if t_final is None else max(t_final / h for h in hs)
+    if most > MAX_STEPS:
+        raise SpecError(f"{source}: " + (f"steps = {steps}" if t_final is None else
+                                         f"t_final = {t_final:g} with h = {min(hs):g}")
+                        + f" is {most:.3g} steps per trajectory, beyond the limit of {MAX_STEPS:.0e} (more than a "
+                        "day even at 0.1 µs/step); take fewer steps, a larger h or a shorter t_final")
 
     params_t = data.get("params", {})
     known = scene.system.param_names
@@ -287,23 +296,6 @@ def parse_spec(data: Mapping, base: Path | None = None, source: str = "the sweep
                      check_resolution=data.get("check_resolution", True))
 
 
-def memory_limit() -> int | None:
-    """Bytes of memory this process can have: physical memory, or a smaller cgroup limit (None: unknown)."""
-    limits = []
-    try:
-        limits.append(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (AttributeError, ValueError, OSError):  # pragma: no cover - not POSIX
-        pass
-    for f in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
-        try:
-            text = Path(f).read_text().strip()
-        except OSError:
-            continue
-        if text.isdigit() and int(text) < 1 << 60:  # "max" or a huge number: no limit
-            limits.append(int(text))
-    return min(limits) if limits else None
-
-
 def memory_estimate(state_size: int, combos: int, count: int, batch: int) -> int:
     """Bytes a sweep needs at once, roughly (an estimate to refuse impossible sizes, not a budget).
 
@@ -319,22 +311,14 @@ def memory_estimate(state_size: int, combos: int, count: int, batch: int) -> int
     return 3 * 8 * n * state_size + 4096 * tasks + 4 * 8 * CHUNK_VALUES + 2 * min(batch, n) * per_traj
 
 
-def _fmt_bytes(n: float) -> str:
-    for unit in ("bytes", "kB", "MB", "GB", "TB", "PB"):
-        if n < 1000 or unit == "PB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1000
-    return f"{n:.1f} EB"  # pragma: no cover
-
-
 def _check_memory(state_size: int, combos: int, count: int, batch: int, source: str) -> None:
     limit = memory_limit()
     need = memory_estimate(state_size, combos, count, batch)
     if limit is not None and need > limit:
         raise SpecError(
-            f"{source}: this sweep needs about {_fmt_bytes(need)} of memory ({max(count, 1)} initial states "
+            f"{source}: this sweep needs about {fmt_bytes(need)} of memory ({max(count, 1)} initial states "
             f"of {state_size} values, {combos} method/h/parameter combinations in batches of {batch}), more "
-            f"than this machine has ({_fmt_bytes(limit)}); reduce [initial].count or split the sweep")
+            f"than this machine has ({fmt_bytes(limit)}); reduce [initial].count or split the sweep")
 
 
 def load_spec(path) -> SweepSpec:
@@ -596,24 +580,38 @@ def _finite(x) -> float | None:
 
 
 class _Stats:
-    """Running maxima of |I(t) - I(0)| per invariant (and constraint residuals) over a batch."""
+    """Running maxima of |I(t) - I(0)| per invariant (and constraint residuals) over a batch.
+
+    Each is a :class:`~methodgen.stats.ErrorMax`: a NaN or ±inf is recorded with its step,
+    never lost in the maximum (the builtin ``max(x, nan)`` returns ``x``).
+    """
 
     def __init__(self, module, params: dict, Y0: np.ndarray):
         self.module, self.params = module, params
         self.inv0 = module.invariants(Y0, params)  # name -> (batch,)
-        self.max = {name: 0.0 for name in module.INVARIANT_NAMES}
-        self.constraint = 0.0 if hasattr(module, "constraint_residuals") else None
+        self.err = {name: ErrorMax() for name in module.INVARIANT_NAMES}
+        self.constraint = ErrorMax() if hasattr(module, "constraint_residuals") else None
 
-    def update(self, traj: np.ndarray) -> None:
-        """Fold in a trajectory piece of shape (n, batch, 2d)."""
+    def update(self, traj: np.ndarray, offset: int) -> None:
+        """Fold in a trajectory piece of shape (n, batch, 2d) whose row 0 is after ``offset`` steps."""
         if not len(traj):
             return
-        inv = self.module.invariants(traj, self.params)
-        for name, vals in inv.items():
-            self.max[name] = max(self.max[name], float(np.max(np.abs(vals - self.inv0[name]))))
-        if self.constraint is not None:
-            g, gv = self.module.constraint_residuals(traj, self.params)
-            self.constraint = max(self.constraint, float(np.max(np.abs(g))), float(np.max(np.abs(gv))))
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # tracked by ErrorMax
+            inv = self.module.invariants(traj, self.params)
+            for name, vals in inv.items():
+                self.err.setdefault(name, ErrorMax()).update(vals - self.inv0[name], offset=offset)
+            if self.constraint is not None:
+                g, gv = self.module.constraint_residuals(traj, self.params)
+                rows = len(traj)
+                both = np.concatenate([np.reshape(g, (rows, -1)), np.reshape(gv, (rows, -1))], axis=1)
+                self.constraint.update(both, offset=offset)
+
+    def nonfinite(self) -> dict[str, int]:
+        """``{name: first step}`` of every monitored quantity that stopped being a number."""
+        out = {k: e.nonfinite_step for k, e in self.err.items() if not e.finite}
+        if self.constraint is not None and not self.constraint.finite:
+            out["constraints"] = self.constraint.nonfinite_step
+        return out
 
 
 def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
@@ -669,18 +667,23 @@ def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
             partial = getattr(exc, "trajectory", None)
             if partial is not None and len(partial):
                 partial = np.asarray(partial).reshape(len(partial), n_traj, dim)
-                stats.update(partial)
+                stats.update(partial, offset=done)
                 done += len(partial) - 1
                 Y = partial[-1]
             status, error = "numerical-error", f"{type(exc).__name__}: {exc}"
             break
         cpu += time.thread_time() - t0
         part = part.reshape(n + 1, n_traj, dim)
-        stats.update(part[1:])
+        stats.update(part[1:], offset=done + 1)
         iters.append(np.asarray(info.get("newton_iterations", np.zeros(0))))
         Y = part[-1]
         done += n
     its = np.concatenate(iters) if iters else np.zeros(0)
+    bad = stats.nonfinite()
+    if bad and status == "ok":
+        # The steps ran but their numbers are not numbers: a numerical error, never "ok" with 0.
+        status = "numerical-error"
+        error = "NonFiniteError: " + "; ".join(f"{k} is not finite at step {v}" for k, v in bad.items())
     final_error = None
     if ref is not None and status == "ok":
         final_error = float(np.max(np.abs(Y - np.asarray(ref["y"]))))
@@ -701,9 +704,11 @@ def run_task(task: Task, src: ModuleSource, ref: dict | None = None) -> dict:
         "batch": task.batch,
         "trajectories": n_traj,
         "trajectory_steps": n_traj * done,
-        "energy_error": _finite(stats.max.get("H")) if measured else None,
-        "invariant_errors": {k: _finite(v) if measured else None for k, v in stats.max.items()},
-        "constraint_error": _finite(stats.constraint) if measured else None,
+        # null when not measured or not a number (then "nonfinite" names the first step).
+        "energy_error": _finite(stats.err["H"].value) if measured and "H" in stats.err else None,
+        "invariant_errors": {k: _finite(e.value) if measured else None for k, e in stats.err.items()},
+        "constraint_error": _finite(stats.constraint.value) if measured and stats.constraint else None,
+        "nonfinite": bad or None,
         "final_error": _finite(final_error),
         "reference": ref["kind"] if ref is not None else None,
         "newton_mean": float(its.mean()) if its.size else None,
@@ -719,7 +724,8 @@ def failed_row(task: Task, exc: BaseException, attempts: int) -> dict:
             "steps": task.steps, "steps_done": 0, "t_final": task.h_used * task.steps,
             "params": {k: v for k, v in task.params if k in set(task.swept)}, "batch": task.batch,
             "trajectories": int(len(task.y0)), "trajectory_steps": 0, "energy_error": None,
-            "invariant_errors": {}, "constraint_error": None, "final_error": None, "reference": None,
+            "invariant_errors": {}, "constraint_error": None, "nonfinite": None, "final_error": None,
+            "reference": None,
             "newton_mean": None, "newton_max": None, "cpu_seconds": None}
 
 

@@ -13,6 +13,7 @@ import pytest
 
 import methodgen as mg
 from methodgen import cli
+from methodgen.cli import generate as cli_generate
 from methodgen.emit import load_module
 from methodgen.errors import SceneError
 
@@ -253,7 +254,7 @@ def test_generate_writes_and_checks_composed_modules(tmp_path, capsys, monkeypat
 
     # A built-in scene whose [run] declares an order: its composed modules are targets too.
     scene = dataclasses.replace(mg.load_scene("harmonic"), methods=("midpoint",), order=4)
-    monkeypatch.setattr(cli, "load_scene", lambda name: scene)
+    monkeypatch.setattr(cli_generate, "load_scene", lambda name: scene)
     other = tmp_path / "declared"
     other.mkdir()
     code, out, err = _main(capsys, "generate", "harmonic", "--out", str(other))

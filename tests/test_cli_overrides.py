@@ -39,7 +39,8 @@ def test_without_overrides_the_scene_values_are_used(capsys):
     (["--param", "k=abc"], "is not a number"),
     (["--y0", "1,2"], "needs 6 comma-separated values"),
     (["--y0", "0.5,0,0,0,1.2,nan"], "entry 6: 'nan' is not finite"),
-    (["--steps", "10", "--t-final", "1"], "either --steps or --t-final"),
+    (["--steps", "10", "--t-final", "1", "--h", "0.1"], "not all three"),
+    (["--steps", "0", "--t-final", "1"], "--steps must be at least 1 with --t-final"),
     (["--t-final", "-1"], "positive finite time"),
 ])
 def test_bad_overrides_are_one_line_errors(capsys, argv, fragment):

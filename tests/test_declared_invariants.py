@@ -20,7 +20,7 @@ import methodgen as mg
 from methodgen.derive import invariants
 from methodgen.errors import InputError, SceneError
 
-USER = Path(__file__).resolve().parents[2] / "shared" / "user-problems"
+USER = Path(__file__).resolve().parent / "user_problems"
 TODA_Y0 = [0.0, 0.5, -0.3, 0.8, -0.2, -0.6]
 
 
@@ -29,7 +29,7 @@ def _toda(**invs) -> mg.Hamiltonian:
     if path.is_file():
         base = mg.load_scene(str(path)).system
         H, q, p = base.source, [s.name for s in base.q], [s.name for s in base.p]
-    else:   # pragma: no cover - the shared folder is missing
+    else:   # pragma: no cover - tests/user_problems is missing
         H, q, p = ("(p1**2 + p2**2 + p3**2)/2 + exp(q1 - q2) + exp(q2 - q3) + exp(q3 - q1)",
                    ["q1", "q2", "q3"], ["p1", "p2", "p3"])
     return mg.Hamiltonian(H, q=q, p=p, invariants=invs or None, name="toda3")

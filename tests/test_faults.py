@@ -18,6 +18,9 @@ import numpy as np
 import pytest
 
 import methodgen.cli as cli
+import methodgen.cli.run as cli_run
+import methodgen.cli.scenes as cli_scenes
+from methodgen.cli.common import dump_json
 import methodgen.runio as runio
 import methodgen.sweep as sw
 from methodgen.errors import StorageError
@@ -111,16 +114,16 @@ def test_monitor_records_the_first_nonfinite_step_whatever_the_module_does():
             return {"H": traj[:, 0] ** 2}
 
     good = np.array([[1.0], [1.0 + 1e-9], [1.0]])
-    acc = cli._invariant_stats(Mod, good, None, offset=0)
-    assert acc["H"]["nonfinite_step"] is None and 0 < acc["H"]["max_abs_error"] < 1e-8
+    acc = cli_run._invariant_stats(Mod, good, None, offset=0)
+    assert acc["H"]["error"].nonfinite_step is None and 0 < acc["H"]["error"].value < 1e-8
     bad = np.array([[1.0], [np.nan], [5.0]])
-    acc = cli._invariant_stats(Mod, bad, acc, offset=2)
-    assert acc["H"]["nonfinite_step"] == 3
-    assert acc["H"]["max_abs_error"] == pytest.approx(24.0)  # over the finite values; reported as null
+    acc = cli_run._invariant_stats(Mod, bad, acc, offset=2)
+    assert acc["H"]["error"].nonfinite_step == 3 and math.isnan(acc["H"]["error"].value)
+    assert acc["H"]["error"].finite_max == pytest.approx(24.0)  # over the finite values; reported as null
 
 
 def test_json_never_contains_nan_or_infinity():
-    text = cli.dump_json({"a": math.nan, "b": [1.0, -math.inf], "c": {"d": np.float64(np.inf)},
+    text = dump_json({"a": math.nan, "b": [1.0, -math.inf], "c": {"d": np.float64(np.inf)},
                           "e": np.array([1.0, np.nan])})
     assert strict_json(text) == {"a": None, "b": [1.0, None], "c": {"d": None}, "e": [1.0, None]}
 
@@ -134,7 +137,7 @@ class NonFiniteError(FloatingPointError):
 
 
 def test_nonfinite_error_from_the_stepper_is_one_line_exit_3(osc, tmp_path, capsys, monkeypatch):
-    real_build = cli.build
+    real_build = cli_run.build
 
     class Wrapped:
         def __init__(self, mod):
@@ -148,7 +151,7 @@ def test_nonfinite_error_from_the_stepper_is_one_line_exit_3(osc, tmp_path, caps
             traj = np.vstack([traj, np.full((1, traj.shape[1]), np.nan)])
             raise NonFiniteError("state is not finite at step 4 (q = nan)\nsecond line", 4, traj)
 
-    monkeypatch.setattr(cli, "build", lambda *a, **k: Wrapped(real_build(*a, **k)))
+    monkeypatch.setattr(cli_run, "build", lambda *a, **k: Wrapped(real_build(*a, **k)))
     out_file = tmp_path / "nf.npz"
     code, out, err = main(capsys, "run", osc, "--json", "--save", out_file)
     assert code == cli.EXIT_NUMERICAL
@@ -162,7 +165,7 @@ def test_nonfinite_error_from_the_stepper_is_one_line_exit_3(osc, tmp_path, caps
 
 def test_nonfinite_error_at_step_0_without_trajectory(osc, capsys, monkeypatch):
     """y0 outside the domain: the error may come before any state; the report still has H(y0)."""
-    real_build = cli.build
+    real_build = cli_run.build
 
     class Wrapped:
         def __init__(self, mod):
@@ -174,7 +177,7 @@ def test_nonfinite_error_at_step_0_without_trajectory(osc, capsys, monkeypatch):
         def integrate(self, *a, **k):
             raise NonFiniteError("H is not defined at the initial state", 0, None)
 
-    monkeypatch.setattr(cli, "build", lambda *a, **k: Wrapped(real_build(*a, **k)))
+    monkeypatch.setattr(cli_run, "build", lambda *a, **k: Wrapped(real_build(*a, **k)))
     code, out, err = main(capsys, "run", osc, "--json")
     assert code == cli.EXIT_NUMERICAL and "at step 0" in one_error_line(err)
     rep = strict_json(out)
@@ -215,6 +218,7 @@ def test_disk_full_during_save_keeps_every_written_chunk(osc, tmp_path, capsys, 
     monkeypatch.setattr(runio.ChunkWriter, "__init__", init)
     _full_disk_from_call(monkeypatch, n_ok=lambda: written["meta"] + 3)
     target = tmp_path / "out" / "F.npz"
+    target.parent.mkdir()
     code, out, err = main(capsys, "run", osc, "--steps", "1000", "--save", target, "--chunk", "100")
     assert code == cli.EXIT_NUMERICAL
     line = one_error_line(err)
@@ -306,21 +310,21 @@ def test_save_path_through_a_file_and_no_permission(osc, tmp_path, capsys, monke
     code, out, err = main(capsys, "run", osc, "--steps", "5", "--save", tmp_path / "afile" / "F.npz")
     assert code == cli.EXIT_INPUT and "is a file, not a folder" in one_error_line(err)
 
-    def denied(self, *a, **k):
-        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
-
-    monkeypatch.setattr(Path, "mkdir", denied)
-    code, out, err = main(capsys, "run", osc, "--steps", "5", "--save", tmp_path / "new" / "F.npz")
+    # A folder that cannot be written (as root every folder can: the check is what is tested).
+    (tmp_path / "ro").mkdir()
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != tmp_path / "ro")
+    code, out, err = main(capsys, "run", osc, "--steps", "5", "--save", tmp_path / "ro" / "F.npz")
     assert code == cli.EXIT_INPUT
     line = one_error_line(err)
-    assert str(tmp_path / "new" / "F.npz") in line and "Permission denied" in line
+    assert str(tmp_path / "ro" / "F.npz") in line and "is not a writable folder" in line
+    assert not list((tmp_path / "ro").iterdir())
 
 
 def test_any_other_oserror_is_one_line(capsys, monkeypatch):
     def boom(args):
         raise OSError(errno.EIO, os.strerror(errno.EIO), "/some/file")
 
-    monkeypatch.setattr(cli, "cmd_scenes", boom)
+    monkeypatch.setattr(cli_scenes, "cmd_scenes", boom)
     code, out, err = main(capsys, "scenes")
     assert code == cli.EXIT_NUMERICAL and one_error_line(err) == "methodgen: error: /some/file: Input/output error"
 
@@ -330,6 +334,7 @@ def test_any_other_oserror_is_one_line(capsys, monkeypatch):
 def test_killed_save_is_recovered_by_the_next_run(osc, tmp_path, capsys):
     """Was: an 8 MB unreadable .kill.npz.*.tmp left behind for good."""
     folder = tmp_path / "runs"
+    folder.mkdir()
     env = {**os.environ, "METHODGEN_CACHE": str(tmp_path / "cache")}
     proc = subprocess.Popen([sys.executable, "-m", "methodgen", "run", str(osc), "--steps", "100000000",
                              "--save", str(folder / "kill.npz"), "--chunk", "2000"],

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from methodgen import figures as F
+from methodgen.cli.figures import _summary as _figures_summary
 from methodgen.errors import InputError
 
 A = F.LINEAR_A
@@ -249,4 +250,4 @@ def test_cli_figures(tmp_path, monkeypatch, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert rep["ok"] and rep["checks"]["figure2"]["drift"]["kahan"]["bounded"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figure1_linear.svg", "figure2_henon_heiles.svg"]
-    assert "2·arctan(hω/2)" in "\n".join(__import__("methodgen.figures_cli").figures_cli._summary(rep["checks"]))
+    assert "2·arctan(hω/2)" in "\n".join(_figures_summary(rep["checks"]))

@@ -168,11 +168,11 @@ def test_no_false_alarm_on_the_built_in_scenes(scene_name, method, modules):
 @pytest.mark.slow
 def test_no_false_alarm_sweep(modules):
     """The whole documented runs of the built-in scenes and of every user problem in
-    ../shared/user-problems with every method that applies (the issue's sweep)."""
+    tests/user_problems with every method that applies (the issue's sweep)."""
     import glob
     from pathlib import Path
     targets = [(mg.load_scene(s), mg.load_scene(s).methods) for s in mg.scenes()]
-    root = Path(__file__).resolve().parents[2] / "shared" / "user-problems"
+    root = Path(__file__).resolve().parent / "user_problems"
     for f in sorted(glob.glob(str(root / "*.toml"))):
         sc = mg.load_scene(f)
         targets.append((sc, mg.applicable_methods(sc.run_system)))

@@ -192,6 +192,7 @@ def _kill_during_save(osc, folder, tmp_path):
 def test_kill_9_recovery_records_the_steps_its_rows_cover(osc, tmp_path, capsys, monkeypatch):
     """Was: 82001 rows of --save-every 10 recorded as steps_done = 82000 (they cover 820000)."""
     folder = tmp_path / "D"
+    folder.mkdir()   # --save never creates a folder
     _kill_during_save(osc, folder, tmp_path)
     (orphan,) = folder.glob(".long.npz.*.tmp")
     kept = tmp_path / "orphan.tmp"

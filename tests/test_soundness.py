@@ -17,7 +17,7 @@ from methodgen.special import atan_dd, safe_div, to_elementary
 from methodgen.verify.common import at, y1_symbols
 from methodgen.verify.exact import Domain, certify, guard_cases, reduce_to_zero
 
-USER = Path(__file__).resolve().parents[2] / "shared" / "user-problems"
+USER = Path(__file__).resolve().parent / "user_problems"
 ENERGY = ("energy-momentum", "avf", "gonzalez", "itoh-abe")
 
 
@@ -164,7 +164,7 @@ def test_no_trait_of_a_built_in_scene_is_refuted(scene_method):
 
 # --- verify stays fast on user problems -------------------------------------------------
 
-@pytest.mark.skipif(not USER.exists(), reason="shared/user-problems not present")
+@pytest.mark.skipif(not USER.exists(), reason="tests/user_problems not present")
 @pytest.mark.parametrize("problem, method", [("pend2", "gonzalez"), ("hh", "energy-momentum"),
                                              ("pend2", "itoh-abe"), ("toda3", "itoh-abe")])
 def test_small_user_problems_verify_quickly(problem, method):
@@ -177,7 +177,7 @@ def test_small_user_problems_verify_quickly(problem, method):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not USER.exists(), reason="shared/user-problems not present")
+@pytest.mark.skipif(not USER.exists(), reason="tests/user_problems not present")
 @pytest.mark.parametrize("problem", sorted(p.stem for p in USER.glob("*.toml")) if USER.exists() else [])
 def test_every_user_problem_verifies_with_every_applicable_method(problem):
     sc = mg.load_scene(str(USER / f"{problem}.toml"))

@@ -52,7 +52,7 @@ References
 .. [1] J. C. Simo, N. Tarnow, K. K. Wong, Comput. Methods Appl. Mech. Eng. 100
    (1992) 63-116.
 .. [2] R. A. LaBudde, D. Greenspan, J. Comput. Phys. 15 (1974) 134-167.
-.. [3] E. Celledoni, lecture notes (shared/seed), Exercise 1.1.
+.. [3] E. Celledoni, lecture notes on geometric numerical integration, Exercise 1.1.
 .. [4] R. I. McLachlan, G. R. W. Quispel, N. Robidoux, Phil. Trans. R. Soc. A 357
    (1999) 1021-1045 (discrete gradients; the AVF integral of a term V(aᵀq)).
 """

@@ -1,22 +1,27 @@
-"""``methodgen sweep SPEC [--scheduler ADDRESS | --workers N] [--json] [--csv FILE] [--retries K]``.
+"""``methodgen sweep SPEC [--scheduler ADDRESS | --workers N] [--json] [--csv FILE] [--retries K]
+[--no-check-resolution]``.
 
 Runs a parameter sweep (:mod:`methodgen.sweep`): in-process by default, on a
 local Dask cluster with ``--workers N``, on a running Dask cluster with
 ``--scheduler ADDRESS``.  ``--json`` prints exactly one JSON object on stdout;
 ``--csv FILE`` also writes the rows as CSV.  Exit status: 0 when every task
 produced a result (a numerical error such as a non-converging Newton iteration
-*is* a result), 1 when some task failed even after ``--retries`` re-runs, 2 for
-bad input (spec, options, a spec whose memory estimate exceeds the machine, dask
-not installed, scheduler unreachable, a ``--csv`` path that cannot be written),
-3 when the disk is full writing ``--csv``.
+*is* a result, and so is an invariant that stopped being a number: status
+``numerical-error``, ``non-finite`` in the table), 1 when some task failed even
+after ``--retries`` re-runs, 2 for bad input (spec, options, a spec whose memory
+estimate exceeds the machine or whose steps exceed
+:data:`~methodgen.limits.MAX_STEPS`, dask not installed, scheduler unreachable,
+a ``--csv`` path that cannot be written), 3 when the disk is full writing ``--csv``.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
+import dataclasses
 import sys
-from pathlib import Path
+
+from ..stats import max_value
+from .common import add_resolution_arg, check_output_file, dump_json, fmt
 
 
 def _count(minimum: int):
@@ -31,10 +36,6 @@ def _count(minimum: int):
     return parse
 
 
-def _fmt(x, spec: str = ".2e") -> str:
-    return "-" if x is None else format(x, spec)
-
-
 def _print_report(rep: dict) -> None:
     """The human-readable table (one line per task) and a summary line."""
     params = list(rep["spec"]["params"])
@@ -44,13 +45,17 @@ def _print_report(rep: dict) -> None:
     print(f"sweep of {rep['scene']}: {rep['tasks']} tasks")
     print(head)
     for r in rep["rows"]:
-        others = [v for k, v in r["invariant_errors"].items() if k != "H" and v is not None]
-        if r["constraint_error"] is not None:
-            others.append(r["constraint_error"])
+        bad = r.get("nonfinite") or {}
+        # A quantity that stopped being a number is shown as "non-finite", never as an error of 0.
+        nonfinite = {k: float("nan") for k in bad}
+        others = [nonfinite.get(k, v) for k, v in r["invariant_errors"].items() if k != "H"]
+        others.append(nonfinite.get("constraints", r["constraint_error"]))
+        energy = nonfinite.get("H", r["energy_error"])
         line = f"{r['method']:<18} {r['h']:9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
-        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {_fmt(r['energy_error']):>10} " \
-                f"{_fmt(max(others) if others else None):>10} {_fmt(r['final_error']):>10} " \
-                f"{_fmt(r['newton_mean'], '.2f'):>6} {_fmt(r['cpu_seconds'], '.3f'):>8}"
+        line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {fmt(energy):>10} " \
+                f"{fmt(max_value(*others) if any(v is not None for v in others) else None):>10} " \
+                f"{fmt(r['final_error']):>10} " \
+                f"{fmt(r['newton_mean'], '.2f'):>6} {fmt(r['cpu_seconds'], '.3f'):>8}"
         print(line)
         if r["error"]:
             print(f"{'':<18} {r['error'][:200]}")
@@ -59,23 +64,22 @@ def _print_report(rep: dict) -> None:
     rate = rep["trajectory_steps_per_second"]
     print(f"{rep['ok']} ok, {rep['numerical_errors']} numerical errors, {rep['failed']} failed; "
           f"{rep['trajectory_steps']} trajectory-steps in {rep['wall_seconds']:.2f} s wall "
-          f"({_fmt(rate, '.3g')} steps/s, {rep['cpu_seconds']:.2f} CPU s) {where}")
+          f"({fmt(rate, '.3g')} steps/s, {rep['cpu_seconds']:.2f} CPU s) {where}")
 
 
 def cmd_sweep(args) -> int:
     """Run the sweep of ``args.spec``; return the exit status."""
     # Imported here: the other commands do not need the sweep layer.
-    from .cli import dump_json
-    from .emit import write_atomic
-    from .errors import InputError
-    from .sweep import run_sweep, rows_to_csv
+    from ..emit import write_atomic
+    from ..sweep import load_spec, run_sweep, rows_to_csv
 
     if args.csv:
         # Checked before the run, which may take hours, not after it.
-        folder = Path(args.csv).resolve().parent
-        if not folder.is_dir() or not os.access(folder, os.W_OK):
-            raise InputError(f"cannot write --csv {args.csv}: {folder} is not a writable folder")
-    rep = run_sweep(args.spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
+        check_output_file(args.csv, "--csv")
+    spec = load_spec(args.spec)
+    if not args.check_resolution:   # --no-check-resolution over the spec's check_resolution
+        spec = dataclasses.replace(spec, check_resolution=False)
+    rep = run_sweep(spec, scheduler=args.scheduler, workers=args.workers, retries=args.retries,
                     progress=not args.json)
     if args.csv:
         # A StorageError (one line naming the file and the cause) if it fails: exit 2 for a
@@ -107,5 +111,6 @@ def add_parser(sub) -> None:
     p.add_argument("--retries", type=_count(0), default=2, metavar="K",
                    help="re-run a failed task up to K times before reporting it (default 2)")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV to FILE")
+    add_resolution_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_sweep)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def _default_out() -> Path:
-    from .build import generated_dir
+    from ..build import generated_dir
 
     gen = generated_dir()
     if gen is None:
@@ -61,8 +61,8 @@ def _jsonable(x):
 
 def cmd_figures(args) -> int:
     """Run the ``figures`` subcommand; see the module docstring for the exit status."""
-    from .cli import dump_json
-    from .plots import write_figures
+    from .common import dump_json
+    from ..plots import write_figures
 
     out = Path(args.out) if args.out else _default_out()
     t0 = time.perf_counter()

@@ -38,12 +38,12 @@ def _timeout(text: str) -> float:
 def cmd_verify(args) -> int:
     """Run the verification for a scene; return the exit status."""
     # Imported here: the verification layer is not needed by the other commands.
-    from .cli import (dump_json, effective_stages, resolve_order, resolve_stages, resolve_time_transform,
+    from .common import (dump_json, effective_stages, resolve_order, resolve_stages, resolve_time_transform,
                       transformed_context)
-    from .errors import InputError
-    from .scene import load_scene
-    from .schemes import composition_for, discretize
-    from .verify import verify
+    from ..errors import InputError
+    from ..scene import load_scene
+    from ..schemes import composition_for, discretize
+    from ..verify import verify
 
     # --time-transform over the scene's [run] time_transform: the transformed system K is verified.
     scene = resolve_time_transform(load_scene(args.scene), getattr(args, "time_transform", None))
@@ -100,7 +100,7 @@ def add_parser(sub) -> None:
                    help="verify the method composed to order K (4, 6, 8, 10; default: the scene's [run] order)")
     p.add_argument("--composition", metavar="FAMILY",
                    help="composition family for order > 2 (default: the scene's, else the order's default)")
-    from .cli import add_variant_args
+    from .common import add_variant_args
     add_variant_args(p, "verify")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--format", choices=("text", "markdown", "latex"), default="text",
