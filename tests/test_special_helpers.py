@@ -104,6 +104,65 @@ def test_new_derivative_helpers_match_mpmath(name):
             assert abs(got - want) <= 1e-13 * max(1.0, abs(want))
 
 
+#: The derivative helpers (x g'(x) - g(x))/x² of the g(x)/x helpers, in mpmath, and the
+#: threshold below which each sums its Taylor series (templates/_special.py.j2).
+DERIVATIVES = {
+    "dsinc": (lambda x: (x * mpmath.cos(x) - mpmath.sin(x)) / x**2, 1.0),
+    "dsinhc": (lambda x: (x * mpmath.cosh(x) - mpmath.sinh(x)) / x**2, 1.0),
+    "datanc": (lambda x: (x / (1 + x * x) - mpmath.atan(x)) / x**2, 0.5),
+    "datanhc": (lambda x: (x / (1 - x * x) - mpmath.atanh(x)) / x**2, 0.5),
+}
+
+
+def _rel_err(fn, exact, xs):
+    worst = 0.0
+    for x in xs:
+        with mpmath.workdps(60):
+            want = float(exact(mpmath.mpf(x))) if x else 0.0
+        got = fn(x)
+        worst = max(worst, abs(got - want) / max(abs(want), 1e-300))
+    return worst
+
+
+def _switch_points(t):
+    """Just below and just above the threshold t (and on it), both signs; plus small and 0."""
+    below, above = np.nextafter(t, 0.0), np.nextafter(t, 2 * t)
+    pts = [below, t, above, 0.999 * t, 1.001 * t, 1e-2, 1e-5, 1e-9]
+    return [float(s * x) for x in pts for s in (1.0, -1.0)]
+
+
+@pytest.mark.parametrize("name", sorted(DERIVATIVES))
+def test_derivative_helpers_accurate_on_both_sides_of_their_series_switch(name):
+    """Numerical: relative error ≤ 8 ulp (scalar and vector helper) just below, on and just
+    above the series threshold, and down to 1e-9 and 0 (exactly 0 there)."""
+    hs = special_helpers()
+    exact, t = DERIVATIVES[name]
+    xs = _switch_points(t)
+    f, v = hs[f"_f_{name}"], hs[f"_v_{name}"]
+    assert f(0.0) == 0.0 and float(v(np.array([0.0]))[0]) == 0.0
+    assert _rel_err(f, exact, xs) < 8 * np.finfo(float).eps
+    assert _rel_err(lambda x: float(v(np.array([x]))[0]), exact, xs) < 8 * np.finfo(float).eps
+
+
+@pytest.mark.parametrize("name", sorted(DERIVATIVES))
+def test_quotient_below_the_switch_fails_the_same_check(name):
+    """Negative control: the quotient branch used below the threshold (the former switch at
+    1e-2 moved the switch there) loses ~eps/x² and the check above sees it."""
+    hs = special_helpers()
+    exact, t = DERIVATIVES[name]
+    f = hs[f"_f_{name}"]
+    quotient = {"dsinc": lambda x: (x * math.cos(x) - math.sin(x)) / (x * x),
+                "dsinhc": lambda x: (x * math.cosh(x) - math.sinh(x)) / (x * x),
+                "datanc": lambda x: (x / (1.0 + x * x) - math.atan(x)) / (x * x),
+                "datanhc": lambda x: (x / (1.0 - x * x) - math.atanh(x)) / (x * x)}[name]
+    xs = [1.0001e-2, 2e-2, 5e-2]
+    assert _rel_err(quotient, exact, xs) > 100 * np.finfo(float).eps
+    assert _rel_err(f, exact, xs) < 8 * np.finfo(float).eps
+    # above the threshold the helper *is* the quotient, and that is accurate there
+    assert all(f(x) == quotient(x) for x in (np.nextafter(t, 2 * t), 1.5 * t))
+    assert _rel_err(quotient, exact, [np.nextafter(t, 2 * t)]) < 8 * np.finfo(float).eps
+
+
 # --- the exact side: the helper certificates ------------------------------------------
 
 @pytest.mark.parametrize("cls", sorted(DIVIDED_DIFFERENCES.values(), key=lambda c: c.__name__)
