@@ -35,8 +35,8 @@ import sympy as sp
 
 __all__ = ["sinc_u", "sinhc", "atanhc", "atanc", "dsinc_u", "dsinhc", "datanhc", "datanc", "safe_div",
            "DividedDifference", "exp_dd", "log_dd", "sin_dd", "cos_dd", "tan_dd", "sinh_dd", "cosh_dd",
-           "tanh_dd", "atan_dd", "datan_dd", "DIVIDED_DIFFERENCES", "SPECIAL_FUNCTIONS", "HELPER_DEPENDENCIES",
-           "to_elementary"]
+           "tanh_dd", "atan_dd", "datan_dd", "dexp_dd", "DIVIDED_DIFFERENCES", "SPECIAL_FUNCTIONS",
+           "HELPER_DEPENDENCIES", "to_elementary"]
 
 
 class _RemovableFunction(sp.Function):
@@ -271,6 +271,20 @@ class exp_dd(DividedDifference):
     def stable_form(cls, a, b):
         return sp.exp((a + b) / 2) * sinhc((b - a) / 2)
 
+    @classmethod
+    def helper_form(cls, a, b):
+        """What ``_expdd`` evaluates for ``b > a``, ``exp(b)·(1 - exp(a - b))/(b - a)`` (the same
+        function written with the larger exponent outside, so no factor overflows where the
+        value does not; the helper swaps the arguments of ``a > b``, the quotient being
+        symmetric, and takes ``exp(a)`` at ``a = b``)."""
+        return sp.exp(b) * (1 - sp.exp(a - b)) / (b - a)
+
+    def fdiff(self, argindex=1):
+        # Not the derivative of the stable form: exp(m)·dsinhc(d) overflows on a thin
+        # barrier (d ~ 1000) where the value and the derivative are 0.
+        a, b = self.args
+        return dexp_dd(a, b) if argindex == 2 else dexp_dd(b, a)
+
 
 class sin_dd(DividedDifference):
     r"""``sin[a, b] = cos((a+b)/2) sinc((b-a)/2)``."""
@@ -394,6 +408,37 @@ class datan_dd(sp.Function):
         return sp.diff(datan_dd(A, B).as_quotient(), B if argindex == 2 else A).xreplace({A: a, B: b})
 
 
+class dexp_dd(sp.Function):
+    r"""``∂/∂b exp[a, b] = (exp(b) - exp[a, b])/(b - a)``, ``exp(a)/2`` at a = b.
+
+    Jacobians only.  The generated helper evaluates ``exp(m)(sinhc(δ) + dsinhc(δ))/2``
+    (``m = (a+b)/2``, ``δ = (b-a)/2``) where ``|b - a| < 1`` and the quotient elsewhere
+    (no cancellation there, and no factor overflows where the value does not).
+    """
+
+    nargs = 2
+
+    @classmethod
+    def eval(cls, a, b):
+        if a == b or (a - b).is_zero:
+            return sp.exp(a) / 2
+        return None
+
+    def _eval_is_real(self):
+        a, b = self.args
+        return (a.is_real and b.is_real) or None
+
+    def as_quotient(self):
+        a, b = self.args
+        return (sp.exp(b) - (sp.exp(b) - sp.exp(a)) / (b - a)) / (b - a)
+
+    def fdiff(self, argindex=1):
+        # Second derivatives (never in generated code): from the defining quotient.
+        a, b = self.args
+        A, B = _fresh_pair()
+        return sp.diff(dexp_dd(A, B).as_quotient(), B if argindex == 2 else A).xreplace({A: a, B: b})
+
+
 #: The divided difference of each elementary function of the grammar.
 DIVIDED_DIFFERENCES: dict = {sp.exp: exp_dd, sp.log: log_dd, sp.sin: sin_dd, sp.cos: cos_dd, sp.tan: tan_dd,
                              sp.sinh: sinh_dd, sp.cosh: cosh_dd, sp.tanh: tanh_dd, sp.atan: atan_dd}
@@ -420,13 +465,15 @@ SPECIAL_FUNCTIONS: dict[type, str] = {
     tanh_dd: "_tanhdd",
     atan_dd: "_atandd",
     datan_dd: "_datandd",
+    dexp_dd: "_dexpdd",
 }
 
 #: Helpers a helper calls (so the template emits them too).
 HELPER_DEPENDENCIES: dict[str, tuple[str, ...]] = {
-    "expdd": ("sinhc",), "sinhdd": ("sinhc",), "coshdd": ("sinhc",), "tanhdd": ("sinhc",),
+    "sinhdd": ("sinhc",), "coshdd": ("sinhc",), "tanhdd": ("sinhc",),
     "sindd": ("sinc",), "cosdd": ("sinc",), "tandd": ("sinc",),
     "logdd": ("atanhc",), "atandd": ("atanc",), "datandd": ("atanc", "datanc", "atandd"),
+    "dexpdd": ("sinhc", "dsinhc", "expdd"),
 }
 
 
@@ -436,5 +483,6 @@ def to_elementary(expr: sp.Expr) -> sp.Expr:
     The result is equal to ``expr`` wherever the quotients are defined; the
     verification layer uses it to reduce identities with ordinary SymPy.
     """
-    return expr.replace(lambda e: isinstance(e, (_RemovableFunction, safe_div, DividedDifference, datan_dd)),
+    quotients = (_RemovableFunction, safe_div, DividedDifference, datan_dd, dexp_dd)
+    return expr.replace(lambda e: isinstance(e, quotients),
                         lambda e: e.as_quotient())

@@ -16,7 +16,7 @@ import pytest
 import sympy as sp
 
 from helpers import special_helpers
-from methodgen.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, exp_dd, log_dd, sinc_u, sinhc,
+from methodgen.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, dexp_dd, exp_dd, log_dd, sinc_u, sinhc,
                                tan_dd)
 from methodgen.verify.helpers import _certificate, helper_certificate
 
@@ -185,6 +185,19 @@ def test_a_wrong_stable_form_is_refuted(monkeypatch):
         _certificate.cache_clear()
 
 
+def test_a_wrong_exp_helper_form_is_not_proved(monkeypatch):
+    """Negative control: the overflow-safe form of _expdd with 1 + exp(a - b) is not proved."""
+    assert helper_certificate(exp_dd).status == "proved"
+    monkeypatch.setattr(exp_dd, "helper_form",
+                        classmethod(lambda cls, a, b: sp.exp(b) * (1 + sp.exp(a - b)) / (b - a)))
+    _certificate.cache_clear()
+    try:
+        assert helper_certificate(exp_dd).status != "proved"
+    finally:
+        monkeypatch.undo()
+        _certificate.cache_clear()
+
+
 def test_a_wrong_atan_branch_is_refuted_inside_its_domain(monkeypatch):
     """Negative control: atanc(t) without the 1/(1+ab) factor."""
     monkeypatch.setattr(atan_dd, "branch_form", classmethod(lambda cls, a, b: atanc((b - a) / (1 + a * b))))
@@ -216,3 +229,72 @@ def test_tan_form_proved_algebraically():
     """tan's addition formula is an identity wherever both sides are defined (not only near a)."""
     cert = helper_certificate(tan_dd)
     assert cert.status == "proved" and "derivative" not in cert.method
+
+
+# --- exp[a, b] far apart: no overflow where the value does not overflow -----------------
+
+#: (a, b) of a thin barrier 10 exp(-(q/0.005)²) (exponents -40000 q²) and its mirror images.
+FAR = [(-1600.0, 0.0), (0.0, -1600.0), (-3600.0, -400.0), (-160000.0, -152100.0), (-1000.0, -200.0),
+       (-745.0, 700.0), (700.0, -745.0)]
+
+
+def _exp_dd_exact(a, b):
+    with mpmath.workdps(60):
+        A, B = mpmath.mpf(a), mpmath.mpf(b)
+        return float((mpmath.exp(B) - mpmath.exp(A)) / (B - A)) if A != B else float(mpmath.exp(A))
+
+
+def _dexp_dd_exact(a, b):
+    with mpmath.workdps(80):
+        A, B = mpmath.mpf(a), mpmath.mpf(b)
+        if A == B:
+            return float(mpmath.exp(A) / 2)
+        return float((mpmath.exp(B) - (mpmath.exp(B) - mpmath.exp(A)) / (B - A)) / (B - A))
+
+
+def _close(got, want, ulps=8):
+    return abs(got - want) <= ulps * np.finfo(float).eps * abs(want) + 1e-300
+
+
+def test_exp_divided_difference_far_apart_does_not_overflow():
+    """Numerical: exp[a, b] at a thin barrier's exponents (the value 6.25e-4, or an underflow
+    to 0) within 8 ulp, scalar and vector, where exp((a+b)/2)·sinh((b-a)/2) is 0·inf."""
+    hs = special_helpers()
+    for a, b in FAR:
+        want = _exp_dd_exact(a, b)
+        assert _close(hs["_f_expdd"](a, b), want), (a, b)
+        assert _close(float(hs["_v_expdd"](np.array([a]), np.array([b]))[0]), want), (a, b)
+
+
+def test_the_sinhc_product_overflows_there():
+    """Negative control: the former evaluation exp(m)·sinhc(δ) fails on the same points."""
+    hs = special_helpers()
+    with pytest.raises(OverflowError):
+        math.exp(-800.0) * hs["_f_sinhc"](800.0)
+    with np.errstate(all="ignore"):
+        v = np.exp(np.array([-800.0])) * hs["_v_sinhc"](np.array([800.0]))
+    assert not np.isfinite(v[0])
+    assert _exp_dd_exact(-1600.0, 0.0) == pytest.approx(6.25e-4, rel=1e-12)
+
+
+def test_exp_divided_difference_jacobian_helper():
+    """Numerical: ∂/∂b exp[a, b] within 16 ulp (64 where the quotient branch cancels
+    mildly, |b - a| just above 1) near and far from the diagonal, on both sides of its
+    switch |b - a| = 1, and at a thin barrier."""
+    hs = special_helpers()
+    one_below = float(np.nextafter(1.0, 0.0))
+    pts = [(0.3, 0.3), (0.3, 0.3 + 1e-9), (-2.0, -2.0 + one_below), (-2.0, -1.0), (-2.0, -1.0 + 1e-12),
+           (1.0, 1.0 - one_below), (1.0, 0.0), (2.5, -4.0), (-4.0, 2.5)] + FAR
+    for a, b in pts:
+        want = _dexp_dd_exact(a, b)
+        ulps = 64 if abs(b - a) >= 1.0 else 16
+        assert _close(hs["_f_dexpdd"](a, b), want, ulps), (a, b, hs["_f_dexpdd"](a, b), want)
+        assert _close(float(hs["_v_dexpdd"](np.array([a]), np.array([b]))[0]), want, ulps), (a, b)
+
+
+def test_exp_divided_difference_jacobian_is_its_derivative():
+    """Exact: ∂/∂b of exp_dd is dexp_dd, whose defining quotient is the derivative of exp_dd's."""
+    a, b = sp.symbols("a b", real=True)
+    d = sp.diff(exp_dd(a, b), b)
+    assert d == dexp_dd(a, b) and sp.diff(exp_dd(a, b), a) == dexp_dd(b, a)
+    assert sp.simplify(d.as_quotient() - sp.diff(exp_dd(a, b).as_quotient(), b)) == 0
