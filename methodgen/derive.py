@@ -475,8 +475,10 @@ def _linear_candidates(system: Hamiltonian) -> list[list[sp.Rational]]:
     g = gradient(system)
     rows = [list(g[:d])] + [[sp.diff(c, qk) for qk in system.q] for c in system.constraints]
     args = list(system.y) + list(system.params)
+    from .special import to_elementary   # sampled away from removable points
+
     try:
-        fns = [sp.lambdify(args, r, modules="math") for r in rows]
+        fns = [sp.lambdify(args, [to_elementary(e) for e in r], modules="math") for r in rows]
     except Exception:   # pragma: no cover - lambdify of whitelisted functions
         return []
     rng = random.Random(20240515)

@@ -139,6 +139,10 @@ def _pairs():
     for x in SCALARS:
         for y in (x, x + 1e-7, x + 0.4, -x + 0.05):
             yield x, y
+    # the switches of _sincdd (|a|, |b| = 2; |b - a| = 1) and _ddsinc (|x| = 3)
+    below2, above2, below1 = np.nextafter(2.0, 0.0), np.nextafter(2.0, 3.0), np.nextafter(1.0, 0.0)
+    yield from [(below2, below2), (above2, above2), (below2, 1.5), (above2, 1.5), (2.5, 2.5 - below1),
+                (2.5, 1.5), (np.nextafter(3.0, 0.0), 3.5), (np.nextafter(3.0, 4.0), 2.5)]
 
 
 def test_every_helper_compiles_and_agrees_on_numba(tmp_path):
