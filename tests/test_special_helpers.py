@@ -16,8 +16,8 @@ import pytest
 import sympy as sp
 
 from helpers import special_helpers
-from methodgen.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, dexp_dd, exp_dd, log_dd, sinc_dd, sinc_u, sinhc,
-                               tan_dd)
+from methodgen.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, dexp_dd, exp_dd, log_dd, sinc_dd, sinc_u,
+                               sinhc, tan_dd)
 from methodgen.verify.helpers import _certificate, helper_certificate
 
 MP = {"exp": mpmath.exp, "log": mpmath.log, "sin": mpmath.sin, "cos": mpmath.cos, "tan": mpmath.tan,
@@ -160,7 +160,8 @@ def test_quotient_below_the_switch_fails_the_same_check(name):
                 "dsinhc": lambda x: (x * math.cosh(x) - math.sinh(x)) / (x * x),
                 "datanc": lambda x: (x / (1.0 + x * x) - math.atan(x)) / (x * x),
                 "datanhc": lambda x: (x / (1.0 - x * x) - math.atanh(x)) / (x * x),
-                "ddsinc": lambda x: (2.0 * math.sin(x) - 2.0 * x * math.cos(x) - x * x * math.sin(x)) / (x * x * x)}[name]
+                "ddsinc": lambda x: (2.0 * math.sin(x) - 2.0 * x * math.cos(x)
+                                     - x * x * math.sin(x)) / (x * x * x)}[name]
     xs = [1.0001e-2, 2e-2, 5e-2]
     assert _rel_err(quotient, exact, xs) > 100 * np.finfo(float).eps
     assert _rel_err(f, exact, xs) < 8 * np.finfo(float).eps
@@ -171,7 +172,8 @@ def test_quotient_below_the_switch_fails_the_same_check(name):
 
 # --- the exact side: the helper certificates ------------------------------------------
 
-@pytest.mark.parametrize("cls", sorted(set(DIVIDED_DIFFERENCES.values()) - {sinc_dd}, key=lambda c: c.__name__)
+@pytest.mark.parametrize("cls", sorted(set(DIVIDED_DIFFERENCES.values()) - {sinc_dd},
+                                       key=lambda c: c.__name__)
                          + [sinc_u, sinhc, atanc], ids=lambda c: c.__name__)
 def test_every_helper_is_proved_to_evaluate_its_defining_relation(cls):
     cert = helper_certificate(cls)

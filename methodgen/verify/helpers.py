@@ -150,7 +150,8 @@ def _sinc_dd_certificate(helper: str, details: dict, t0: float) -> Certificate:
     F = to_elementary(sinc_dd.branch_form(_A, _B)) * (_B - _A) - (sp.sin(_B) / _B - sp.sin(_A) / _A)
     method = reduce_to_zero(F, allow_simplify=True)
     claim = (f"helper {helper}(a, b) evaluates sinc[a, b] = (sin(b)/b - sin(a)/a)/(b - a): the quotient "
-             "where |b - a| >= 1, (m cos m sinc δ - sin m cos δ)/(ab) where |a| or |b| >= 2 and |b - a| < 1 "
+             "where |b - a| >= 1, (m cos m sinc δ - sin m cos δ)/(ab) where |a| or |b| >= 2 and "
+             "|b - a| < 1 "
              "(an identity), the Taylor series (a + b) Σ_(k<=12) c_k h_(k-1)(a², b²) where |a|, |b| < 2 "
              f"(truncated: tail below {SINC_DD_TAIL:g} |a + b|)")
     details = {**details, "branch_form": str(sinc_dd.branch_form(_A, _B)), "series_tail": SINC_DD_TAIL,
