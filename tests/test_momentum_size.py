@@ -60,3 +60,14 @@ def test_no_families_above_the_limit_is_still_skipped():
     assert all(f.size == 1 for f in derive.potential_families(big))
     assert derive.detected_momenta(big) == ()
     assert [inv.name for inv in derive.detected_momenta(chain(6))] == ["P"]
+
+
+def test_mass_matrix_read_off_monomials_equals_the_hessian():
+    """The monomial read-off that replaced sp.hessian gives the same M⁻¹, and None where
+    T is not ½ pᵀ M⁻¹ p with constant M⁻¹ (a linear term, a q- or p-dependent coefficient)."""
+    p1, p2, q1, m = sp.symbols("p1 p2 q1 m", real=True)
+    state = {p1, p2, q1}
+    for T in (p1**2 / (2 * m) + p2**2 / 2, p1**2 / 2 + p1 * p2 / 3 + 2 * p2**2):
+        assert derive._mass_inverse(T, [p1, p2], state) == sp.hessian(T, [p1, p2])
+    for T in (p1**2 / 2 + p1, q1 * p1**2 / 2, p1**4 + p2**2, sp.sqrt(1 + p1**2) + p2**2):
+        assert derive._mass_inverse(T, [p1, p2], state) is None
