@@ -168,27 +168,44 @@ def separable_split(system: Hamiltonian) -> Separable | None:
         return None          # no (q, p) split
     qs, ps = set(system.q), set(system.p)
     for H in (system.H, sp.expand(system.H)):
-        T, U, ok = sp.S.Zero, sp.S.Zero, True
+        Ts, Us, ok = [], [], True
         for term in sp.Add.make_args(H):
             fs = term.free_symbols
             if fs & qs and fs & ps:
                 ok = False
                 break
-            if fs & ps:
-                T += term
-            else:
-                U += term
+            (Ts if fs & ps else Us).append(term)
         if ok:
+            T, U = sp.Add(*Ts), sp.Add(*Us)   # one Add each: += is quadratic in the terms
             break
     else:
         return None
-    p = sp.Matrix(system.p)
-    hess = sp.hessian(T, system.p)
-    Minv = None
-    if not (hess.free_symbols & (qs | ps)):
-        if sp.expand(T - (p.T * hess * p)[0, 0] / 2) == 0:
-            Minv = hess
-    return Separable(T=T, U=U, Minv=Minv)
+    return Separable(T=T, U=U, Minv=_mass_inverse(T, list(system.p), qs | ps))
+
+
+def _mass_inverse(T: sp.Expr, p: list, state: set) -> sp.Matrix | None:
+    """``∂²T/∂p²`` when ``T = ½ pᵀ (∂²T/∂p²) p`` with a constant Hessian, else None.
+
+    Read off T's monomials (T is then a homogeneous quadratic polynomial in p with
+    coefficients free of the state): one pass over T, where ``sp.hessian`` takes d²
+    derivatives of the whole sum (63 s for a chain of d = 200).
+    """
+    try:
+        poly = sp.Poly(T, *p)
+    except sp.PolynomialError:
+        return None
+    d = len(p)
+    hess = sp.zeros(d, d)
+    for monom, c in poly.terms():
+        if sum(monom) != 2 or (c.free_symbols & state):
+            return None
+        ij = [k for k, e in enumerate(monom) for _ in range(e)]
+        i, j = ij
+        if i == j:
+            hess[i, i] = 2 * c
+        else:
+            hess[i, j] = hess[j, i] = c
+    return hess
 
 
 @_cache
@@ -345,15 +362,26 @@ def _gradient_samples(system: Hamiltonian):
         return None
 
 
-def _angular_sample(y, g, d: int, i: int, j: int) -> tuple[float, float]:
-    """``{q_i p_j - q_j p_i, H}`` at a sample point, and the size of its terms."""
-    terms = (y[d + j] * g[d + i], -y[d + i] * g[d + j], -y[i] * g[j], y[j] * g[i])
-    return sum(terms), sum(abs(t) for t in terms)
+def _angular_screen(system: Hamiltonian):
+    """Boolean (d, d) array: at every sample point ``{L_ij, H}`` is 0 up to 1e-9 of the size
+    of its four terms (finite), for all planes (i, j) at once (a chain of d = 200 has 19900),
+    or None.  A cheap screen: only rejection uses floats."""
+    import numpy as np
 
-
-def _small(sample: tuple[float, float]) -> bool:
-    value, size = sample
-    return math.isfinite(value) and abs(value) <= 1e-9 * max(size, 1e-300)
+    samples = _gradient_samples(system)
+    if samples is None:
+        return None
+    d = system.dim
+    ok = np.ones((d, d), dtype=bool)
+    with np.errstate(all="ignore"):
+        for y, g in samples:
+            yq, yp, gq, gp = (np.asarray(v, dtype=float) for v in (y[:d], y[d:], g[:d], g[d:]))
+            # {q_i p_j - q_j p_i, H} = p_j ∂H/∂p_i - p_i ∂H/∂p_j - q_i ∂H/∂q_j + q_j ∂H/∂q_i
+            terms = (np.outer(gp, yp), -np.outer(yp, gp), -np.outer(yq, gq), np.outer(gq, yq))
+            value = terms[0] + terms[1] + terms[2] + terms[3]
+            size = sum(np.abs(t) for t in terms)
+            ok &= np.isfinite(value) & (np.abs(value) <= 1e-9 * np.maximum(size, 1e-300))
+    return ok
 
 
 @_cache
@@ -371,10 +399,10 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     if d < 2:
         return ()
     out = []
-    screen = _gradient_samples(system)
+    screen = _angular_screen(system)
     for i in range(d):
         for j in range(i + 1, d):
-            if screen is not None and not all(_small(_angular_sample(y, g, d, i, j)) for y, g in screen):
+            if screen is not None and not screen[i, j]:
                 continue   # {L_ij, H} clearly nonzero at a sample point: not a candidate
             qi, qj, pi, pj = system.q[i], system.q[j], system.p[i], system.p[j]
             if d == 3 and (i, j) == (0, 2):
@@ -415,8 +443,9 @@ def constraint_monitors(system: Hamiltonian) -> tuple[Invariant, ...]:
 
 
 #: Largest number of degrees of freedom for which :func:`detected_momenta` looks for
-#: total linear and angular momenta (the search samples a d-column matrix and tests a
-#: few candidates exactly; above this it is skipped).
+#: total linear and angular momenta in a system whose U is not a sum of like terms (the
+#: exact tests then reduce brackets over the whole sum; above this it is skipped).
+#: Systems with families of like terms are searched at any size.
 DETECT_MAX_DIM = 60
 _AXES = ("x", "y", "z")
 
@@ -446,8 +475,10 @@ def _linear_candidates(system: Hamiltonian) -> list[list[sp.Rational]]:
     g = gradient(system)
     rows = [list(g[:d])] + [[sp.diff(c, qk) for qk in system.q] for c in system.constraints]
     args = list(system.y) + list(system.params)
+    from .special import to_elementary   # sampled away from removable points
+
     try:
-        fns = [sp.lambdify(args, r, modules="math") for r in rows]
+        fns = [sp.lambdify(args, [to_elementary(e) for e in r], modules="math") for r in rows]
     except Exception:   # pragma: no cover - lambdify of whitelisted functions
         return []
     rng = random.Random(20240515)
@@ -466,7 +497,7 @@ def _linear_candidates(system: Hamiltonian) -> list[list[sp.Rational]]:
     if len(A) < d:
         return []
     A = np.array(A)
-    _, sv, vh = np.linalg.svd(A)
+    _, sv, vh = np.linalg.svd(A, full_matrices=False)
     smax = sv[0] if len(sv) else 0.0
     rank = int(np.sum(sv > 1e-9 * smax)) if smax > 0 else 0
     N = vh[rank:].copy()
@@ -527,10 +558,24 @@ def _commutes(system: Hamiltonian, I: sp.Expr) -> bool:
             return by_families
     g = gradient(system)
     d = system.dim
-    IH = sp.Add(*[sp.diff(I, qi) * g[d + k] - sp.diff(I, pi) * g[k]
-                  for k, (qi, pi) in enumerate(zip(system.q, system.p))])
+    dq, dp = _partials(I, system.q), _partials(I, system.p)
+    IH = sp.Add(*[dq[k] * g[d + k] - dp[k] * g[k] for k in range(d)])
     return _is_zero(IH, system) and all(_is_zero(poisson_bracket(system, I, F), system)
                                         for F in system.constraints)
+
+
+def _partials(expr: sp.Expr, xs) -> list[sp.Expr]:
+    """``[∂expr/∂x for x in xs]`` of a sum, each additive term differentiated only in the
+    symbols it contains: one pass over the terms, where ``sp.diff`` walks the whole sum for
+    each x (d² work for a chain's momentum or kinetic energy)."""
+    where = {x: i for i, x in enumerate(xs)}
+    parts: list[list] = [[] for _ in xs]
+    for t in sp.Add.make_args(expr):
+        for x in t.free_symbols:
+            i = where.get(x)
+            if i is not None:
+                parts[i].append(sp.diff(t, x))
+    return [sp.Add(*ps) for ps in parts]
 
 
 def _commutes_by_families(system: Hamiltonian, I: sp.Expr) -> bool | None:
@@ -552,10 +597,10 @@ def _commutes_by_families(system: Hamiltonian, I: sp.Expr) -> bool | None:
     sep = separable_split(system)
     q, p = list(system.q), list(system.p)
     qset = set(q)
-    w = [sp.diff(I, pi) for pi in p]
+    w = _partials(I, p)
     if any(wi.free_symbols & set(p) for wi in w):
         return None
-    pieces = [sp.Add(*[sp.diff(I, qi) * sp.diff(sep.T, pi) for qi, pi in zip(q, p)])]
+    pieces = [sp.Add(*[a * b for a, b in zip(_partials(I, q), _partials(sep.T, p))])]
     for fam in fams:
         seen = set()
         tgrad = [sp.diff(fam.template, u) for u in fam.slots]
@@ -593,14 +638,19 @@ def detected_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
       (``L_x, L_y, L_z``; ``L`` for k = 2) that are proved first integrals.
 
     A name already used (state, parameter, declared invariant) gets the suffix ``_auto``;
-    a detected quantity equal to a declared one is left out.  Skipped (empty) above
-    :data:`DETECT_MAX_DIM` degrees of freedom and for time-transformed systems.
+    a detected quantity equal to a declared one is left out.  The brackets are shown family
+    by family where U is a sum of like terms (:func:`_commutes_by_families`), so such systems
+    are searched at any size (a Toda chain of N = 200: about 4 s); others are skipped
+    (empty) above :data:`DETECT_MAX_DIM` degrees of freedom, as are time-transformed systems.
     """
     if is_poisson(system):
         return ()            # a Poisson system's simple first integrals are its Casimirs
     d = system.dim
-    if d > DETECT_MAX_DIM or system.time_transform is not None:
+    if system.time_transform is not None:
         return ()
+    fams = potential_families(system)
+    if d > DETECT_MAX_DIM and (fams is None or not any(f.size >= 2 for f in fams) or system.constraints):
+        return ()            # the brackets would be reduced on the whole sum: bounded size
     out: list[Invariant] = []
     vecs = [c for c in _linear_candidates(system)
             if _commutes(system, sp.Add(*[ck * pk for ck, pk in zip(c, system.p)]))]

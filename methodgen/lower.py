@@ -645,8 +645,10 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         vector["minv"] = _kernel(list(Minv), (system.dim * system.dim,), vp, rename)
 
     all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
-    if plan is not None:   # the helpers the loops' template terms call
-        all_exprs += [e for lf in plan.families for e in lf.dg + lf.grad]
+    if plan is not None:   # the helpers the loops' template terms call (Jacobian terms too:
+        # dsinc, dsinhc, ... appear only there)
+        for lf in plan.families:
+            all_exprs += [*lf.dg, *lf.grad, *(e for row in lf.jacobian for e in row)]
     return ModuleIR(
         module_name=module_name,
         system_name=system.name or "system",

@@ -216,8 +216,10 @@ def check_smooth(expr: sp.Expr, what: str = "expression") -> sp.Expr:
     The same check is applied to parsed text and to SymPy input
     (:class:`methodgen.Hamiltonian`), to the Hamiltonian and to constraints.
     """
+    from .special import sinc_u   # sin(u)/u as folded by the Hamiltonian (smooth)
+
     for node in sp.preorder_traversal(expr):
-        if isinstance(node, (sp.Symbol, sp.Rational, sp.Add, sp.Mul, sp.Pow) + SMOOTH_FUNCTIONS):
+        if isinstance(node, (sp.Symbol, sp.Rational, sp.Add, sp.Mul, sp.Pow, sinc_u) + SMOOTH_FUNCTIONS):
             continue
         if isinstance(node, sp.Float) and node.is_finite:
             continue

@@ -17,6 +17,7 @@ import sympy as sp
 
 from .errors import InputError, ParseError
 from .parse import check_name, check_smooth, parse_expr
+from .special import fold_removable_quotients
 
 __all__ = ["Hamiltonian", "DeclaredInvariant", "builtin_monitor_names"]
 
@@ -191,6 +192,8 @@ class Hamiltonian:
         object.__setattr__(self, "time", symbols[tn] if tn else None)
 
         expr, source = self._expr(H, "Hamiltonian")
+        # sin(u)/u as sinc_u(u): smooth at u = 0 and evaluated there (methodgen.special)
+        expr = fold_removable_quotients(expr)
         if not expr.free_symbols & set(self.p):
             raise InputError("the Hamiltonian does not depend on any momentum p; "
                              "it would not define a Hamiltonian flow")

@@ -35,8 +35,9 @@ import sympy as sp
 
 __all__ = ["sinc_u", "sinhc", "atanhc", "atanc", "dsinc_u", "dsinhc", "datanhc", "datanc", "safe_div",
            "DividedDifference", "exp_dd", "log_dd", "sin_dd", "cos_dd", "tan_dd", "sinh_dd", "cosh_dd",
-           "tanh_dd", "atan_dd", "datan_dd", "DIVIDED_DIFFERENCES", "SPECIAL_FUNCTIONS", "HELPER_DEPENDENCIES",
-           "to_elementary"]
+           "tanh_dd", "atan_dd", "datan_dd", "dexp_dd", "ddsinc_u", "sinc_dd", "dsinc_dd",
+           "DIVIDED_DIFFERENCES", "SPECIAL_FUNCTIONS", "HELPER_DEPENDENCIES", "to_elementary",
+           "fold_removable_quotients"]
 
 
 class _RemovableFunction(sp.Function):
@@ -114,12 +115,27 @@ class dsinc_u(_OddDerivative):
     r"""Derivative of :class:`sinc_u`: ``(x cos x - sin x)/x**2``, 0 at 0."""
 
     def fdiff(self, argindex=1):
-        x = self.args[0]
-        return (-x**2 * sp.sin(x) - 2 * x * sp.cos(x) + 2 * sp.sin(x)) / x**3
+        return ddsinc_u(self.args[0])
 
     def as_quotient(self):
         x = self.args[0]
         return (x * sp.cos(x) - sp.sin(x)) / x**2
+
+
+class ddsinc_u(_RemovableFunction):
+    r"""Second derivative of :class:`sinc_u`: ``(2 sin x - 2x cos x - x² sin x)/x³``, -1/3 at 0.
+
+    Jacobians only (the Hessian of an H with ``sin(u)/u``).
+    """
+
+    _value_at_zero = sp.Rational(-1, 3)
+
+    def fdiff(self, argindex=1):
+        return sp.diff(self.as_quotient(), self.args[0])
+
+    def as_quotient(self):
+        x = self.args[0]
+        return (2 * sp.sin(x) - 2 * x * sp.cos(x) - x**2 * sp.sin(x)) / x**3
 
 
 class dsinhc(_OddDerivative):
@@ -271,6 +287,20 @@ class exp_dd(DividedDifference):
     def stable_form(cls, a, b):
         return sp.exp((a + b) / 2) * sinhc((b - a) / 2)
 
+    @classmethod
+    def helper_form(cls, a, b):
+        """What ``_expdd`` evaluates for ``b > a``, ``exp(b)·(1 - exp(a - b))/(b - a)`` (the same
+        function written with the larger exponent outside, so no factor overflows where the
+        value does not; the helper swaps the arguments of ``a > b``, the quotient being
+        symmetric, and takes ``exp(a)`` at ``a = b``)."""
+        return sp.exp(b) * (1 - sp.exp(a - b)) / (b - a)
+
+    def fdiff(self, argindex=1):
+        # Not the derivative of the stable form: exp(m)·dsinhc(d) overflows on a thin
+        # barrier (d ~ 1000) where the value and the derivative are 0.
+        a, b = self.args
+        return dexp_dd(a, b) if argindex == 2 else dexp_dd(b, a)
+
 
 class sin_dd(DividedDifference):
     r"""``sin[a, b] = cos((a+b)/2) sinc((b-a)/2)``."""
@@ -394,9 +424,99 @@ class datan_dd(sp.Function):
         return sp.diff(datan_dd(A, B).as_quotient(), B if argindex == 2 else A).xreplace({A: a, B: b})
 
 
+class sinc_dd(DividedDifference):
+    r"""``sinc[a, b] = (sinc b - sinc a)/(b - a)`` with ``sinc x = sin(x)/x`` (a term ``sin(u)/u``).
+
+    No closed form is free of cancellation at once near ``a = b`` and near ``a = 0`` or
+    ``b = 0``, so the generated helper has three branches (``templates/_special.py.j2``):
+    the Taylor series ``(a + b) Σ c_k h_{k-1}(a², b²)`` (positive terms h) where
+    ``|a|, |b| < 2``; the quotient itself where ``|b - a| >= 1``; else (a, b of one sign,
+    ``|ab| > 1``) :meth:`branch_form`.  The last two are exact identities
+    (:mod:`methodgen.verify.helpers`), the series is truncated below round-off (numerical).
+    """
+    func_elementary = sinc_u
+
+    def as_quotient(self):
+        a, b = self.args
+        return (sp.sin(b) / b - sp.sin(a) / a) / (b - a)
+
+    @classmethod
+    def branch_form(cls, a, b):
+        """``(m cos m sinc δ - sin m cos δ)/(ab)``, ``m = (a+b)/2``, ``δ = (b-a)/2``."""
+        m, d = (a + b) / 2, (b - a) / 2
+        return (m * sp.cos(m) * sinc_u(d) - sp.sin(m) * sp.cos(d)) / (a * b)
+
+    def _branch_derivative(self, argindex):
+        a, b = self.args
+        return dsinc_dd(a, b) if argindex == 2 else dsinc_dd(b, a)
+
+
+class dsinc_dd(sp.Function):
+    r"""``∂/∂b sinc[a, b] = (sinc'(b) - sinc[a, b])/(b - a) = ∫₀¹ t sinc''(a + t(b - a)) dt``,
+    ``sinc''(a)/2`` at a = b.
+
+    Jacobians only.  The helper evaluates the quotient where ``|b - a| >= 1`` and the
+    integral by 8-point Gauss–Legendre elsewhere (sinc'' is entire: ~1e-14 relative).
+    """
+
+    nargs = 2
+
+    @classmethod
+    def eval(cls, a, b):
+        if a == b or (a - b).is_zero:
+            return ddsinc_u(a) / 2
+        return None
+
+    def _eval_is_real(self):
+        a, b = self.args
+        return (a.is_real and b.is_real) or None
+
+    def as_quotient(self):
+        a, b = self.args
+        return (dsinc_u(b).as_quotient() - sinc_dd(a, b).as_quotient()) / (b - a)
+
+    def fdiff(self, argindex=1):
+        # Second derivatives (never in generated code): from the defining quotient.
+        a, b = self.args
+        A, B = _fresh_pair()
+        return sp.diff(dsinc_dd(A, B).as_quotient(), B if argindex == 2 else A).xreplace({A: a, B: b})
+
+
+class dexp_dd(sp.Function):
+    r"""``∂/∂b exp[a, b] = (exp(b) - exp[a, b])/(b - a)``, ``exp(a)/2`` at a = b.
+
+    Jacobians only.  The generated helper evaluates ``exp(m)(sinhc(δ) + dsinhc(δ))/2``
+    (``m = (a+b)/2``, ``δ = (b-a)/2``) where ``|b - a| < 1`` and the quotient elsewhere
+    (no cancellation there, and no factor overflows where the value does not).
+    """
+
+    nargs = 2
+
+    @classmethod
+    def eval(cls, a, b):
+        if a == b or (a - b).is_zero:
+            return sp.exp(a) / 2
+        return None
+
+    def _eval_is_real(self):
+        a, b = self.args
+        return (a.is_real and b.is_real) or None
+
+    def as_quotient(self):
+        a, b = self.args
+        return (sp.exp(b) - (sp.exp(b) - sp.exp(a)) / (b - a)) / (b - a)
+
+    def fdiff(self, argindex=1):
+        # Second derivatives (never in generated code): from the defining quotient.
+        a, b = self.args
+        A, B = _fresh_pair()
+        return sp.diff(dexp_dd(A, B).as_quotient(), B if argindex == 2 else A).xreplace({A: a, B: b})
+
+
 #: The divided difference of each elementary function of the grammar.
 DIVIDED_DIFFERENCES: dict = {sp.exp: exp_dd, sp.log: log_dd, sp.sin: sin_dd, sp.cos: cos_dd, sp.tan: tan_dd,
-                             sp.sinh: sinh_dd, sp.cosh: cosh_dd, sp.tanh: tanh_dd, sp.atan: atan_dd}
+                             sp.sinh: sinh_dd, sp.cosh: cosh_dd, sp.tanh: tanh_dd, sp.atan: atan_dd,
+                             sinc_u: sinc_dd}
 
 
 #: Name of the runtime helper each function prints as.
@@ -420,13 +540,19 @@ SPECIAL_FUNCTIONS: dict[type, str] = {
     tanh_dd: "_tanhdd",
     atan_dd: "_atandd",
     datan_dd: "_datandd",
+    dexp_dd: "_dexpdd",
+    ddsinc_u: "_ddsinc",
+    sinc_dd: "_sincdd",
+    dsinc_dd: "_dsincdd",
 }
 
 #: Helpers a helper calls (so the template emits them too).
 HELPER_DEPENDENCIES: dict[str, tuple[str, ...]] = {
-    "expdd": ("sinhc",), "sinhdd": ("sinhc",), "coshdd": ("sinhc",), "tanhdd": ("sinhc",),
+    "sinhdd": ("sinhc",), "coshdd": ("sinhc",), "tanhdd": ("sinhc",),
     "sindd": ("sinc",), "cosdd": ("sinc",), "tandd": ("sinc",),
     "logdd": ("atanhc",), "atandd": ("atanc",), "datandd": ("atanc", "datanc", "atandd"),
+    "dexpdd": ("sinhc", "dsinhc", "expdd"),
+    "sincdd": ("sinc",), "dsincdd": ("dsinc", "ddsinc", "sincdd"),
 }
 
 
@@ -436,5 +562,31 @@ def to_elementary(expr: sp.Expr) -> sp.Expr:
     The result is equal to ``expr`` wherever the quotients are defined; the
     verification layer uses it to reduce identities with ordinary SymPy.
     """
-    return expr.replace(lambda e: isinstance(e, (_RemovableFunction, safe_div, DividedDifference, datan_dd)),
+    quotients = (_RemovableFunction, safe_div, DividedDifference, datan_dd, dexp_dd, dsinc_dd)
+    return expr.replace(lambda e: isinstance(e, quotients),
                         lambda e: e.as_quotient())
+
+
+def fold_removable_quotients(expr: sp.Expr) -> sp.Expr:
+    """Write each ``sin(u)/u`` in ``expr`` as ``sinc_u(u)`` (an exact rewriting).
+
+    ``sin(u)/u`` is smooth at ``u = 0`` but its quotient form is 0/0 there, its derivative
+    ``cos(u)/u - sin(u)/u²`` cancels like 1/u², and its product-rule divided difference
+    like 1/u: as ``sinc_u`` it evaluates to 1 at 0 and gets the helpers of this module
+    (derivatives, divided difference) that are accurate to round-off near 0.  A product
+    ``c·sin(u)·D⁻¹`` is folded when ``D/u`` is free of u's symbols (``sin(2q)/(2q)``,
+    ``k sin(q)/q``, ``sin(x² + y²)/(x² + y²)``).
+    """
+    def fold(m):
+        for f in m.args:
+            if not isinstance(f, sp.sin):
+                continue
+            u = f.args[0]
+            rest = m / f
+            num, den = sp.fraction(rest)
+            ratio = sp.cancel(den / u)
+            if ratio != 0 and not (ratio.free_symbols & u.free_symbols):
+                return sinc_u(u) * num / ratio
+        return m
+
+    return expr.replace(lambda e: e.is_Mul and any(isinstance(f, sp.sin) for f in e.args), fold)

@@ -109,10 +109,19 @@ def _quadratic_form(expr: sp.Expr, q) -> bool:
 
 
 def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr] | None:
-    """Find ``(E, s, V)`` with ``term = V(E(q))``, E a quadratic form in q."""
+    """Find ``(E, s, V)`` with ``term = V(E(q))``, E a quadratic form in q.
+
+    E is looked for among the sums in ``term`` (and their parts in q, so a constant
+    added to the form does not hide it), and taken with a positive coefficient of some
+    ``v²``: SymPy writes ``exp(-(x² + y²))`` as ``exp(-x² - y²)``, a function of the
+    form ``-(x² + y²)``, which is then the same term as a function of ``x² + y²``.
+    """
     qs = [v for v in q if v in term.free_symbols]
-    candidates = [e for e in sp.preorder_traversal(term)
-                  if isinstance(e, sp.Add) and set(qs) <= e.free_symbols and _quadratic_form(e, q)]
+    candidates = []
+    for e in sp.preorder_traversal(term):
+        if isinstance(e, sp.Add) and set(qs) <= e.free_symbols:
+            part = e.as_independent(*q, as_Add=True)[1]
+            candidates += [c for c in (e, part) if _quadratic_form(c, q) and c not in candidates]
     if _quadratic_form(term, q):
         candidates.insert(0, term)
     s = sp.Symbol("_s", positive=True)
@@ -120,6 +129,8 @@ def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr]
         poly = sp.Poly(E, *q)
         for v in qs:
             c = poly.coeff_monomial(v**2)
+            if c.is_negative:   # the form -E, with a positive coefficient of v²
+                E, poly, c = sp.expand(-E), -poly, -c
             if c.is_positive:
                 line = {w: sp.S.Zero for w in q}
                 line[v] = sp.sqrt(s / c)

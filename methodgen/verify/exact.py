@@ -31,9 +31,9 @@ from math import gcd, isqrt
 import sympy as sp
 
 from ..derive import term_groups
-from ..special import DividedDifference, _RemovableFunction, datan_dd, to_elementary
+from ..special import DividedDifference, _RemovableFunction, datan_dd, dexp_dd, dsinc_dd, to_elementary
 
-_QUOTIENT_FUNCTIONS = (DividedDifference, datan_dd)
+_QUOTIENT_FUNCTIONS = (DividedDifference, datan_dd, dexp_dd, dsinc_dd)
 
 try:  # guarded quotient n/d (0 where d = 0), used by newer Gonzalez forms
     from ..special import safe_div
