@@ -35,6 +35,7 @@ from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .poisson import is_poisson
 from .schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
+from .timetransform import time_scale_guard
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
 
@@ -615,8 +616,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         field1 = list(sep.Minv * sp.Matrix(system.p)) + [-sp.Symbol(f"_sK{i}", real=True) for i in range(dim)]
     lplan = local_error_plan(scheme, links, field_at_end=field1)
     conds = domain_conditions(system)
+    # A time transformation's guard values (g, the level-set defect and its scale) at y1.
+    tguard = time_scale_guard(system) if not is_poisson(system) else ()
     at1 = {s: s + dv for s, dv in zip(system.y, links)}
-    later = list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
+    later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
+             + [u.xreplace(at1) for u in tguard])
     shared = lplan.shared if lplan else ()
     scalar["post"] = _with_loops(
         _chained_kernel(inc, later, links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}), shared),
@@ -631,6 +635,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     if conds:
         scalar["domain"] = _kernel([u for _, u in conds], (len(conds),), sp_, rename)
         vector["domain"] = _kernel([u for _, u in conds], (len(conds),), vp, rename)
+    if tguard:
+        vector["tguard"] = _kernel(list(tguard), (len(tguard),), vp, rename)
     vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
     n_cons = len(system.constraints)
@@ -744,6 +750,8 @@ def _time_transform_fields(system, invs) -> dict | None:
 
     return {"g": " ".join(tt.g_source.split()), "time": tt.time.name, "energy": tt.energy.name,
             "hamiltonian": " ".join(tt.original.source.split()),
+            # per-step guard of g > 0 and of the level set (timetransform.time_scale_guard)
+            "guard": bool(time_scale_guard(system)),
             "h_index": [inv.name for inv in invs].index(PHYSICAL_ENERGY)}
 
 

@@ -1,0 +1,116 @@
+"""Per-step guards of the runtimes (both backends), with their negative controls.
+
+* A time transformation whose g reaches 0: g = q on the harmonic oscillator from
+  (q, p) = (1, -1); the physical trajectory reaches q = 0 at t = π/4, the flow of
+  K = g(H + e) only creeps towards it (K's error divided by a vanishing g outgrows the
+  energy: the level-set guard), and a coarse midpoint step lands beyond it (g < 0).
+* ``initial_state`` refuses g(y0) <= 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+
+Y0_TT = np.array([1.0, -1.0])          # (q, p): H = 1, q reaches 0 at t = π/4
+
+
+@pytest.fixture(scope="module")
+def tt_modules(tmp_path_factory):
+    root = tmp_path_factory.mktemp("guards")
+    K = mg.time_transform(mg.load_scene("harmonic").system, "q")
+    cache = {}
+
+    def get(method, backend="numpy"):
+        if (method, backend) not in cache:
+            cache[method, backend] = mg.generate(mg.discretize(K, method), root / f"ttq_{method}_{backend}.py",
+                                                 backend=backend)
+        return cache[method, backend]
+
+    return get
+
+
+def _h_phys_error(mod, tr):
+    Hp = mod.invariants(tr)["H_phys"]
+    return float(np.max(np.abs(Hp - Hp[0])))
+
+
+def _check_g_guards(mod):
+    """The checks of one module (either backend)."""
+    Y0 = mod.initial_state(Y0_TT)
+    # The level-set guard stops the run where g has collapsed (before H_phys is wrong by 100%).
+    with pytest.raises(mod.ResolutionError, match=r"g = q has fallen to .* at step \d+ .*state \{'q'") as ei:
+        mod.integrate(Y0, 0.3, 400)
+    assert ei.value.check == "time_scale" and 0 < ei.value.trajectory[-1, 0] < 0.1
+    assert ei.value.step == len(ei.value.trajectory) - 1
+    # the rows before the failure are an honest run: physical energy within its midpoint error
+    # (each row has |H + e| <= MAX_LEVEL_DEFECT (|e| + |T| + |U|) <= 0.1 (1 + 2 |e|))
+    assert _h_phys_error(mod, ei.value.trajectory) < 0.3
+    # negative control: without the guard the run ends with 0 and H_phys wrong by ~100 %
+    tr = mod.integrate(Y0, 0.3, 400, check_resolution=False)
+    assert _h_phys_error(mod, tr) > 0.9
+    # A coarse step lands at g < 0: refused always (also without check_resolution), naming g.
+    for cr in (True, False):
+        with pytest.raises(mod.NonFiniteError, match=r"g = q is -0\.24\d* <= 0 at step 0 \(state") as ei:
+            mod.integrate(Y0, 1.6, 10, check_resolution=cr)
+        assert ei.value.state[0] < 0
+    # an extended state with g <= 0 is refused at the start
+    with pytest.raises(mod.NonFiniteError, match=r"g = q is -1, not > 0"):
+        mod.integrate(np.array([-1.0, 0.0, 1.0, -1.0]), 0.1, 3)
+    with pytest.raises(mod.NonFiniteError, match=r"g = q is -1, not > 0.*trajectories \[1\]"):
+        mod.integrate(np.array([[1.0, 0.0, -1.0, -1.0], [-1.0, 0.0, 1.0, -1.0]]), 0.1, 3)
+
+
+def test_g_guards_numpy(tt_modules):
+    mod = tt_modules("midpoint")
+    _check_g_guards(mod)
+    # batch path: the same failure, named by trajectory
+    Y = mod.initial_state(np.array([[1.0, 1.0], [1.0, -1.0]]))
+    with pytest.raises(mod.ResolutionError, match=r"trajectories \[1\]"):
+        mod.integrate(Y, 0.3, 400)
+
+
+def test_g_crossing_negative_control(tt_modules):
+    """Without the g guard the midpoint step at h = 1.6 is an ordinary converged step to q < 0:
+    the state the NonFiniteError names solves the step equations (the unknowns are the
+    increments), so an unguarded runtime returns it -- physical time then runs backwards."""
+    mod = tt_modules("midpoint")
+    assert all(name.startswith("_d_") for name in mod.UNKNOWN_NAMES)
+    Y0 = mod.initial_state(Y0_TT)
+    with pytest.raises(mod.NonFiniteError) as ei:
+        mod.integrate(Y0, 1.6, 1)
+    y1 = ei.value.state
+    assert np.max(np.abs(mod.residual(y1 - Y0, Y0, 1.6))) < 1e-14
+    assert y1[0] < 0 and y1[1] < Y0[1] + 1.6 * 1.0   # g < 0; dt = g dτ: t advanced less than g(y0) h
+
+
+def test_avf_stops_on_the_guard_not_on_newton(tt_modules):
+    """AVF keeps K to round-off, yet g = q shrinks geometrically: the level-set guard names the
+    cause (it used to end in a Newton failure at g ~ 1e-18)."""
+    mod = tt_modules("avf")
+    with pytest.raises(mod.ResolutionError, match="has fallen to") as ei:
+        mod.integrate(mod.initial_state(Y0_TT), 0.3, 400)
+    assert ei.value.trajectory[-1, 1] == pytest.approx(np.pi / 4, abs=0.01)   # physical time stalls at π/4
+    # negative control: unguarded, the run ends in Newton's method failing (or in nonsense)
+    try:
+        tr = mod.integrate(mod.initial_state(Y0_TT), 0.3, 400, check_resolution=False)
+    except mod.ConvergenceError:
+        pass
+    else:
+        assert _h_phys_error(mod, tr) > 0.5
+
+
+def test_initial_state_refuses_g_not_positive(tt_modules):
+    mod = tt_modules("midpoint")
+    with pytest.raises(ValueError, match=r"g = q is -1 at y0; it must be > 0"):
+        mod.initial_state(np.array([-1.0, 1.0]))
+    with pytest.raises(ValueError, match=r"g = q is 0 at y0\[1\]"):
+        mod.initial_state(np.array([[1.0, 1.0], [0.0, 1.0]]))
+    assert mod.initial_state(np.array([0.5, 1.0]))[0] == 0.5        # positive g: accepted
+
+
+def test_g_guards_numba(tt_modules):
+    pytest.importorskip("numba")
+    _check_g_guards(tt_modules("midpoint", "numba"))
