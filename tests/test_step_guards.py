@@ -114,3 +114,63 @@ def test_initial_state_refuses_g_not_positive(tt_modules):
 def test_g_guards_numba(tt_modules):
     pytest.importorskip("numba")
     _check_g_guards(tt_modules("midpoint", "numba"))
+
+
+# --- linear fields: exempt from the resolution guard, but an unresolved h is warned of ---------
+
+@pytest.fixture(scope="module")
+def linear_modules(tmp_path_factory):
+    root = tmp_path_factory.mktemp("linear")
+    system = mg.load_scene("harmonic").system
+    cache = {}
+
+    def get(backend="numpy", method="midpoint"):
+        if (backend, method) not in cache:
+            cache[backend, method] = mg.generate(mg.discretize(system, method), root / f"harm_{method}_{backend}.py",
+                                                 backend=backend)
+        return cache[backend, method]
+
+    return get
+
+
+def _check_linear_warning(mod):
+    import warnings
+
+    with pytest.warns(mod.ResolutionWarning, match=r"h\*omega = 1e\+04 > 2\.0.*use h <= 2e-06"):
+        mod.integrate([1.0, 0.0], 0.01, 10, {"k": 1e12})
+    # negative controls: a resolved h (h·ω = 0.1), and check_resolution=False, are silent
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mod.integrate([1.0, 0.0], 0.1, 10)
+        mod.integrate([1.0, 0.0], 0.01, 10, {"k": 1e12}, check_resolution=False)
+        mod.integrate([1.0, 0.0], 1.9, 10)            # h·ω = 1.9: just inside
+    with pytest.warns(mod.ResolutionWarning, match=r"h\*omega = 2\.1"):
+        mod.integrate([1.0, 0.0], 2.1, 10)            # just outside
+
+
+def test_linear_warning_numpy(linear_modules):
+    mod = linear_modules()
+    assert mod.MAX_RESOLUTION is None and mod.MAX_LOCAL_ERROR is None    # exempt from the guard
+    _check_linear_warning(mod)
+    _check_linear_warning(linear_modules(method="energy-momentum"))
+
+
+def test_linear_warning_numba(linear_modules):
+    pytest.importorskip("numba")
+    _check_linear_warning(linear_modules("numba"))
+
+
+def test_linear_warning_cli_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    scene = tmp_path / "stiff.toml"
+    scene.write_text('name = "stiff"\n[system]\nH = "p**2/(2*m) + k*q**2/2"\nq = ["q"]\np = ["p"]\n'
+                     '[params]\nm = 1.0\nk = 1e12\n[run]\nmethod = ["midpoint"]\nh = 0.01\nsteps = 100\n'
+                     'y0 = [1.0, 0.0]\n')
+    res = subprocess.run([sys.executable, "-m", "methodgen", "run", str(scene)], capture_output=True, text=True,
+                         cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("methodgen: warning: step size h = 0.01 does not resolve")
+    assert "Traceback" not in res.stderr
