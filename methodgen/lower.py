@@ -237,6 +237,8 @@ class ModuleIR:
     #: ``(kind, expression)``, kind ``"positive"`` (log, negative fractional power) or
     #: ``"nonnegative"`` (positive fractional power such as sqrt).
     domain: tuple[tuple[str, str], ...] = ()
+    #: The post kernel also gives H(y1) - H(y0) and Σ|terms of H| at y0 (see energy_jump).
+    energy_jump: bool = False
     #: Symmetric composition of the base step: family, order, stages, source (None: the base
     #: method), and its coefficients γ_i as float64 reprs (``stages`` of them).
     composition: dict | None = None
@@ -504,6 +506,27 @@ def domain_conditions(system) -> tuple[tuple[str, sp.Expr], ...]:
     return tuple(seen[k] for k in sorted(seen))
 
 
+def energy_jump(scheme, lplan, tguard) -> tuple[sp.Expr, ...]:
+    """``(H, S)``: what the energy-jump test needs, or ``()`` where it does not apply.
+
+    A step whose end lands inside a feature thinner than the step (a barrier) changes H by
+    more than H's own size, ``S = Σ|terms of H|``, and the next step may leave it again:
+    the local error estimate, built from the field at the two ends, can see nothing (the
+    force vanishes at the barrier's centre).  The runtimes refuse a step with
+    ``|H(y1) - H(y0)| > MAX_ENERGY_JUMP · S(y0)``.  Not for methods that keep H exactly
+    (their H does not jump), linear fields (exempt from the resolution guards, no lplan)
+    and time-transformed systems (K = 0: their own level-set guard, see
+    :func:`methodgen.timetransform.time_scale_guard`).  The caller leaves it out where H has
+    domain conditions: H(y1) is evaluated in the kernel that gives the domain conditions, and a
+    state outside the domain must be reported as such, not as a failure evaluating H there.
+    """
+    system = scheme.system
+    if lplan is None or tguard or scheme.traits.energy_preserving:
+        return ()
+    H = system.H
+    return (H, sp.Add(*(sp.Abs(t) for t in sp.Add.make_args(H))))
+
+
 def uses_loops(scheme, loops: bool | None = None) -> bool:
     """Whether the module of ``scheme`` loops over families of like terms.
 
@@ -619,8 +642,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     # A time transformation's guard values (g, the level-set defect and its scale) at y1.
     tguard = time_scale_guard(system) if not is_poisson(system) else ()
     at1 = {s: s + dv for s, dv in zip(system.y, links)}
+    # The energy-jump test (methods that do not keep H): H(y1) - H(y0) and the size of H at y0.
+    ejump = energy_jump(scheme, lplan, tguard) if not conds else ()
     later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
-             + [u.xreplace(at1) for u in tguard])
+             + [u.xreplace(at1) for u in tguard]
+             + ([ejump[0].xreplace(at1) - ejump[0], ejump[1]] if ejump else []))
     shared = lplan.shared if lplan else ()
     scalar["post"] = _with_loops(
         _chained_kernel(inc, later, links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}), shared),
@@ -685,6 +711,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         lerr_scale=repr(float(lplan.scale)) if lplan else "1.0",
         lerr_partner=lplan.partner if lplan else "",
         domain=tuple((kind, str(u)) for kind, u in conds),
+        energy_jump=bool(ejump),
         **_composition_fields(scheme),
         time_transform=_time_transform_fields(system, invs),
         poisson=_poisson_fields(system),

@@ -136,16 +136,16 @@ def linear_modules(tmp_path_factory):
 def _check_linear_warning(mod):
     import warnings
 
-    with pytest.warns(mod.ResolutionWarning, match=r"h\*omega = 1e\+04 > 2\.0.*use h <= 2e-06"):
+    with pytest.warns(mod.ResolutionWarning, match=r"h\*omega = 1e\+04 > pi.*aliased.*use h <= 2e-06"):
         mod.integrate([1.0, 0.0], 0.01, 10, {"k": 1e12})
     # negative controls: a resolved h (h·ω = 0.1), and check_resolution=False, are silent
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         mod.integrate([1.0, 0.0], 0.1, 10)
         mod.integrate([1.0, 0.0], 0.01, 10, {"k": 1e12}, check_resolution=False)
-        mod.integrate([1.0, 0.0], 1.9, 10)            # h·ω = 1.9: just inside
-    with pytest.warns(mod.ResolutionWarning, match=r"h\*omega = 2\.1"):
-        mod.integrate([1.0, 0.0], 2.1, 10)            # just outside
+        mod.integrate([1.0, 0.0], 3.1, 10)            # h·ω = 3.1: two steps per period and more
+    with pytest.warns(mod.ResolutionWarning, match=r"h\*omega = 3\.2"):
+        mod.integrate([1.0, 0.0], 3.2, 10)            # just below two
 
 
 def test_linear_warning_numpy(linear_modules):
@@ -174,3 +174,60 @@ def test_linear_warning_cli_one_line(tmp_path):
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("methodgen: warning: step size h = 0.01 does not resolve")
     assert "Traceback" not in res.stderr
+
+
+# --- a step landing inside a thin barrier ------------------------------------------------------
+
+BARRIER = "p**2/2 + 10*exp(-(q/0.005)**2)"      # energy 2 < 10: the exact motion is reflected
+
+
+@pytest.fixture(scope="module")
+def barrier_modules(tmp_path_factory):
+    root = tmp_path_factory.mktemp("barrier")
+    system = mg.Hamiltonian(BARRIER, q=["q"], p=["p"], name="barrier")
+    cache = {}
+
+    def get(method, backend="numpy"):
+        if (method, backend) not in cache:
+            cache[method, backend] = mg.generate(mg.discretize(system, method),
+                                                 root / f"bar_{method.replace('-', '_')}_{backend}.py", backend=backend)
+        return cache[method, backend]
+
+    return get
+
+
+def _check_barrier(mod):
+    # from q = -1 at h = 0.1 the fifth step ends at q = 0, the barrier's top: H jumps 2 -> 12
+    with pytest.raises(mod.ResolutionError, match=r"at step 4: H changed by 5 times its own size") as ei:
+        mod.integrate([-1.0, 2.0], 0.1, 20)
+    assert ei.value.check == "energy_jump" and ei.value.suggested_h < 0.1
+    assert len(ei.value.trajectory) == 5
+    # negative control: without the guard the step is accepted, H jumps by 10 and back, and
+    # the particle is transmitted (the exact one is reflected)
+    tr = mod.integrate([-1.0, 2.0], 0.1, 20, check_resolution=False)
+    H = mod.hamiltonian(tr)
+    assert np.abs(H - 2.0).max() == pytest.approx(10.0, rel=1e-6) and tr[-1, 0] > 2.5
+    # batch: the trajectory that lands in the barrier is named
+    with pytest.raises(mod.ResolutionError, match=r"trajectories \[1\]"):
+        mod.integrate([[-1.1, 2.0], [-1.0, 2.0]], 0.1, 20)
+
+
+@pytest.mark.parametrize("method", ["stormer-verlet", "midpoint"])
+def test_barrier_energy_jump_numpy(barrier_modules, method):
+    _check_barrier(barrier_modules(method))
+
+
+def test_barrier_energy_jump_numba(barrier_modules):
+    pytest.importorskip("numba")
+    _check_barrier(barrier_modules("stormer-verlet", "numba"))
+
+
+def test_barrier_thinner_than_a_step_is_invisible(barrier_modules):
+    """The documented limit (README): from q = -1.1 no step end touches the barrier and the
+    force is ~0 wherever a step evaluates it -- no fixed-step method can see it.  A step that
+    resolves the barrier reflects the particle, as the exact motion is."""
+    mod = barrier_modules("stormer-verlet")
+    tr = mod.integrate([-1.1, 2.0], 0.1, 20)                 # silently transmitted
+    assert tr[-1, 0] > 2.5 and np.abs(mod.hamiltonian(tr) - 2.0).max() < 1e-12
+    tr = mod.integrate([-1.1, 2.0], 0.001, 1200)             # resolved: reflected
+    assert tr[-1, 0] < -1.0
