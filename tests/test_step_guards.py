@@ -102,6 +102,26 @@ def test_avf_stops_on_the_guard_not_on_newton(tt_modules):
         assert _h_phys_error(mod, tr) > 0.5
 
 
+def _check_roundoff_residual_message(mod):
+    """Unguarded, g = q creeps to 0 and the increments become far smaller than the state: a
+    simplified-Newton residual at the state's round-off is not a failure of h (it used to say
+    "try a smaller step size h" with a residual of 5e-17); a real divergence still is."""
+    Y0 = mod.initial_state(Y0_TT)
+    with pytest.raises(mod.ConvergenceError) as ei:
+        mod.integrate(Y0, 0.3, 400, solver="simplified", check_resolution=False)
+    y = ei.value.trajectory[-1]
+    assert ei.value.residual_norm <= 4 * 2.2e-16 * np.abs(y).max()
+    assert ei.value.converging and "raise maxiter" in str(ei.value) and "smaller step" not in str(ei.value)
+    # negative control: Newton's method failing with a residual of O(1) keeps the advice on h
+    with pytest.raises(mod.ConvergenceError) as ei:
+        mod.integrate(Y0, 0.3, 400, solver="newton", check_resolution=False)
+    assert ei.value.residual_norm > 1 and not ei.value.converging and "smaller step size h" in str(ei.value)
+
+
+def test_roundoff_residual_is_not_called_a_step_size_failure(tt_modules):
+    _check_roundoff_residual_message(tt_modules("avf"))
+
+
 def test_initial_state_refuses_g_not_positive(tt_modules):
     mod = tt_modules("midpoint")
     with pytest.raises(ValueError, match=r"g = q is -1 at y0; it must be > 0"):
@@ -231,3 +251,8 @@ def test_barrier_thinner_than_a_step_is_invisible(barrier_modules):
     assert tr[-1, 0] > 2.5 and np.abs(mod.hamiltonian(tr) - 2.0).max() < 1e-12
     tr = mod.integrate([-1.1, 2.0], 0.001, 1200)             # resolved: reflected
     assert tr[-1, 0] < -1.0
+
+
+def test_roundoff_residual_message_numba(tt_modules):
+    pytest.importorskip("numba")
+    _check_roundoff_residual_message(tt_modules("avf", "numba"))
