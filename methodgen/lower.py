@@ -80,12 +80,17 @@ class ScalarPrinter(PythonCodePrinter):
 class CheckPrinter(ScalarPrinter):
     """ScalarPrinter for the per-step checks (no trajectory depends on their rounding):
     squares and cubes of a symbol as products and ``u**(3/2)`` as ``u*math.sqrt(u)``,
-    which CPython evaluates faster than ``**``."""
+    which CPython evaluates faster than ``**``.  Squares to fourth powers of any other base
+    are products too: a float ``**`` that overflows raises OverflowError where ``*`` gives
+    inf, and a check (such as H at the step's end) must not fail where the state is finite."""
 
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
         if b.is_Symbol and e.is_Integer and 2 <= e <= 3:
             return "(" + "*".join([self._print(b)] * int(e)) + ")"
+        if e.is_Integer and 2 <= e <= 4:
+            base = self.parenthesize(b, sp.printing.precedence.PRECEDENCE["Mul"])
+            return "(" + "*".join([base] * int(e)) + ")"
         if b.is_Symbol and e.is_Rational and e.q == 2 and abs(e.p) == 3:
             u = self._print(b)
             power = f"({u}*math.sqrt({u}))"
