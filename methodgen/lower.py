@@ -242,7 +242,7 @@ class ModuleIR:
     #: ``(kind, expression)``, kind ``"positive"`` (log, negative fractional power) or
     #: ``"nonnegative"`` (positive fractional power such as sqrt).
     domain: tuple[tuple[str, str], ...] = ()
-    #: The post kernel also gives H(y1) - H(y0) and Σ|terms of H| at y0 (see energy_jump).
+    #: The post kernel also gives H and Σ|terms of H| at y1 (see energy_jump).
     energy_jump: bool = False
     #: Symmetric composition of the base step: family, order, stages, source (None: the base
     #: method), and its coefficients γ_i as float64 reprs (``stages`` of them).
@@ -518,7 +518,8 @@ def energy_jump(scheme, lplan, tguard) -> tuple[sp.Expr, ...]:
     more than H's own size, ``S = Σ|terms of H|``, and the next step may leave it again:
     the local error estimate, built from the field at the two ends, can see nothing (the
     force vanishes at the barrier's centre).  The runtimes refuse a step with
-    ``|H(y1) - H(y0)| > MAX_ENERGY_JUMP · S(y0)``.  Not for methods that keep H exactly
+    ``|H(y1) - H(y0)| > MAX_ENERGY_JUMP · S(y0)`` (``S = |T| + |U|`` for a separable H), the values at y1 carried over as those at
+    y0 of the next step (one evaluation of H per step, sharing the force's subexpressions).  Not for methods that keep H exactly
     (their H does not jump), linear fields (exempt from the resolution guards, no lplan)
     and time-transformed systems (K = 0: their own level-set guard, see
     :func:`methodgen.timetransform.time_scale_guard`).  The caller leaves it out where H has
@@ -529,6 +530,11 @@ def energy_jump(scheme, lplan, tguard) -> tuple[sp.Expr, ...]:
     if lplan is None or tguard or scheme.traits.energy_preserving:
         return ()
     H = system.H
+    sep = separable_split(system)
+    if sep is not None and sep.T != 0 and sep.U != 0:
+        # |T| + |U|: the same scale where U's terms share a sign (gravity), and two abs()
+        # instead of one per term on an N-body H
+        return (H, sp.Abs(sep.T) + sp.Abs(sep.U))
     return (H, sp.Add(*(sp.Abs(t) for t in sp.Add.make_args(H))))
 
 
@@ -647,11 +653,12 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     # A time transformation's guard values (g, the level-set defect and its scale) at y1.
     tguard = time_scale_guard(system) if not is_poisson(system) else ()
     at1 = {s: s + dv for s, dv in zip(system.y, links)}
-    # The energy-jump test (methods that do not keep H): H(y1) - H(y0) and the size of H at y0.
+    # The energy-jump test (methods that do not keep H): H and its size Σ|terms| at y1, carried
+    # over as the values at y0 of the next step (a kernel gives them at the initial state).
     ejump = energy_jump(scheme, lplan, tguard) if not conds else ()
     later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
              + [u.xreplace(at1) for u in tguard]
-             + ([ejump[0].xreplace(at1) - ejump[0], ejump[1]] if ejump else []))
+             + [u.xreplace(at1) for u in ejump])
     shared = lplan.shared if lplan else ()
     scalar["post"] = _with_loops(
         _chained_kernel(inc, later, links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}), shared),
@@ -668,6 +675,9 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         vector["domain"] = _kernel([u for _, u in conds], (len(conds),), vp, rename)
     if tguard:
         vector["tguard"] = _kernel(list(tguard), (len(tguard),), vp, rename)
+    if ejump:
+        scalar["hs"] = _kernel(list(ejump), (2,), CheckPrinter({"fully_qualified_modules": True}), rename)
+        vector["hs"] = _kernel(list(ejump), (2,), vp, rename)
     vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
     n_cons = len(system.constraints)
