@@ -264,6 +264,10 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     }
     if "domain" in ir.vector:
         vector["domain"] = _vector_view(ir.vector["domain"], [("_out", ir.vector["domain"].shape)], "_out")
+    if "tguard" in ir.vector:
+        vector["tguard"] = _vector_view(ir.vector["tguard"], [("_out", ir.vector["tguard"].shape)], "_out")
+    if "hs" in ir.vector:
+        vector["hs"] = _vector_view(ir.vector["hs"], [("_out", (2,))], "_out")
     if ir.n_constraints:
         m, d = ir.n_constraints, ir.dim
         vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")

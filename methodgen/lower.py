@@ -35,6 +35,7 @@ from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .poisson import is_poisson
 from .schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
+from .timetransform import time_scale_guard
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
 
@@ -79,12 +80,17 @@ class ScalarPrinter(PythonCodePrinter):
 class CheckPrinter(ScalarPrinter):
     """ScalarPrinter for the per-step checks (no trajectory depends on their rounding):
     squares and cubes of a symbol as products and ``u**(3/2)`` as ``u*math.sqrt(u)``,
-    which CPython evaluates faster than ``**``."""
+    which CPython evaluates faster than ``**``.  Squares to fourth powers of any other base
+    are products too: a float ``**`` that overflows raises OverflowError where ``*`` gives
+    inf, and a check (such as H at the step's end) must not fail where the state is finite."""
 
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
         if b.is_Symbol and e.is_Integer and 2 <= e <= 3:
             return "(" + "*".join([self._print(b)] * int(e)) + ")"
+        if e.is_Integer and 2 <= e <= 4:
+            base = self.parenthesize(b, sp.printing.precedence.PRECEDENCE["Mul"])
+            return "(" + "*".join([base] * int(e)) + ")"
         if b.is_Symbol and e.is_Rational and e.q == 2 and abs(e.p) == 3:
             u = self._print(b)
             power = f"({u}*math.sqrt({u}))"
@@ -236,6 +242,8 @@ class ModuleIR:
     #: ``(kind, expression)``, kind ``"positive"`` (log, negative fractional power) or
     #: ``"nonnegative"`` (positive fractional power such as sqrt).
     domain: tuple[tuple[str, str], ...] = ()
+    #: The post kernel also gives H and Σ|terms of H| at y1 (see energy_jump).
+    energy_jump: bool = False
     #: Symmetric composition of the base step: family, order, stages, source (None: the base
     #: method), and its coefficients γ_i as float64 reprs (``stages`` of them).
     composition: dict | None = None
@@ -503,6 +511,33 @@ def domain_conditions(system) -> tuple[tuple[str, sp.Expr], ...]:
     return tuple(seen[k] for k in sorted(seen))
 
 
+def energy_jump(scheme, lplan, tguard) -> tuple[sp.Expr, ...]:
+    """``(H, S)``: what the energy-jump test needs, or ``()`` where it does not apply.
+
+    A step whose end lands inside a feature thinner than the step (a barrier) changes H by
+    more than H's own size, ``S = Σ|terms of H|``, and the next step may leave it again:
+    the local error estimate, built from the field at the two ends, can see nothing (the
+    force vanishes at the barrier's centre).  The runtimes refuse a step with
+    ``|H(y1) - H(y0)| > MAX_ENERGY_JUMP · S(y0)`` (``S = |T| + |U|`` for a separable H), the values at y1 carried over as those at
+    y0 of the next step (one evaluation of H per step, sharing the force's subexpressions).  Not for methods that keep H exactly
+    (their H does not jump), linear fields (exempt from the resolution guards, no lplan)
+    and time-transformed systems (K = 0: their own level-set guard, see
+    :func:`methodgen.timetransform.time_scale_guard`).  The caller leaves it out where H has
+    domain conditions: H(y1) is evaluated in the kernel that gives the domain conditions, and a
+    state outside the domain must be reported as such, not as a failure evaluating H there.
+    """
+    system = scheme.system
+    if lplan is None or tguard or scheme.traits.energy_preserving:
+        return ()
+    H = system.H
+    sep = separable_split(system)
+    if sep is not None and sep.T != 0 and sep.U != 0:
+        # |T| + |U|: the same scale where U's terms share a sign (gravity), and two abs()
+        # instead of one per term on an N-body H
+        return (H, sp.Abs(sep.T) + sp.Abs(sep.U))
+    return (H, sp.Add(*(sp.Abs(t) for t in sp.Add.make_args(H))))
+
+
 def uses_loops(scheme, loops: bool | None = None) -> bool:
     """Whether the module of ``scheme`` loops over families of like terms.
 
@@ -615,8 +650,15 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         field1 = list(sep.Minv * sp.Matrix(system.p)) + [-sp.Symbol(f"_sK{i}", real=True) for i in range(dim)]
     lplan = local_error_plan(scheme, links, field_at_end=field1)
     conds = domain_conditions(system)
+    # A time transformation's guard values (g, the level-set defect and its scale) at y1.
+    tguard = time_scale_guard(system) if not is_poisson(system) else ()
     at1 = {s: s + dv for s, dv in zip(system.y, links)}
-    later = list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
+    # The energy-jump test (methods that do not keep H): H and its size Σ|terms| at y1, carried
+    # over as the values at y0 of the next step (a kernel gives them at the initial state).
+    ejump = energy_jump(scheme, lplan, tguard) if not conds else ()
+    later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
+             + [u.xreplace(at1) for u in tguard]
+             + [u.xreplace(at1) for u in ejump])
     shared = lplan.shared if lplan else ()
     scalar["post"] = _with_loops(
         _chained_kernel(inc, later, links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}), shared),
@@ -631,6 +673,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     if conds:
         scalar["domain"] = _kernel([u for _, u in conds], (len(conds),), sp_, rename)
         vector["domain"] = _kernel([u for _, u in conds], (len(conds),), vp, rename)
+    if tguard:
+        vector["tguard"] = _kernel(list(tguard), (len(tguard),), vp, rename)
+    if ejump:
+        scalar["hs"] = _kernel(list(ejump), (2,), CheckPrinter({"fully_qualified_modules": True}), rename)
+        vector["hs"] = _kernel(list(ejump), (2,), vp, rename)
     vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
     n_cons = len(system.constraints)
@@ -681,6 +728,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         lerr_scale=repr(float(lplan.scale)) if lplan else "1.0",
         lerr_partner=lplan.partner if lplan else "",
         domain=tuple((kind, str(u)) for kind, u in conds),
+        energy_jump=bool(ejump),
         **_composition_fields(scheme),
         time_transform=_time_transform_fields(system, invs),
         poisson=_poisson_fields(system),
@@ -746,6 +794,8 @@ def _time_transform_fields(system, invs) -> dict | None:
 
     return {"g": " ".join(tt.g_source.split()), "time": tt.time.name, "energy": tt.energy.name,
             "hamiltonian": " ".join(tt.original.source.split()),
+            # per-step guard of g > 0 and of the level set (timetransform.time_scale_guard)
+            "guard": bool(time_scale_guard(system)),
             "h_index": [inv.name for inv in invs].index(PHYSICAL_ENERGY)}
 
 

@@ -218,3 +218,25 @@ def autonomise(system: Hamiltonian) -> Hamiltonian:
     object.__setattr__(out, "source", f"{system.source} + {e_name}")
     _AUTONOMISED[id(system)] = (system, out)
     return out
+
+
+def time_scale_guard(system) -> tuple[sp.Expr, ...]:
+    """What the runtimes check at every step of a time-transformed system: ``(g, d, s)``.
+
+    ``g`` must stay positive (``K = g(H + e)`` is singular where ``g ≤ 0``: physical time
+    stops or runs backwards).  ``d = H + e`` is the level-set defect: on ``K = 0`` it is 0
+    and the flow of K is the original one; off it, ``d = K/g`` is the error of the physical
+    energy and ``d ∇g`` a spurious force.  Where the motion approaches ``g = 0`` (the
+    physical trajectory reaches it in finite time, while the flow of K only approaches it)
+    a K error of round-off size is divided by a vanishing g: ``|d|`` grows to the size of
+    ``s = |e| + Σ|terms of H|``, the scale of the energy, and the run no longer follows the
+    physical motion.  Empty for a system without a time transformation and for the
+    autonomous extension (``g = 1``: nothing is singular).
+    """
+    tt = getattr(system, "time_transform", None)
+    if tt is None or tt.autonomised:
+        return ()
+    e = system.symbol(tt.energy.name)
+    H = tt.original.H
+    scale = sp.Abs(e) + sp.Add(*(sp.Abs(t) for t in sp.Add.make_args(H)))
+    return (tt.g, H + e, scale)
