@@ -502,8 +502,8 @@ def _index_record(key: str, module_path: Path, sig: str, path=None) -> None:
 
 
 def _warn_no_index(exc: _IndexTrouble, stacklevel: int) -> None:
-    warnings.warn(f"the warm-start index cannot be used ({exc}); this start and the next derive "
-                  "as methodgen.build does", RuntimeWarning, stacklevel=stacklevel + 1)
+    warnings.warn(f"the warm-start index cannot be used ({exc}); no warm start: the module is built "
+                  "as methodgen.build builds it", RuntimeWarning, stacklevel=stacklevel + 1)
 
 
 def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: str | None = None,
