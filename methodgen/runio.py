@@ -300,7 +300,9 @@ def _copy_new(tmp: str, target) -> Path | None:
     Also None when the reserved file lost its name while being written (a
     complete run renamed itself onto it: that file wins, and this one goes to the
     next free name).  ``tmp`` is left in place (the caller removes it once the
-    copy is in place).
+    copy is in place): a process killed during the copy leaves a short file under
+    the reserved name — never over another file — and its temporary file, which
+    the next ``--save`` into the folder rebuilds (:func:`recover_orphans`).
     """
     try:
         fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
