@@ -23,9 +23,6 @@ methods() / scenes()
 (PEP 562), so loading a cached module through :func:`build_text` stays light.
 """
 
-import importlib
-import types
-
 from ._version import __version__
 from .build import build, build_text, generate
 from .errors import (GenerationError, InputError, MethodgenError, MethodNotApplicable,
@@ -38,48 +35,65 @@ __all__ = [
     "GenerationError", "time_transform", "autonomise",
 ]
 
-#: Public names imported on first use (they import SymPy and the derivation code).
-_LAZY = {
-    "Hamiltonian": ".problem", "PoissonSystem": ".poisson",
-    "Scheme": ".schemes", "Traits": ".schemes", "applicable_methods": ".schemes",
-    "discretize": ".schemes", "method_names": ".schemes",
-    "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
-    "autonomise": ".timetransform", "time_transform": ".timetransform",
-    "verify": ".verify",
-}
 
+def _lazy_names():
+    """``__getattr__`` and ``__dir__`` of the package (PEP 562); its helpers stay out of the namespace."""
+    import importlib
+    import sys
+    import types
 
-def __getattr__(name: str):
-    where = _LAZY.get(name)
-    if where is None:
+    # Public names imported on first use (they import SymPy and the derivation code).
+    lazy = {
+        "Hamiltonian": ".problem", "PoissonSystem": ".poisson",
+        "Scheme": ".schemes", "Traits": ".schemes", "applicable_methods": ".schemes",
+        "discretize": ".schemes", "method_names": ".schemes",
+        "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
+        "autonomise": ".timetransform", "time_transform": ".timetransform",
+        "verify": ".verify",
+    }
+    found: list[frozenset] = []
+
+    def submodules() -> frozenset:
+        if not found:
+            import pkgutil
+
+            found.append(frozenset(m.name for m in pkgutil.iter_modules(__path__)
+                                   if not m.name.startswith("__")))   # never __main__ (the CLI)
+        return found[0]
+
+    def __getattr__(name: str):
+        where = lazy.get(name)
+        if where is not None:
+            value = getattr(importlib.import_module(where, __name__), name)
+            globals()[name] = value
+            return value
+        if name in submodules():   # methodgen.derive, methodgen.schemes … as before the lazy import
+            return importlib.import_module(f"{__name__}.{name}")
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(where, __name__), name)
-    globals()[name] = value
-    return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(globals()) | set(lazy) | submodules())
+
+    class Package(types.ModuleType):
+        """Keeps ``methodgen.verify`` the function when the subpackage of that name is imported.
+
+        Importing a subpackage binds it as an attribute of its parent; the eager
+        ``from .verify import verify`` used to rebind the function right after.  With
+        the lazy import the subpackage may be imported first (by a test or by the
+        CLI): the function must still win, as before.
+        """
+
+        def __setattr__(self, name, value):
+            if name == "verify" and isinstance(value, types.ModuleType):
+                return
+            super().__setattr__(name, value)
+
+    sys.modules[__name__].__class__ = Package
+    return __getattr__, __dir__
 
 
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
-
-
-class _Package(types.ModuleType):
-    """Keeps ``methodgen.verify`` the function when the subpackage of that name is imported.
-
-    Importing a subpackage binds it as an attribute of its parent; the eager
-    ``from .verify import verify`` used to rebind the function right after.  With
-    the lazy import the subpackage may be imported first (by a test or by the
-    CLI): the function must still win, as before.
-    """
-
-    def __setattr__(self, name, value):
-        if name == "verify" and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-import sys as _sys  # noqa: E402
-
-_sys.modules[__name__].__class__ = _Package
+__getattr__, __dir__ = _lazy_names()
+del _lazy_names
 
 
 def methods() -> list[str]:

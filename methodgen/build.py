@@ -17,19 +17,21 @@ path only.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import hmac
 import json
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING
 
 from ._version import __version__
 from .emit import (cache_dir, cache_root_of, check_cache_folder, emit_source, file_status, generator_hash,
-                   load_module, module_filename, resolve_backend, signature, template_hash,
-                   warn_regenerating, write_atomic, write_module)
-from .errors import InputError, StorageError
+                   load_if_current, load_module, module_filename, resolve_backend, signature,
+                   template_hash, warn_regenerating, write_atomic, write_module)
+from .errors import InputError, MethodgenError, StorageError
 
 if TYPE_CHECKING:  # the derivation is imported by the cold path only (see build_text)
     from .problem import Hamiltonian
@@ -199,7 +201,8 @@ def _build(system, method: str, path, backend: str, order: int, composition, opt
             with phase("write", progress):
                 write_module(path, text)
         with phase("load", progress):
-            module = load_module(path)
+            # checked on the bytes imported: a file replaced since file_status is refused, not run
+            module = load_module(path, expected_signature=sig)
     return module, path, sig
 
 
@@ -244,28 +247,82 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
 WARM_INDEX = "warm-index"
 
 
-def _plain(value, what: str):
-    """``value`` as JSON-able text/numbers (the key of :func:`build_text`); anything else is refused."""
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    if isinstance(value, float):
-        return {"float": repr(value)}   # repr round-trips; tagged: never the same key as a text
-    if isinstance(value, dict):
-        return {str(k): _plain(v, f"{what}[{k!r}]") for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+def _tagged(value, what: str):
+    """``value`` as JSON with its type in every node (the key of :func:`build_text`).
+
+    Every value carries its type, so no two arguments that build differently
+    share a key (``1.0`` and ``{"float": "1.0"}``, ``1`` and ``True``, a
+    ``numpy.float64`` and a float); mappings keep their order (a system's
+    parameters and invariants are declared in order: ``PARAM_NAMES``,
+    ``INVARIANT_NAMES`` and the signature follow it).  Anything but text,
+    numbers, None, lists and mappings of them is refused.
+    """
+    kind = type(value)
+    if value is None:
+        return ["none"]
+    if kind in (bool, int, str):
+        return [kind.__name__, value]
+    if kind is float:
+        return ["float", repr(value)]      # repr round-trips
+    if isinstance(value, (bool, int, float, str)):   # subclasses (numpy.float64 …): their own type
+        return [f"{kind.__module__}.{kind.__qualname__}", repr(value)]
+    if isinstance(value, Mapping):
+        return ["map", [[_tagged(k, f"{what} key"), _tagged(v, f"{what}[{k!r}]")] for k, v in value.items()]]
     if isinstance(value, (list, tuple)):
-        return [_plain(v, what) for v in value]
-    raise InputError(f"build_text takes text and numbers: {what} is a {type(value).__name__}; use "
+        return ["seq", [_tagged(v, what) for v in value]]
+    raise InputError(f"build_text takes text and numbers: {what} is a {kind.__name__}; use "
                      "methodgen.Hamiltonian(...) with methodgen.build(...) for SymPy objects")
 
 
-def _dist_version(name: str) -> str | None:
-    """The installed version of the distribution ``name``, read from its metadata (not imported)."""
-    from importlib import metadata
+def _sequence(value, what: str, example: str):
+    """``value`` (a list of ``what``) checked as :class:`~methodgen.problem.Hamiltonian` would: text is refused."""
+    if isinstance(value, (str, bytes)):
+        raise InputError(f"{what} must be a list, e.g. {example}, got the string {value!r}")
+    if not isinstance(value, (list, tuple)):
+        raise InputError(f"build_text takes {what} as a list, e.g. {example}, got a {type(value).__name__}")
+    return value
+
+
+def _mapping(value, what: str, example: str):
+    """``value`` (None or a mapping) checked as :class:`~methodgen.problem.Hamiltonian` would."""
+    if value is not None and not isinstance(value, Mapping):
+        raise InputError(f"{what} must be a mapping, e.g. {example}, got a {type(value).__name__}")
+    return value
+
+
+@functools.lru_cache(maxsize=None)
+def _own_source_hash() -> str:
+    """SHA-256 of this file: how text becomes a build (outside :func:`~methodgen.emit.generator_hash`)."""
+    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
+
+
+def _sympy_identity() -> str | None:
+    """Which SymPy ``import sympy`` would import, without importing it; None when there is none.
+
+    The SymPy found first on ``sys.path`` (:func:`importlib.util.find_spec`, as
+    the import itself finds it — also one on ``PYTHONPATH`` that shadows the
+    installed one), named by its folder and the bytes of its ``__init__.py``
+    and ``release.py`` (where its ``__version__`` is set).  Any other SymPy —
+    another version or another copy — gives another identity.
+    """
+    import importlib.util
 
     try:
-        return metadata.version(name)
-    except metadata.PackageNotFoundError:
+        spec = importlib.util.find_spec("sympy")
+    except (ImportError, ValueError):
         return None
+    if spec is None or not spec.origin:
+        return None
+    init = Path(spec.origin)
+    h = hashlib.sha256(str(init.resolve()).encode() + b"\0")
+    for part in (init, init.with_name("release.py")):
+        try:
+            h.update(part.read_bytes() + b"\0")
+        except FileNotFoundError:
+            h.update(b"-\0")
+        except OSError:
+            return None
+    return h.hexdigest()
 
 
 def text_key(H: str, q, p, method: str, *, params=None, constraints=(), name=None, invariants=None,
@@ -273,73 +330,162 @@ def text_key(H: str, q, p, method: str, *, params=None, constraints=(), name=Non
              options=None) -> str | None:
     """Hash of everything :func:`build_text` is given and of what the module depends on besides.
 
-    The text of the system, the method and its options, the backend and path,
-    and the versions of methodgen and SymPy (from SymPy's metadata: SymPy is not
-    imported), the templates and the generator's sources — so a key made by
-    other code never finds a module.  None when SymPy's version is unknown (then
-    there is no warm start).
+    The text of the system (parameters and invariants in their order: the
+    module follows it), the method and its options, the backend and path, the
+    cache root (resolved: an index copied into another cache finds nothing),
+    methodgen's version, the SymPy that would be imported
+    (:func:`_sympy_identity`; SymPy is not imported), the templates, the
+    generator's sources and this file's own source — so a key made by other
+    code never finds a module.  None when there is no SymPy (then there is no
+    warm start).
 
     Raises
     ------
     InputError
-        An argument that is not text or numbers.
+        An argument that is not text or numbers, ``q``, ``p`` or ``constraints``
+        given as a string, ``params`` or ``invariants`` not a mapping — as the
+        cold path (:class:`methodgen.Hamiltonian`) would refuse them.
     """
     if not isinstance(H, str):
         raise InputError(f"build_text takes H as text, got a {type(H).__name__}; use "
                          "methodgen.Hamiltonian(...) with methodgen.build(...) for SymPy objects")
-    args = {"H": H, "q": list(q), "p": list(p), "params": dict(params or {}),
-            "constraints": list(constraints or ()), "name": name, "invariants": dict(invariants or {}),
-            "time": time, "path": str(Path(path).resolve()) if path is not None else None,
-            "method": method, "order": order, "composition": composition, "options": dict(options or {})}
-    parts = {k: _plain(v, k) for k, v in args.items()}
-    sympy_version = _dist_version("sympy")
-    if sympy_version is None:
+    args = [("H", H), ("q", _sequence(q, "q", '["q"]')), ("p", _sequence(p, "p", '["p"]')),
+            ("params", _mapping(params, "params", '{"m": 1.0}')),
+            ("constraints", _sequence(constraints, "constraints", '["q1**2 + q2**2 - 1"]')),
+            ("name", name), ("invariants", _mapping(invariants, "invariants", '{"P": "p1 + p2"}')),
+            ("time", time), ("path", str(Path(path).resolve()) if path is not None else None),
+            ("method", method), ("order", order), ("composition", composition),
+            # keyword options: their order means nothing, so they are sorted
+            ("options", dict(sorted(dict(options or {}).items())))]
+    parts = [[k, _tagged(v, k)] for k, v in args]
+    sympy_id = _sympy_identity()
+    if sympy_id is None:
         return None
-    blob = json.dumps({"inputs": parts, "methodgen": __version__, "sympy": sympy_version,
-                       "backend": backend, "templates": template_hash(backend),
-                       "generator": generator_hash()}, sort_keys=True)
-    return hashlib.sha256(b"methodgen-text-key-v1\0" + blob.encode()).hexdigest()
+    blob = json.dumps({"inputs": parts, "methodgen": __version__, "sympy": sympy_id,
+                       "cache": str(cache_dir().resolve()), "backend": backend,
+                       "templates": template_hash(backend), "generator": generator_hash(),
+                       "build": _own_source_hash()}, sort_keys=True)
+    return hashlib.sha256(b"methodgen-text-key-v2\0" + blob.encode()).hexdigest()
 
 
 def _index_file(key: str) -> Path:
     return cache_dir() / WARM_INDEX / f"{key[:40]}.json"
 
 
+#: HMAC domain of the index entries (never the same message as a module's tag, see emit._keyed_tag).
+_INDEX_DOMAIN = b"methodgen-warm-index-v2\0"
+
+
 def _index_tag(root: Path, body: str) -> str | None:
-    from .emit import _cache_key, _keyed_tag
+    from .emit import _cache_key
 
     secret = _cache_key(root, create=False)
-    return None if secret is None else _keyed_tag(secret, "warm-index", body)
+    return None if secret is None else hmac.new(secret, _INDEX_DOMAIN + body.encode(), hashlib.sha256).hexdigest()
 
 
-def _index_lookup(key: str) -> tuple[Path, str] | None:
-    """``(module path, signature)`` the index holds for ``key``; None if absent or not this user's."""
-    entry = _index_file(key)
-    root = check_cache_folder(entry)
-    try:
-        data = json.loads(entry.read_text(encoding="utf-8"))
-        body = json.dumps(data["entry"], sort_keys=True)
-        tag = data["tag"]
-        path, sig = Path(data["entry"]["path"]), str(data["entry"]["signature"])
-        if data["entry"]["key"] != key:
-            return None
-    except (OSError, ValueError, KeyError, TypeError):
+def _inside(base: Path, rel: str) -> Path | None:
+    """``base / rel`` resolved, when ``rel`` is relative and stays inside ``base`` (no ``..``, no link out)."""
+    if not rel or Path(rel).is_absolute() or ".." in Path(rel).parts:
         return None
-    expected = _index_tag(root, body) if root is not None else None
+    target = (base / rel).resolve()
+    try:
+        target.relative_to(base)
+    except ValueError:
+        return None
+    return target
+
+
+def _where(module_path: Path, path) -> dict | None:
+    """How the index names ``module_path``: relative to the cache or ``generated/``, or the path given."""
+    module_path = Path(module_path).resolve()
+    if path is not None:
+        return {"in": "path", "path": str(Path(path).resolve())}
+    for base_name, base in (("cache", cache_dir().resolve()), ("generated", generated_dir())):
+        if base is None:
+            continue
+        try:
+            return {"in": base_name, "path": module_path.relative_to(base.resolve()).as_posix()}
+        except ValueError:
+            continue
+    return None   # pragma: no cover - default_path puts modules in one of the two
+
+
+def _located(where: dict, path) -> Path | None:
+    """The module an index entry names, if it is where this call's modules go (else None).
+
+    ``path=None``: the entry's relative path, inside the current cache root (or
+    the checkout's ``generated/``) — never a file elsewhere, whatever the entry
+    says.  A given ``path``: the entry must name exactly that file.
+    """
+    kind, text = where.get("in"), where.get("path")
+    if not isinstance(text, str):
+        return None
+    if path is not None:
+        wanted = Path(path).resolve()
+        return wanted if kind == "path" and text == str(wanted) else None
+    if kind == "cache":
+        return _inside(cache_dir().resolve(), text)
+    if kind == "generated":
+        gen = generated_dir()
+        return None if gen is None else _inside(gen.resolve(), text)
+    return None
+
+
+class _IndexTrouble(Exception):
+    """The index could not be used (a cache folder or key not trusted, a file unreadable)."""
+
+
+def _index_lookup(key: str, path=None) -> tuple[Path, str] | None:
+    """``(module path, signature)`` the index holds for ``key``; None if absent or not to be trusted.
+
+    Raises
+    ------
+    _IndexTrouble
+        The cache folder or key cannot be trusted, or the entry cannot be read
+        (the caller warns once and takes the cold path).
+    """
+    entry = _index_file(key)
+    try:
+        root = check_cache_folder(entry)
+        raw = entry.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except (MethodgenError, OSError) as exc:
+        raise _IndexTrouble(str(exc)) from None
+    try:
+        data = json.loads(raw)
+        body = json.dumps(data["entry"], sort_keys=True)
+        tag, where, sig = data["tag"], data["entry"]["where"], str(data["entry"]["signature"])
+        if data["entry"]["key"] != key or not isinstance(where, dict):
+            return None
+    except (ValueError, KeyError, TypeError):
+        return None
+    try:
+        expected = _index_tag(root, body) if root is not None else None
+    except (MethodgenError, OSError) as exc:
+        raise _IndexTrouble(str(exc)) from None
     if expected is None or not hmac.compare_digest(str(tag), expected):
         return None   # not written by this user's methodgen: ignored (the cold path decides)
-    return path, sig
+    module_path = _located(where, path)
+    return None if module_path is None else (module_path, sig)
 
 
-def _index_record(key: str, path: Path, sig: str) -> None:
-    """Remember that ``key`` was built into ``path`` with signature ``sig`` (keyed with the user's secret)."""
+def _index_record(key: str, module_path: Path, sig: str, path=None) -> None:
+    """Remember that ``key`` was built into ``module_path`` with signature ``sig`` (keyed with the user's secret).
+
+    Raises
+    ------
+    _IndexTrouble
+        The entry could not be written (the module is built; only the next start is cold).
+    """
+    where = _where(module_path, path)
     entry = _index_file(key)
     root = cache_root_of(entry)
-    if root is None:  # pragma: no cover - the index lives in the cache by construction
+    if where is None or root is None:  # pragma: no cover - the index lives in the cache by construction
         return
     from .emit import _cache_key
 
-    body = {"key": key, "path": str(Path(path).resolve()), "signature": sig}
+    body = {"key": key, "where": where, "signature": sig}
     try:
         try:
             root.mkdir(mode=0o700, parents=True, exist_ok=True)   # as for a module in the cache
@@ -351,9 +497,13 @@ def _index_record(key: str, path: Path, sig: str) -> None:
         _cache_key(root, create=True)
         tag = _index_tag(root, json.dumps(body, sort_keys=True))
         write_atomic(entry, json.dumps({"entry": body, "tag": tag}, sort_keys=True) + "\n")
-    except StorageError as exc:   # the module is built; only the next start is cold
-        warnings.warn(f"cannot record the warm-start index ({exc}); the next start derives again",
-                      RuntimeWarning, stacklevel=3)
+    except (MethodgenError, OSError) as exc:
+        raise _IndexTrouble(str(exc)) from None
+
+
+def _warn_no_index(exc: _IndexTrouble, stacklevel: int) -> None:
+    warnings.warn(f"the warm-start index cannot be used ({exc}); no warm start: the module is built "
+                  "as methodgen.build builds it", RuntimeWarning, stacklevel=stacklevel + 1)
 
 
 def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: str | None = None,
@@ -363,14 +513,19 @@ def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: 
 
     The same as ``build(Hamiltonian(H, q, p, params=..., ...), method, ...)``, but
     a module already built for exactly these arguments is found through an index
-    in the cache (:func:`text_key` → module path and signature) and imported
-    without importing SymPy or the derivation code: the warm path computes a
-    hash, reads one small file, checks the module (signature, content hash and
-    this user's key tag, as :func:`build` does) and imports it.  Anything else —
-    no entry, a module edited, replaced by another signature (stale) or untrusted,
-    other methodgen or SymPy versions, templates or generator sources — goes the
-    cold way, :func:`build`, which derives and rewrites the module when needed
-    and records the entry.
+    in the cache (:func:`text_key` → module and signature) and imported without
+    importing SymPy or the derivation code: the warm path computes a hash, reads
+    one small file (tagged with this user's key), and imports the module after
+    checking — on the very bytes it runs — its signature, content hash and, in the
+    cache, this user's key tag, as :func:`build` does.  The entry names the module
+    relative to the current cache root (or ``generated/``) when ``path`` is None,
+    and must name exactly ``path`` otherwise: it never leads to a file elsewhere.
+    Anything else — no entry, a module edited, replaced by another signature
+    (stale) or untrusted, another methodgen, SymPy, templates or generator sources
+    — goes the cold way, :func:`build`, which derives and rewrites the module when
+    needed and records the entry.  An index that cannot be used (a cache folder
+    others can write to while ``path`` is elsewhere, an unreadable entry) means no
+    warm start: one RuntimeWarning, and the cold way.
 
     Parameters
     ----------
@@ -384,27 +539,39 @@ def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: 
     Raises
     ------
     InputError
-        An argument that is not text or numbers (SymPy objects: use :func:`build`).
+        An argument that is not text or numbers (SymPy objects: use :func:`build`),
+        ``q``, ``p`` or ``constraints`` as a string, ``params`` or ``invariants`` not
+        a mapping — whether or not the module is cached.
     """
     backend = resolve_backend(backend)
     key = text_key(H, q, p, method, params=params, constraints=constraints, name=name, invariants=invariants,
                    time=time, path=path, backend=backend, order=order, composition=composition,
                    options=options)
-    if key is not None:
-        found = _index_lookup(key)
+    index_usable = key is not None
+    if index_usable:
+        try:
+            found = _index_lookup(key, path)
+        except _IndexTrouble as exc:   # e.g. a cache others can write to, with path= elsewhere
+            _warn_no_index(exc, stacklevel=2)
+            found, index_usable = None, False
         if found is not None:
             module_path, sig = found
-            check_cache_folder(module_path)
-            if file_status(module_path, sig) == "ok":   # stale, edited, untrusted: the cold path rebuilds
-                from .progress import about, phase
+            from .progress import about, phase
 
-                with about(module_path.name), phase("load", progress):
-                    return load_module(module_path)
+            with about(module_path.name), phase("load", progress):
+                # one read: signature, content hash and key tag checked on the bytes that run
+                _, module = load_if_current(module_path, sig)
+            if module is not None:
+                return module
+            # stale, edited, untrusted, missing: the cold path rebuilds (and warns as build does)
     from .problem import Hamiltonian
 
     system = Hamiltonian(H, q, p, params=params, constraints=constraints, name=name, invariants=invariants,
                          time=time)
     module, module_path, sig = _build(system, method, path, backend, order, composition, options, progress)
-    if key is not None:
-        _index_record(key, module_path, sig)
+    if index_usable:
+        try:
+            _index_record(key, module_path, sig, path)
+        except _IndexTrouble as exc:
+            _warn_no_index(exc, stacklevel=2)
     return module

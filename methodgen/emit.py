@@ -50,7 +50,8 @@ if TYPE_CHECKING:  # imported where rendering needs them (never on the loading p
 
 __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
            "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available",
-           "resolve_backend", "write_module", "check_cache_folder", "cache_root_of", "untagged"]
+           "resolve_backend", "write_module", "check_cache_folder", "cache_root_of", "untagged",
+           "load_if_current"]
 
 #: Code generation backends: plain numpy, or numba-compiled kernels and integration loop.
 BACKENDS = ("numpy", "numba")
@@ -591,34 +592,23 @@ class _VerifiedSourceLoader(importlib.machinery.SourceFileLoader):
         return self.source_to_code(self._source, self.path)
 
 
-def load_module(path: Path) -> ModuleType:
-    """Import a generated module from its file.
-
-    The file is read once; its content hash (and, in the per-user cache, the
-    folder and the user's key tag) is checked, and exactly those bytes are
-    compiled and run — no second read of the file and no ``.pyc``.
-
-    Raises
-    ------
-    GenerationError
-        The file is missing, corrupt, untrusted or unreadable (nothing is run).
-    UntrustedCacheError
-        A cache folder others can write to.
-    """
-    path = Path(path).resolve()
+def _read_checked(path: Path, expected_signature: str | None) -> tuple[str, bytes | None]:
+    """Read ``path`` once and classify those bytes: ``(status, bytes)`` (see :func:`file_status`)."""
     check_cache_folder(path)
     try:
         source = path.read_bytes()
-        status = _classify(path, source.decode("utf-8"), None)
+        status = _classify(path, source.decode("utf-8"), expected_signature)
     except FileNotFoundError:
-        status = "missing"
+        return "missing", None
     except UnicodeDecodeError:
-        status = "corrupt"
+        return "corrupt", None
     except OSError as exc:
         raise GenerationError(f"cannot read generated module {path}: {exc.strerror or exc}") from None
-    if status != "ok":
-        why = {"untrusted": "not written by this user's methodgen (no valid key tag)"}.get(status, status)
-        raise GenerationError(f"generated module {path} is {why}; regenerate it (it was not imported)")
+    return status, source
+
+
+def _exec_source(path: Path, source: bytes) -> ModuleType:
+    """Import the module at ``path`` from ``source`` (its checked bytes), never from a second read."""
     digest = hashlib.sha256(str(path).encode()).hexdigest()[:12]
     name = f"methodgen_generated.{path.stem}_{digest}"
     loader = _VerifiedSourceLoader(name, str(path), source)
@@ -633,6 +623,56 @@ def load_module(path: Path) -> ModuleType:
         sys.modules.pop(name, None)
         raise
     return module
+
+
+def load_if_current(path, expected_signature: str) -> tuple[str, ModuleType | None]:
+    """Import the module at ``path`` only if it is current: ``(status, module or None)``.
+
+    As :func:`load_module` with ``expected_signature``, but a file that is not
+    ``"ok"`` (missing, corrupt, untrusted, stale) is reported instead of raised,
+    for callers that then rebuild it (the warm start of
+    :func:`methodgen.build.build_text`).  The checks and the import use the same
+    bytes, read once: a file replaced in between is never imported.
+    """
+    path = Path(path).resolve()
+    status, source = _read_checked(path, expected_signature)
+    if status != "ok":
+        return status, None
+    return status, _exec_source(path, source)
+
+
+def load_module(path: Path, expected_signature: str | None = None) -> ModuleType:
+    """Import a generated module from its file.
+
+    The file is read once; its content hash (and, in the per-user cache, the
+    folder and the user's key tag; and ``expected_signature`` when given) is
+    checked, and exactly those bytes are compiled and run — no second read of
+    the file and no ``.pyc``.  So a module checked and then replaced by
+    another process before the import is never imported in its place.
+
+    Parameters
+    ----------
+    path : path-like
+    expected_signature : str, optional
+        The signature the module must carry (:func:`signature`); a module of
+        another signature is refused.
+
+    Raises
+    ------
+    GenerationError
+        The file is missing, corrupt, untrusted, of another signature or
+        unreadable (nothing is run).
+    UntrustedCacheError
+        A cache folder others can write to.
+    """
+    path = Path(path).resolve()
+    status, source = _read_checked(path, expected_signature)
+    if status != "ok":
+        why = {"untrusted": "not written by this user's methodgen (no valid key tag)",
+               "stale": "of another signature than the one just checked or written (another process "
+                        "wrote to the same path meanwhile?)"}.get(status, status)
+        raise GenerationError(f"generated module {path} is {why}; regenerate it (it was not imported)")
+    return _exec_source(path, source)
 
 
 def warn_regenerating(path, status: str, stacklevel: int = 3) -> None:
@@ -687,7 +727,7 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
         with phase("write", progress):
             write_module(path, text)
     with phase("load", progress):
-        return load_module(path)
+        return load_module(path, expected_signature=sig)
 
 
 def emit_source(scheme, sig: str | None = None, module_name: str | None = None,

@@ -11,8 +11,8 @@ nobody listens.
   reporter for the whole process.
 * The CLI installs :class:`StderrReporter`: a line on stderr when a phase has
   run for more than 2 s (``$METHODGEN_PROGRESS_SECONDS`` changes the threshold;
-  0 reports every phase) and a line with its time when it ends after more than
-  that.  A slow derivation is then never silent.  As an estimate, the line of a
+  0 reports every phase, ``inf`` none; anything but seconds ≥ 0 is refused) and
+  a line with its time when it ends after more than that.  A slow derivation is then never silent.  As an estimate, the line of a
   running phase gives the time the same phase of the same module took the last
   time it was reported (kept in ``progress-times.json`` in the cache).
 """
@@ -31,6 +31,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
 
+from .errors import InputError
+
 __all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "threshold_from_env",
            "stderr_reporting", "about", "subject", "PHASES"]
 
@@ -44,10 +46,22 @@ HISTORY_FILE = "progress-times.json"
 _HISTORY_KEEP = 500
 
 
+#: The name of the modules of unnamed systems (``system_<signature>_<method>.py``): it names no system.
+_ANONYMOUS = "system"
+
+
 def _history_key(name: str, about_text: str) -> str:
-    """``phase:module`` with the module's file name freed of its 12-hex signature prefix ("" without one)."""
+    """``phase:module`` ("" without a module) for the estimates of :class:`StderrReporter`.
+
+    The module's file name without its 12-hex signature, so that the same system
+    after a generator change keeps its estimate — except for unnamed systems
+    (``system_<signature>_…``), whose signature is all that tells them apart.
+    """
     if not about_text:
         return ""
+    named = re.match(r"(?P<name>.+?)_[0-9a-f]{12}_", about_text)
+    if named is not None and named.group("name") == _ANONYMOUS:
+        return f"{name}:{about_text}"
     return f"{name}:{re.sub(r'_[0-9a-f]{12}(?=_)', '', about_text)}"
 
 _installed: Reporter | None = None
@@ -98,14 +112,33 @@ def phase(name: str, progress: Reporter | None = None) -> Iterator[None]:
         report(name, time.perf_counter() - t0, True)
 
 
+def _check_threshold(value: float, what: str) -> float:
+    if not value >= 0:   # also NaN
+        raise InputError(f"{what} must be a number of seconds >= 0 (0: report every phase; inf: "
+                         f"never), got {value!r}")
+    return value
+
+
 def threshold_from_env(default: float = 2.0) -> float:
-    """``$METHODGEN_PROGRESS_SECONDS`` as a threshold in seconds (``default`` when unset or not a number ≥ 0)."""
-    text = os.environ.get("METHODGEN_PROGRESS_SECONDS", "")
+    """``$METHODGEN_PROGRESS_SECONDS`` as a threshold in seconds (``default`` when unset or empty).
+
+    ``inf`` reports nothing.
+
+    Raises
+    ------
+    InputError
+        A value that is not a number of seconds ≥ 0 (negative, NaN, text).
+    """
+    what = "METHODGEN_PROGRESS_SECONDS"
+    text = os.environ.get(what, "").strip()
+    if not text:
+        return default
     try:
         value = float(text)
     except ValueError:
-        return default
-    return value if value >= 0 else default
+        raise InputError(f"{what} must be a number of seconds >= 0 (0: report every phase; inf: never), "
+                         f"got {text!r}") from None
+    return _check_threshold(value, what)
 
 
 @contextmanager
@@ -138,9 +171,11 @@ class StderrReporter:
     """
 
     def __init__(self, threshold: float = 2.0, stream=None, history: bool | str | os.PathLike = False):
-        self.threshold = float(threshold)
+        self.threshold = _check_threshold(float(threshold), "the progress threshold")
         self.stream = stream
-        self._timers: dict[str, threading.Timer] = {}
+        # One timer per running phase, by thread, phase and subject: phases of two threads (or
+        # two modules) never cancel each other's timer.
+        self._timers: dict[tuple[int, str, str], threading.Timer] = {}
         self._lock = threading.Lock()
         self._history = history
 
@@ -204,19 +239,29 @@ class StderrReporter:
             notes.append(f"{last:.1f} s last time")
         self._write(f"{name}{what} …" + (f" ({'; '.join(notes)})" if notes else ""))
 
+    @staticmethod
+    def _slot(name: str) -> tuple:
+        """The timer of phase ``name`` here: by thread, phase and subject (what the phase is about)."""
+        return (threading.get_ident(), name, subject())
+
     def __call__(self, name: str, elapsed: float, done: bool) -> None:
         what = f" {subject()}" if subject() else ""
         key = _history_key(name, subject())
+        slot = self._slot(name)
         if not done:
             if self.threshold <= 0:
                 self._running(name, what, key)
                 return
+            if self.threshold > threading.TIMEOUT_MAX:   # inf: never (a Timer cannot wait that long)
+                return
             timer = threading.Timer(self.threshold, self._running, args=(name, what, key))
             timer.daemon = True
-            self._timers[name] = timer
+            with self._lock:
+                self._timers[slot] = timer
             timer.start()
             return
-        timer = self._timers.pop(name, None)
+        with self._lock:
+            timer = self._timers.pop(slot, None)
         if timer is not None:
             timer.cancel()
         if elapsed >= self.threshold:

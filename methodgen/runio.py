@@ -271,23 +271,69 @@ def _place_new(tmp: str, candidates) -> Path:
     """Move ``tmp`` to the first of the paths ``candidates`` where no file is.
 
     Never over an existing file: ``os.link`` fails instead of replacing (atomic,
-    also against another run finishing at the same moment).  Returns where it went.
+    also against another run finishing at the same moment).  Where hard links
+    cannot be made (``link()`` fails with anything but EEXIST: vfat, exFAT, SMB,
+    FUSE mounts with ENOSYS …) the name is reserved with ``O_CREAT | O_EXCL`` and
+    the bytes copied into it (:func:`_copy_new`) — never a rename onto the name, which
+    could replace a complete run that took the name in the meantime.  Returns
+    where the file went.
     """
     for target in candidates:
         try:
             os.link(tmp, target)
         except FileExistsError:
             continue
-        except OSError as exc:  # pragma: no cover - no hard links here: check, then rename
-            if exc.errno not in (_errno.EPERM, _errno.EOPNOTSUPP, _errno.EXDEV, _errno.EMLINK):
-                raise
-            if os.path.lexists(target):
+        except OSError:  # no hard links here (EPERM, EOPNOTSUPP, ENOSYS, EXDEV …): reserve and copy
+            placed = _copy_new(tmp, target)
+            if placed is None:
                 continue
-            os.replace(tmp, target)
+            os.unlink(tmp)
             return target
         os.unlink(tmp)
         return target
     raise FileExistsError(_errno.EEXIST, "no free name for the file", str(tmp))  # pragma: no cover
+
+
+def _copy_new(tmp: str, target) -> Path | None:
+    """Copy ``tmp`` into ``target`` created for it (``O_EXCL``); None when ``target`` is taken.
+
+    Also None when the reserved file lost its name while being written (a
+    complete run renamed itself onto it: that file wins, and this one goes to the
+    next free name).  ``tmp`` is left in place (the caller removes it once the
+    copy is in place): a process killed during the copy leaves a short file under
+    the reserved name — never over another file — and its temporary file, which
+    the next ``--save`` into the folder rebuilds (:func:`recover_orphans`).
+    """
+    try:
+        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    except FileExistsError:
+        return None
+    try:
+        with open(tmp, "rb") as src, os.fdopen(os.dup(fd), "wb") as dst:
+            while True:
+                block = src.read(1 << 20)
+                if not block:
+                    break
+                dst.write(block)
+            dst.flush()
+            os.fsync(dst.fileno())
+        mine = os.fstat(fd)
+        try:
+            now = os.stat(target)
+        except FileNotFoundError:
+            return None
+        if (now.st_dev, now.st_ino) != (mine.st_dev, mine.st_ino):
+            return None
+    except BaseException:
+        try:   # a half copy must not stay under the name (the temporary file still has it all)
+            if (os.stat(target).st_ino, os.stat(target).st_dev) == (os.fstat(fd).st_ino, os.fstat(fd).st_dev):
+                os.unlink(target)
+        except OSError:
+            pass
+        raise
+    finally:
+        os.close(fd)
+    return Path(target)
 
 
 class ChunkWriter:

@@ -548,7 +548,7 @@ def load_shipped_module(src: ModuleSource):
                 path = cache_dir() / src.filename
                 if file_status(path, src.signature) != "ok":
                     write_module(path, src.source)
-            module = load_module(path)
+            module = load_module(path, expected_signature=src.signature)   # checked on the bytes run
             _MODULES[src.signature] = module
         return module
 

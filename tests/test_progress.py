@@ -150,3 +150,167 @@ def test_the_running_line_gives_the_last_time_as_an_estimate(tmp_path):
         rep("derive", 0.0, False)
         rep("lower", 0.0, False)
     assert "last time" not in other.getvalue()
+
+
+# --- the threshold: inf reports nothing, nonsense is refused (review item 10) ---------------------
+
+class FakeTimer:
+    """threading.Timer that never runs by itself: the test fires the timers left uncancelled."""
+
+    made: list = []
+
+    def __init__(self, interval, function, args=()):
+        self.interval, self.function, self.args, self.cancelled = interval, function, args, False
+        FakeTimer.made.append(self)
+
+    def start(self):
+        pass
+
+    def cancel(self):
+        self.cancelled = True
+
+    @classmethod
+    def fire(cls):
+        for t in cls.made:
+            if not t.cancelled:
+                t.function(*t.args)
+
+
+@pytest.fixture
+def fake_timer(monkeypatch):
+    import threading
+
+    FakeTimer.made = []
+    monkeypatch.setattr(threading, "Timer", FakeTimer)
+    return FakeTimer
+
+
+@pytest.mark.parametrize("value", ["inf", "1e300"])
+def test_an_infinite_threshold_starts_no_timer(tmp_path, capsys, monkeypatch, fake_timer, value):
+    monkeypatch.setenv("METHODGEN_PROGRESS_SECONDS", value)
+    assert cli.main(["run", _osc(tmp_path), "--steps", "5"]) == 0
+    err = capsys.readouterr().err
+    assert fake_timer.made == [] and "Traceback" not in err and "methodgen: derive" not in err
+    rep = StderrReporter(threshold=3.0, stream=io.StringIO())
+    rep("derive", 0.0, False)
+    assert len(fake_timer.made) == 1          # control: a finite threshold does start one
+
+
+def test_a_timer_of_infinite_length_fails_in_its_thread():
+    """Why: the negative control of the guard above — threading.Timer(inf) raises in its thread."""
+    import threading
+
+    seen = []
+    previous, threading.excepthook = threading.excepthook, lambda args: seen.append(args.exc_type)
+    try:
+        t = threading.Timer(float("inf"), lambda: None)
+        t.start()
+        t.join(5)
+    finally:
+        threading.excepthook = previous
+    assert seen == [OverflowError]
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "two", "-inf"])
+def test_a_threshold_that_is_not_seconds_is_refused(tmp_path, capsys, monkeypatch, value):
+    monkeypatch.setenv("METHODGEN_PROGRESS_SECONDS", value)
+    assert cli.main(["run", _osc(tmp_path), "--steps", "5"]) == cli.EXIT_INPUT
+    err = capsys.readouterr().err
+    assert err.startswith("methodgen: error: METHODGEN_PROGRESS_SECONDS must be a number of seconds >= 0")
+    assert "Traceback" not in err and len(err.splitlines()) == 1
+    with pytest.raises(mg.InputError):
+        StderrReporter(threshold=float(value) if value != "two" else -2.0)
+    # Control: a valid value runs.
+    monkeypatch.setenv("METHODGEN_PROGRESS_SECONDS", "0.5")
+    assert cli.main(["run", _osc(tmp_path), "--steps", "5"]) == 0
+
+
+# --- timers by thread and module, estimates of unnamed systems, the compile phase (item 11) -------
+
+def _two_threads(rep, fake_timer):
+    """Thread 1 starts derive on a.py; thread 2 starts derive on b.py; thread 1 ends a.py; timers fire."""
+    import threading
+
+    go_on = threading.Event()
+
+    def thread_a():                       # a long-lived worker: a starts, b starts elsewhere, a ends
+        with progress.about("a.py"):
+            rep("derive", 0.0, False)
+            go_on.wait(30)
+            rep("derive", 0.1, True)
+
+    def thread_b():
+        with progress.about("b.py"):
+            rep("derive", 0.0, False)     # b still runs
+
+    a = threading.Thread(target=thread_a)
+    a.start()
+    while len(fake_timer.made) < 1:       # a's timer is made (a condition, not a time)
+        threading.Event().wait(0.001)
+    b = threading.Thread(target=thread_b)
+    b.start()
+    b.join()
+    go_on.set()
+    a.join()
+    fake_timer.fire()
+
+
+def test_two_threads_in_the_same_phase_keep_their_own_timers(fake_timer):
+    out = io.StringIO()
+    _two_threads(StderrReporter(threshold=1.0, stream=out), fake_timer)
+    assert out.getvalue() == "methodgen: derive b.py … (still running after 1 s)\n"
+    # Negative control: timers keyed by the phase only (the old reporter) report a, which ended, not b.
+    out = io.StringIO()
+    rep = StderrReporter(threshold=1.0, stream=out)
+    rep._slot = lambda name: name
+    fake_timer.made = []
+    _two_threads(rep, fake_timer)
+    assert out.getvalue() == "methodgen: derive a.py … (still running after 1 s)\n"
+
+
+def test_unnamed_systems_keep_their_own_estimates(tmp_path):
+    history = tmp_path / "times.json"
+    rep = StderrReporter(threshold=0, stream=io.StringIO(), history=history)
+    with progress.about("system_0123456789ab_midpoint.py"):
+        rep("derive", 0.0, False)
+        rep("derive", 300.0, True)
+    out = io.StringIO()
+    rep = StderrReporter(threshold=0, stream=out, history=history)
+    with progress.about("system_fedcba987654_midpoint.py"):      # another unnamed system
+        rep("derive", 0.0, False)
+    with progress.about("system_0123456789ab_midpoint.py"):      # the same one again
+        rep("derive", 0.0, False)
+    assert out.getvalue().splitlines() == [
+        "methodgen: derive system_fedcba987654_midpoint.py …",
+        "methodgen: derive system_0123456789ab_midpoint.py … (300.0 s last time)"]
+    # Control: a named system keeps its estimate across signatures (the test above), the old
+    # key gave the unnamed ones one shared key.
+    assert progress._history_key("derive", "system_0123456789ab_midpoint.py") != \
+        progress._history_key("derive", "system_fedcba987654_midpoint.py")
+    assert progress._history_key("derive", "osc_0123456789ab_midpoint.py") == \
+        progress._history_key("derive", "osc_fedcba987654_midpoint.py") == "derive:osc_midpoint.py"
+
+
+def test_the_cli_compile_phase_names_its_module(tmp_path, capsys, monkeypatch):
+    """The numba branch of ``run`` on a numpy module marked numba (no compile: fast); lines name the module."""
+    import methodgen.cli.run as cli_run
+
+    real, built = cli_run.build, []
+
+    def build_marked(*args, **kwargs):
+        module = real(*args, **kwargs)
+        module.BACKEND = "numba"           # takes the compile branch; step() is the numpy one
+        built.append(module)
+        return module
+
+    monkeypatch.setattr(cli_run, "build", build_marked)
+    monkeypatch.setenv("METHODGEN_PROGRESS_SECONDS", "0")
+    assert cli.main(["run", _osc(tmp_path), "--steps", "5"]) == 0
+    err = capsys.readouterr().err
+    name = built[0].__file__.rsplit("/", 1)[-1]
+    lines = [ln for ln in err.splitlines() if ln.startswith("methodgen: compile")]
+    assert lines[0] == f"methodgen: compile {name} …" and lines[1].startswith(f"methodgen: compile {name} done in")
+    # Negative control: a phase outside about() names no module (the old compile line).
+    out = io.StringIO()
+    StderrReporter(threshold=0, stream=out)("compile", 0.0, False)
+    assert out.getvalue() == "methodgen: compile …\n"

@@ -220,3 +220,116 @@ def test_kill_9_recovery_records_the_steps_its_rows_cover(osc, tmp_path, capsys,
     states2, meta2 = load_trajectory(folder / "long.recovered-2.npz")
     np.testing.assert_array_equal(states2, states)
     assert not _rows_match_steps(module, [1.0, 0.0], 0.01, states2, meta2)
+
+
+# --- without hard links: never a rename onto the name (review items 5 and 6) ---------------------
+
+def _old_place_new(tmp, candidates):
+    """The old fallback: check the name, then rename onto it (the race), and errors it gave up on."""
+    for target in candidates:
+        try:
+            os.link(tmp, target)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+                raise
+            if os.path.lexists(target):
+                continue
+            os.replace(tmp, target)
+            return target
+        os.unlink(tmp)
+        return target
+    raise AssertionError("no free name")
+
+
+def _no_link(code):
+    def link(src, dst, *a, **k):
+        raise OSError(code, os.strerror(code))
+    return link
+
+
+def _complete_run(target):
+    g = ChunkWriter(target, meta={"h": 0.1})
+    g.append(np.ones((1000, 2)))
+    return g.close(complete=True)
+
+
+def test_without_hard_links_a_complete_run_finishing_meanwhile_is_kept(tmp_path, monkeypatch):
+    target = tmp_path / "run.npz"
+    monkeypatch.setattr(runio.os, "link", _no_link(errno.EPERM))
+    real_fdopen, raced = os.fdopen, []
+
+    def fdopen_racing(fd, *a, **k):   # the copy into the reserved name starts: a complete run lands
+        if not raced and target.exists():
+            raced.append(_complete_run(target))
+        return real_fdopen(fd, *a, **k)
+
+    w = ChunkWriter(target, meta={"h": 0.1})
+    w.append(np.zeros((3, 2)))
+    monkeypatch.setattr(runio.os, "fdopen", fdopen_racing)
+    with pytest.warns(RuntimeWarning, match="kept as it was"):
+        where = w.close(complete=False, reason="KeyboardInterrupt")
+    monkeypatch.setattr(runio.os, "fdopen", real_fdopen)
+    assert raced == [target]
+    states, meta = load_trajectory(target)
+    assert states.shape == (1000, 2) and bool(meta["complete"])            # the complete run is kept
+    assert where == tmp_path / "run.partial.npz" and load_trajectory(where)[0].shape == (3, 2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.npz", "run.partial.npz"]   # no temporary left
+
+    # Negative control: the old fallback (check, then rename) loses the complete run.
+    for p in tmp_path.iterdir():
+        p.unlink()
+    monkeypatch.setattr(runio, "_place_new", _old_place_new)
+    real_lexists = os.path.lexists
+
+    def lexists_racing(p):
+        seen = real_lexists(p)
+        if str(p) == str(target) and not seen:
+            _complete_run(target)
+        return seen
+
+    w = ChunkWriter(target, meta={"h": 0.1})
+    w.append(np.zeros((3, 2)))
+    monkeypatch.setattr(runio.os.path, "lexists", lexists_racing)
+    w.close(complete=False, reason="KeyboardInterrupt")
+    monkeypatch.setattr(runio.os.path, "lexists", real_lexists)
+    assert load_trajectory(target)[0].shape == (3, 2)                      # overwritten by the incomplete run
+
+
+def test_without_hard_links_an_existing_file_is_taken_and_the_copy_goes_beside(tmp_path, monkeypatch):
+    target = tmp_path / "run.npz"
+    target.write_bytes(b"a good file")
+    monkeypatch.setattr(runio.os, "link", _no_link(errno.EOPNOTSUPP))
+    w = ChunkWriter(target, meta={"h": 0.1})
+    w.append(np.zeros((3, 2)))
+    with pytest.warns(RuntimeWarning, match="kept as it was"):
+        where = w.close(complete=False, reason="KeyboardInterrupt")
+    assert target.read_bytes() == b"a good file" and load_trajectory(where)[0].shape == (3, 2)
+
+
+@pytest.mark.parametrize("code", ["ENOSYS", "EPERM", "EXDEV"])
+def test_link_failing_with_any_error_falls_back_to_the_safe_copy(tmp_path, monkeypatch, code):
+    """FUSE mounts without link() say ENOSYS: incomplete runs and killed saves are still saved."""
+    code = getattr(errno, code)
+    monkeypatch.setattr(runio.os, "link", _no_link(code))
+    w = ChunkWriter(tmp_path / "run.npz", meta={"h": 0.1})
+    w.append(np.zeros((3, 2)))
+    assert w.close(complete=False, reason="KeyboardInterrupt") == tmp_path / "run.npz"
+    # A killed save (its temporary file left unlocked) is rebuilt the same way.
+    k = ChunkWriter(tmp_path / "killed.npz", meta={"h": 0.1})
+    k.append(np.ones((2, 2)))
+    k._abandon_zip()
+    os.close(k._lock)
+    k._lock = None
+    notes = recover_orphans(tmp_path)
+    assert any("recovered 1 complete chunks" in n for n in notes), notes
+    assert load_trajectory(tmp_path / "killed.recovered.npz")[0].shape == (2, 2)
+    # Negative control: the old rule gave up on ENOSYS (a StorageError for the user), took the others.
+    tmp = tmp_path / "x.tmp"
+    tmp.write_bytes(b"x")
+    if code == errno.ENOSYS:
+        with pytest.raises(OSError):
+            _old_place_new(str(tmp), [tmp_path / "x.npz"])
+    else:
+        assert _old_place_new(str(tmp), [tmp_path / "x.npz"]) == tmp_path / "x.npz"

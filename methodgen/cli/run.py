@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -13,7 +14,7 @@ from ..build import build, scene_module_path
 from ..emit import BACKENDS
 from ..errors import InputError
 from ..limits import check_memory, check_steps
-from ..progress import phase
+from ..progress import about, phase
 from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
 from ..schemes import METHODS, composition_for, method_key, scheme_options
@@ -322,7 +323,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if getattr(module, "BACKEND", "numpy") == "numba":
         # Compile (or load from numba's disk cache) before the timed region.
         try:
-            with phase("compile"):
+            # about the module: its line names it, and the estimate is the last compile of that module
+            with about(Path(module.__file__).name), phase("compile"):
                 module.step(y, h, params)
         except (RuntimeError, FloatingPointError, ValueError):
             pass
