@@ -47,6 +47,7 @@ from ..errors import InputError
 from ..problem import Hamiltonian
 from .base import STEP, Scheme, Traits
 from .gauss import _f64
+from .quadrature import DPS, MAX_NODES, gauss_legendre, gauss_legendre_f64
 
 NAME = "energy-collocation"
 SUMMARY = ("energy-preserving (AVF) collocation, stages=s at Gauss nodes (symmetric, order 2s, "
@@ -87,30 +88,46 @@ def basis(s: int):
     return tuple(c), tuple(ell), tuple(Lam), tuple(b)
 
 
-@lru_cache(maxsize=None)
 def quadrature(m: int) -> tuple:
-    """The m-node Gauss–Legendre rule on [0, 1]: ``((x_k, w_k), …)`` as 40-digit mpmath numbers,
-    from the exact nodes (roots of the shifted Legendre polynomial) and ``w_k = ∫_0^1 ℓ_k``."""
+    """The m-node Gauss–Legendre rule on [0, 1]: ``((x_k, w_k), …)`` as 60-digit mpmath numbers
+    (:func:`methodgen.schemes.quadrature.gauss_legendre`)."""
+    return gauss_legendre(m)
+
+
+@lru_cache(maxsize=None)
+def _mp_coefficients(expr) -> tuple:
+    """Coefficients of a polynomial in σ (highest first) as 60-digit mpmath numbers."""
     import mpmath as mp
 
-    from .gauss import legendre
+    with mp.workdps(DPS):
+        return tuple(mp.mpf(str(sp.N(c, DPS + 10))) for c in sp.Poly(expr, SIGMA).all_coeffs())
 
-    P = legendre(m)
-    with mp.workdps(50):
-        xs = [mp.mpf(str(sp.N(r, 50))) for r in sorted(P.all_roots(), key=lambda r: float(sp.N(r, 30)))]
-        out = []
-        for k, xk in enumerate(xs):
-            # w_k = ∫_0^1 ℓ_k(x) dx with ℓ_k the Lagrange polynomial of the nodes
-            coeffs = [mp.mpf(1)]
-            denom = mp.mpf(1)
-            for j, xj in enumerate(xs):
-                if j == k:
-                    continue
-                coeffs = [a - xj * b for a, b in zip([0] + coeffs, coeffs + [0])]
-                denom *= xk - xj
-            w = sum(c / (i + 1) for i, c in enumerate(coeffs)) / denom
-            out.append((xk, w))
-        return tuple(out)
+
+def _at(expr, x):
+    """The polynomial ``expr`` in σ at the mpmath number x (Horner, 60 digits)."""
+    import mpmath as mp
+
+    with mp.workdps(DPS):
+        return mp.polyval(list(_mp_coefficients(expr)), x)
+
+
+def coefficient_tables(stages: int, m: int) -> dict:
+    """The numbers the module uses, each computed at 60 digits and rounded to float64 once.
+
+    Returns
+    -------
+    dict
+        ``nodes``, ``weights``: the m-node rule (floats); ``path[k][i] = Λ_i(x_k)`` (the
+        stage points ``u(x_k) = y0 + Σ_i Λ_i(x_k) Z_i``); ``quad[j][k] = w_k ℓ_j(x_k)``;
+        ``inv_b[j] = 1/b_j`` and ``b[j]`` -- all float.
+    """
+    c, ell, Lam, b = basis(stages)
+    rule = quadrature(m)
+    nodes, weights = gauss_legendre_f64(m)
+    path = tuple(tuple(float(_at(L, x)) for L in Lam) for x, _ in rule)
+    quad = tuple(tuple(float(w * _at(ell[j], x)) for x, w in rule) for j in range(stages))
+    return {"nodes": nodes, "weights": weights, "path": path, "quad": quad,
+            "inv_b": tuple(float(1 / sp.N(bj, DPS)) for bj in b), "b": tuple(float(sp.N(bj, DPS)) for bj in b)}
 
 
 def field_degree(system: Hamiltonian) -> int | None:
@@ -145,20 +162,25 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
     # is a polynomial in σ of known degree) -- far cheaper than expanding the integral
     # symbolically, and the same f(u(x_k)) serve every j.  Otherwise 2s + 2 nodes.
     m = nodes_needed(stages, degree) if exact else 2 * stages + 2
-    quad = quadrature(m)
-    U = [{v: v + sp.Add(*[_f64(Lam[k].subs(SIGMA, sp.Float(str(x), 40))) * Z[k][i] for k in range(stages)])
-          for i, v in enumerate(y0)} for x, _ in quad]
+    if m > MAX_NODES:
+        raise InputError(f"energy-collocation: f = J∇H has degree {degree}, so exact quadrature with "
+                         f"stages={stages} needs {m} Gauss–Legendre nodes; at most {MAX_NODES} are offered "
+                         "(use fewer stages or a discrete-gradient method)")
+    tab = coefficient_tables(stages, m)
+    U = [{v: v + sp.Add(*[_f64(tab["path"][k][i]) * Z[i][iv] for i in range(stages)])
+          for iv, v in enumerate(y0)} for k in range(m)]
     FU = [[fi.xreplace(Uk) for fi in f] for Uk in U]
-    integral = [[sp.Add(*[_f64(w * ell[j].subs(SIGMA, sp.Float(str(x), 40))) * FU[k][i]
-                          for k, (x, w) in enumerate(quad)]) for i in range(n)] for j in range(stages)]
+    integral = [[sp.Add(*[_f64(tab["quad"][j][k]) * FU[k][i] for k in range(m)]) for i in range(n)]
+                for j in range(stages)]
     if exact:
         how = (f"{m}-node Gauss–Legendre quadrature, exact for this polynomial field (degree {degree} in y: "
                f"the integrand has degree ≤ {(stages - 1) + degree * stages} in σ)")
     else:
         how = f"{m}-node Gauss–Legendre quadrature (H not a polynomial: H kept to the quadrature error)"
-    residual = sp.Matrix([Z[j][i] - h * _f64(1 / b[j]) * integral[j][i] for j in range(stages) for i in range(n)])
-    increment = sp.Matrix([sp.Add(*[_f64(b[j]) * Z[j][i] for j in range(stages)]) for i in range(n)])
-    guess = sp.Matrix([h * _f64(b[j]) * f[i] for j in range(stages) for i in range(n)])   # F_j ≈ f(y0)
+    residual = sp.Matrix([Z[j][i] - h * _f64(tab["inv_b"][j]) * integral[j][i]
+                          for j in range(stages) for i in range(n)])
+    increment = sp.Matrix([sp.Add(*[_f64(tab["b"][j]) * Z[j][i] for j in range(stages)]) for i in range(n)])
+    guess = sp.Matrix([h * _f64(tab["b"][j]) * f[i] for j in range(stages) for i in range(n)])   # F_j ≈ f(y0)
     traits = Traits(order=2 * stages, symmetric=True, symplectic=False, energy_preserving=exact,
                     preserved=("H",) if exact else (), solve="newton",
                     approximate=() if exact else ("H",),
@@ -171,5 +193,5 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
                   resolution=None, fixed_point=True,
                   options=(() if stages == DEFAULT_STAGES else (("stages", stages),)),
                   structure={"kind": "energy-collocation", "stages": stages, "exact": exact,
-                             "degree": degree, "nodes": m, "ell": ell, "Lam": Lam, "b": b,
+                             "degree": degree, "nodes": m, "tables": tab, "ell": ell, "Lam": Lam, "b": b,
                              "sigma": SIGMA, "Z": Z})
