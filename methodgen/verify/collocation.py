@@ -194,8 +194,12 @@ def energy_collocation_certificates(scheme) -> list[Certificate]:
     emitted = emitted_coefficient_certificates(scheme)
     floats_ok = all(c.status != REFUTED for c in emitted)
     details["module_coefficients_certified"] = floats_ok
+    from ..schemes.energy_collocation import drift_note
+
+    details["float64"] = drift_note(s)
     claim = (f"energy-collocation (s = {s}) keeps H exactly: H(y1) − H(y0) = −Σ_j (b_j/h) Z_jᵀ J Z_j = 0 "
-             "(exact coefficients; the module's float64 ones are certified separately)")
+             "(exact coefficients; the module's float64 ones are certified separately; "
+             f"{drift_note(s)})")
     return [Certificate(claim, PROVED if ok and floats_ok else REFUTED,
                         f"Λ_j' = ℓ_j, Λ_j(1) = b_j; {m}-node rule exact to degree {2 * m - 1} ≥ {integrand}",
                         "", "exact lemmas (basis, B(2m) of the rule, degree count) + chain rule along u, J skew"
