@@ -74,3 +74,26 @@ def test_old_monomial_weights_were_wrong():
 def test_bad_node_count(m):
     with pytest.raises(InputError, match=rf"number of nodes must be an integer in 1\.\.{MAX_NODES}"):
         gauss_legendre(m)
+
+
+def test_avf_quadrature_uses_a_certified_rule():
+    """AVF's quadrature path: the rule in its equations is the certified one, and the
+    identity's claim says what is checked (not "hence H(y1) = H(y0)": H is approximate)."""
+    import dataclasses
+
+    import methodgen as mg
+    from methodgen.verify.discrete_gradients import dg_items
+
+    kepler = mg.load_scene("kepler").system
+    sc = mg.discretize(kepler, "avf")
+    assert sc.traits.approximate == ("H",)
+    x, w = sc.structure["rule"]
+    assert (x, w) == gauss_legendre_f64(8)
+    items = dict(dg_items(sc))
+    assert items["quadrature"].status == NUMERICAL and items["quadrature"].details["passed"]
+    ident = items["invariant:H"].claim
+    assert "up to the quadrature error" in ident and "hence H(y1) = H(y0)" not in ident
+    # negative control: a perturbed rule in the structure is refuted
+    bad = (x, tuple(v + (1e-12 if i == 3 else 0) for i, v in enumerate(w)))
+    bad_items = dict(dg_items(dataclasses.replace(sc, structure={"kind": "avf-quadrature", "rule": bad})))
+    assert bad_items["quadrature"].status == REFUTED
