@@ -133,6 +133,12 @@ def _at(expr, x):
         return mp.polyval(list(_mp_coefficients(expr)), x)
 
 
+def _snap(v) -> float:
+    """``float(v)``, with the 60-digit round-off of an exact zero (|v| < 1e-50: ℓ_j(x_k) = 0
+    when a quadrature node is a collocation node) written as 0, not as 1e-62."""
+    return 0.0 if abs(v) < 1e-50 else float(v)
+
+
 def coefficient_tables(stages: int, m: int) -> dict:
     """The numbers the module uses, each computed at 60 digits and rounded to float64 once.
 
@@ -146,8 +152,8 @@ def coefficient_tables(stages: int, m: int) -> dict:
     c, ell, Lam, b = basis(stages)
     rule = quadrature(m)
     nodes, weights = gauss_legendre_f64(m)
-    path = tuple(tuple(float(_at(L, x)) for L in Lam) for x, _ in rule)
-    quad = tuple(tuple(float(w * _at(ell[j], x)) for x, w in rule) for j in range(stages))
+    path = tuple(tuple(_snap(_at(L, x)) for L in Lam) for x, _ in rule)
+    quad = tuple(tuple(_snap(w * _at(ell[j], x)) for x, w in rule) for j in range(stages))
     return {"nodes": nodes, "weights": weights, "path": path, "quad": quad,
             "inv_b": tuple(float(1 / sp.N(bj, DPS)) for bj in b), "b": tuple(float(sp.N(bj, DPS)) for bj in b)}
 
