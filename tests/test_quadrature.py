@@ -20,13 +20,33 @@ from methodgen.verify.report import NUMERICAL, REFUTED
 FAST = list(range(1, 33)) + [48, 63, 64]
 
 
-def _check_rule(m: int) -> None:
-    # the 60-digit rule: degree < 2m integrated to ~1e-55 (x^p moments, exact 1/(p+1))
-    rule = gauss_legendre(m)
+def _moment_error(rule):
+    """max over p < 2m of |Σ w_k x_k^p − 1/(p+1)| at 60 digits (x^p ≤ 1, w_k > 0: no cancellation)."""
+    m = len(rule)
+    worst = mp.mpf(0)
     with mp.workdps(60):
-        for p in (0, 1, 2 * m - 2, 2 * m - 1):
-            err = mp.fsum(w * x**p for x, w in rule) - mp.mpf(1) / (p + 1)
-            assert abs(err) < mp.mpf(10) ** -50, (m, p, err)
+        powers = [mp.mpf(1)] * m
+        for p in range(2 * m):
+            err = mp.fsum(w * xp for (_, w), xp in zip(rule, powers)) - mp.mpf(1) / (p + 1)
+            worst = max(worst, abs(err))
+            powers = [xp * x for (x, _), xp in zip(rule, powers)]
+    return worst
+
+
+def test_moment_check_has_teeth():
+    """Negative control of the 60-digit check: one weight off by 1e-45 fails it."""
+    rule = list(gauss_legendre(16))
+    with mp.workdps(60):
+        rule[5] = (rule[5][0], rule[5][1] + mp.mpf("1e-45"))
+    assert _moment_error(rule) > mp.mpf(10) ** -50
+
+
+def _check_rule(m: int) -> None:
+    # the 60-digit rule: every x^p, p < 2m, integrated to < 1e-50 (exact value 1/(p+1));
+    # x^p ≤ 1 and w_k > 0 on [0, 1], so the check itself loses no digits
+    rule = gauss_legendre(m)
+    assert _moment_error(rule) < mp.mpf(10) ** -50, m
+    with mp.workdps(60):
         assert all(0 < x < 1 and w > 0 for x, w in rule)
         assert all(a[0] < b[0] for a, b in zip(rule, rule[1:]))
     # the float64 rule the module carries: certified to round-off
