@@ -222,3 +222,10 @@ def test_energy_drift_is_as_stated(tmp_path):
     drift = _drift_per_step(mod)
     assert 0 < drift <= bound, drift               # a real, positive drift of the stated size
     assert _drift_per_step(mod, solver="fixed-point") > bound
+
+
+def test_scheme_without_tables_is_not_proved(hh):
+    """The H claim needs the module's tables: without them it is not proved."""
+    sc = mg.discretize(hh, "energy-collocation", stages=2)
+    st = {k: v for k, v in sc.structure.items() if k != "tables"}
+    assert energy_collocation_certificates(dataclasses.replace(sc, structure=st))[0].status == REFUTED

@@ -227,8 +227,10 @@ def emitted_coefficient_certificates(scheme) -> list[Certificate]:
 
     st = scheme.structure
     tab = st.get("tables")
-    if tab is None:
-        return []
+    if tab is None:     # nothing to certify against: the claim cannot rest on it
+        return [Certificate("the module's float64 coefficients are their exact values rounded", REFUTED,
+                            "", "", "no float64 tables recorded in the scheme", 0.0, REF_ENERGY,
+                            {"passed": False})]
     ell, Lam, b = st["ell"], st["Lam"], st["b"]
     m = st["nodes"]
     out = [rule_certificate(tab["nodes"], tab["weights"], "energy-collocation quadrature")]
