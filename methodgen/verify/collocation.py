@@ -164,7 +164,9 @@ def energy_collocation_certificates(scheme) -> list[Certificate]:
     Then ``I_j = ∫_0^1 ℓ_j ∇H(u) dσ`` and, by the chain rule along u,
     ``H(y1) − H(y0) = ∫_0^1 ∇H(u)ᵀ u' dσ = Σ_j Z_jᵀ I_j = Σ_j (b_j/h) Z_jᵀ J⁻¹ Z_j = 0``
     (J⁻¹ = −J is skew).  The claim is the method's (exact nodes and weights); the module
-    runs them rounded to float64.
+    runs them rounded to float64, and the claim is proved only if those floats are certified
+    (:func:`emitted_coefficient_certificates`, returned after it) -- a rule wrong in its
+    weights must not carry a proof.
     """
     from ..schemes.base import _field_degree
     from ..schemes.gauss import legendre
@@ -233,6 +235,9 @@ def emitted_coefficient_certificates(scheme) -> list[Certificate]:
                             {"passed": False})]
     ell, Lam, b = st["ell"], st["Lam"], st["b"]
     m = st["nodes"]
+    if len(tab["nodes"]) != m or any(len(r) != m for r in tab["quad"]) or len(tab["path"]) != m:
+        return [Certificate(f"the module's float64 tables are those of the {m}-node rule", REFUTED, "", "",
+                            f"the tables have {len(tab['nodes'])} nodes", 0.0, REF_ENERGY, {"passed": False})]
     out = [rule_certificate(tab["nodes"], tab["weights"], "energy-collocation quadrature")]
     t0 = time.perf_counter()
     rule = quadrature(m)
