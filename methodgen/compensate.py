@@ -60,6 +60,12 @@ class grouped(sp.Function):
     def _eval_is_real(self):
         return self.args[0].is_real
 
+    # lambdify (verification at 60 digits, the scipy peer): the parenthesised argument
+    def _print_parenthesised(self, printer):
+        return "(" + printer._print(self.args[0]) + ")"
+
+    _lambdacode = _pythoncode = _numpycode = _mpmathcode = _print_parenthesised
+
 
 def compensation_symbols(states: Iterable[sp.Symbol]) -> dict[sp.Symbol, sp.Symbol]:
     """``{y_i: _c_<name>}``: the symbol of each state component's compensation.

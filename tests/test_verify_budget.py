@@ -56,14 +56,27 @@ def test_undecided_status_and_report():
     c = Certificate("some claim", UNDECIDED, details={"reason": "time budget of 1 s exceeded"})
     assert c.passed
     rep = Report("t", [c, Certificate("other", "proved")])
-    assert rep.ok and rep.all_passed and not rep.decided and rep.undecided == [c]
+    # undecided is not a failure, but not "ok" either (issue 28.6c)
+    assert not rep.ok and not rep.refuted and rep.verdict == "undecided"
+    assert rep.all_passed and not rep.decided and rep.undecided == [c]
+    assert str(rep).startswith("t: UNDECIDED (1 undecided)")
     assert "[undecided] some claim  (time budget of 1 s exceeded)" in str(rep)
     assert "undecided" in rep.markdown() and "time budget of 1 s exceeded" in rep.markdown()
     assert r"\item[undecided]" in rep.latex()
     d = json.loads(rep.to_json())
-    assert set(d) == {"ok", "title", "seconds", "certificates"}
+    assert set(d) == {"ok", "verdict", "title", "seconds", "certificates"}
+    assert d["ok"] is False and d["verdict"] == "undecided"
     assert d["certificates"][0]["status"] == UNDECIDED
     assert Report("t", [Certificate("x", "proved")]).decided
+    assert Report("t", [Certificate("x", "proved")]).ok          # positive control of the verdict
+
+
+def test_no_certificate_is_never_ok():
+    """Issue 27.6: a report with nothing verified is not "ok" (a scheme always has claims)."""
+    rep = Report("t", [])
+    assert not rep.ok and not rep.refuted and rep.verdict == "nothing verified"
+    assert str(rep).startswith("t: NOTHING VERIFIED")
+    assert "NOTHING VERIFIED" in rep.markdown()
 
 
 def test_raising_claim_is_undecided(monkeypatch, harmonic_midpoint):
@@ -72,7 +85,7 @@ def test_raising_claim_is_undecided(monkeypatch, harmonic_midpoint):
 
     monkeypatch.setattr(V, "invariant_certificates", boom)
     rep = mg.verify(harmonic_midpoint)                    # no exception escapes
-    assert rep.ok and rep.all_passed and not rep.decided
+    assert not rep.refuted and rep.verdict == "undecided" and rep.all_passed and not rep.decided
     [c] = rep.undecided
     assert c.claim == "invariants kept by the step (midpoint)"
     assert c.details["reason"] == "reduction failed: ZeroDivisionError: division by zero in the reduction"
@@ -86,7 +99,7 @@ def test_failing_applicability_check_is_undecided(monkeypatch, kepler_em):
 
     monkeypatch.setattr(V, "radial_profile", boom)
     rep = mg.verify(kepler_em)
-    assert rep.ok
+    assert not rep.refuted and not rep.ok
     und = rep.undecided
     assert [c.claim for c in und] == ["q × p first integrals for every radial potential V (3D)",
                                       "q × p first integrals of this H"]
@@ -99,7 +112,7 @@ def test_failing_applicability_check_is_undecided(monkeypatch, kepler_em):
 
 def test_broken_scheme_is_undecided_not_a_crash():
     rep = mg.verify(object())
-    assert rep.ok and not rep.decided and len(rep) == 1
+    assert not rep.refuted and not rep.ok and not rep.decided and len(rep) == 1
     assert rep[0].details["reason"].startswith("reduction failed: AttributeError")
 
 
@@ -175,7 +188,7 @@ def test_verify_claim_over_budget_is_undecided(monkeypatch, harmonic_midpoint):
     t0 = time.monotonic()
     rep = mg.verify(harmonic_midpoint, timeout=0.5)
     assert time.monotonic() - t0 < 4
-    assert rep.ok and not rep.decided
+    assert not rep.refuted and not rep.ok and not rep.decided
     [c] = rep.undecided
     assert c.claim == "the step map is symplectic (midpoint)"
     assert "budget" in c.details["reason"] and c.details["timeout"] == 0.5
@@ -253,10 +266,10 @@ def _cli(*args):
 @needs_alarm
 def test_cli_tiny_timeout_is_undecided_not_a_crash():
     r = _cli("verify", "kepler", "--method", "energy-momentum", "--timeout", "0.001", "--json")
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 3, r.stderr            # undecided: neither ok (0) nor refuted (1)
     assert "Traceback" not in r.stderr
     d = json.loads(r.stdout)
-    assert d["ok"] is True
+    assert d["ok"] is False and d["verdict"] == "undecided"
     statuses = {c["status"] for c in d["certificates"]}
     assert "undecided" in statuses and statuses <= set(STATUSES)
     for c in d["certificates"]:
@@ -277,9 +290,21 @@ def test_cli_bad_timeout(value, capsys):
 
 def test_cli_text_shows_undecided(monkeypatch, capsys):
     monkeypatch.setattr(V, "invariant_certificates", lambda scheme: 1 / 0)
-    assert cli_main(["verify", "harmonic", "--method", "midpoint"]) == 0
+    assert cli_main(["verify", "harmonic", "--method", "midpoint"]) == 3
     out, _ = capsys.readouterr()
+    assert "midpoint on harmonic: UNDECIDED (1 undecided)" in out
     assert "[undecided] invariants kept by the step (midpoint)  (reduction failed: ZeroDivisionError" in out
+
+
+@needs_alarm
+def test_cli_tiny_timeout_text_is_not_ok(capsys):
+    """Issue 28.6c: ``--timeout 1e-9`` decides nothing; the text must not say ok."""
+    assert cli_main(["verify", "harmonic", "--method", "midpoint", "--timeout", "1e-9"]) == 3
+    out, _ = capsys.readouterr()
+    assert "midpoint on harmonic: UNDECIDED" in out and ": ok" not in out
+    # positive control: with the default budget the same verification is ok, exit 0
+    assert cli_main(["verify", "harmonic", "--method", "midpoint"]) == 0
+    assert "midpoint on harmonic: ok" in capsys.readouterr()[0]
 
 
 # --- (d) progress -----------------------------------------------------------------------------

@@ -2,10 +2,11 @@
 
 Verifies every claim that applies to the scene's methods (or one method) and
 prints the certificates.  ``--json`` prints exactly one JSON object
-``{"ok": bool, "certificates": [...], "reports": [...]}``; the exit status is
-1 when some claim is refuted, 0 otherwise (an ``undecided`` claim — exception
-or ``--timeout`` overrun — is not a failure); bad input is a one-line error,
-exit 2.  Once a verification has run for 2 s, progress goes to stderr, claim
+``{"ok": bool, "verdict": str, "certificates": [...], "reports": [...]}``.  The exit
+status is 0 when every report is ok (something verified, every claim decided),
+1 when some claim is refuted, 3 when nothing is refuted but some claim is
+``undecided`` (exception or ``--timeout`` overrun) or a report has no certificate
+at all — never "ok" then; bad input is a one-line error, exit 2.  Once a verification has run for 2 s, progress goes to stderr, claim
 group by claim group (never to stdout).
 """
 
@@ -64,13 +65,15 @@ def cmd_verify(args) -> int:
         schemes = [discretize(system, m, order=order, composition=composition, **options[m]) for m in methods]
     reports = [verify(s, conjugacy_dim=args.conjugacy_dim, timeout=args.timeout, progress=True) for s in schemes]
     ok = all(r.ok for r in reports)
+    verdict = ("refuted" if any(r.refuted for r in reports) else "ok" if ok else
+               "undecided" if any(r.undecided for r in reports) else "nothing verified")
     if args.json:
         certs = []
         for r in reports:
             for c in r.certificates:
                 certs.append({**c.to_dict(), "method_name": r.title})
         comp = composition_for(order, composition)
-        print(dump_json({"ok": ok, "scene": scene.name, "order": order,
+        print(dump_json({"ok": ok, "verdict": verdict, "scene": scene.name, "order": order,
                          "composition": None if comp is None else
                          {"family": comp.family, "order": comp.order, "stages": comp.stages},
                          "stages": {m: effective_stages(m, options[m]) for m in methods
@@ -78,7 +81,8 @@ def cmd_verify(args) -> int:
                          "time_transform": None if scene.transformed is None else
                          {"g": scene.time_transform, "system": system.name},
                          "certificates": certs,
-                         "reports": [{"title": r.title, "ok": r.ok, "seconds": round(r.seconds, 3)}
+                         "reports": [{"title": r.title, "ok": r.ok, "verdict": r.verdict,
+                                      "seconds": round(r.seconds, 3)}
                                      for r in reports]}))
     else:
         for r in reports:
@@ -88,7 +92,7 @@ def cmd_verify(args) -> int:
                 print(r.latex())
             else:
                 print(r)
-    return 0 if ok else 1
+    return {"ok": 0, "refuted": 1}.get(verdict, 3)
 
 
 def add_parser(sub) -> None:

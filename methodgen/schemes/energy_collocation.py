@@ -26,8 +26,14 @@ FPU chain and 2.5x larger to emit.)  Otherwise the integrals use ``2s + 2`` node
 H is then kept only to the quadrature error (``Traits.approximate``, numerical
 certificates).  Nodes of the collocation polynomial: exact radicals for s ≤ 3;
 for s = 4 the exact roots rounded to float64 and used as exact binary rationals —
-energy does not depend on them, the order conditions hold to ~1e-16.  Nodes,
-weights and basis values enter the equations rounded to float64.
+energy does not depend on them, the order conditions hold to ~1e-16.  The quadrature
+rule (:mod:`methodgen.schemes.quadrature`, at most 128 nodes) and the tables
+``Λ_i(x_k)``, ``w_k ℓ_j(x_k)``, ``1/b_j``, ``b_j`` are computed at 60 digits and
+rounded to float64 once (:func:`coefficient_tables`); ``verify`` certifies those
+floats, not only the ideal rule.  The tables keep the symmetry relations of the method
+exactly (mirror entries defined from their partners) and the stage sums are evaluated in a
+fixed order, so the float64 step stays symmetric: H shows no linear drift in long runs
+(:data:`MEASURED_DRIFT`; rounded entry by entry it drifted ~1e-19 per step).
 
 References
 ----------
@@ -42,11 +48,34 @@ from functools import lru_cache
 
 import sympy as sp
 
+from ..compensate import grouped
 from ..derive import invariants, vector_field
 from ..errors import InputError
 from ..problem import Hamiltonian
 from .base import STEP, Scheme, Traits
 from .gauss import _f64
+from .quadrature import DPS, MAX_NODES, gauss_legendre, gauss_legendre_f64
+
+#: Measured float64 drift of H per step (slope of the mean of H − H0 over 64 phases of
+#: p²/2 + q²/2 + q⁴/4 on |y0| = 1, h = 0.1, 20000 steps, numpy backend, default solver;
+#: AVF on the same run: 1.3e-20, i.e. none).  s = 2, 3, 4: none, after the consistent
+#: rounding and the fixed evaluation order below; before, s = 2 drifted 1.5e-19 per step
+#: and s = 3 8.9e-19.  s = 1 still drifts (1.4e-19; compensated stage sums did not change
+#: it) -- the `avf` method is the same method without that drift.  Measured figures
+#: (tests/test_energy_collocation.py checks s = 2), not computed here.
+MEASURED_DRIFT = {1: 1.4e-19, 2: 1.5e-21, 3: 3.5e-21, 4: 1.1e-20}
+_DRIFTS = (1,)   # the stage counts whose module still drifts
+
+
+def drift_note(stages: int) -> str:
+    """What was measured of H's float64 drift, as stated wherever exact H is claimed."""
+    d = MEASURED_DRIFT[stages]
+    where = "p²/2 + q²/2 + q⁴/4, h = 0.1, mean over 64 phases"
+    if stages in _DRIFTS:
+        return (f"in float64 H drifts linearly: {d:.1e} per step measured ({where}); "
+                "the avf method does not")
+    return f"in float64 no linear drift of H measured (slope {d:.1e} per step, {where})"
+
 
 NAME = "energy-collocation"
 SUMMARY = ("energy-preserving (AVF) collocation, stages=s at Gauss nodes (symmetric, order 2s, "
@@ -71,8 +100,11 @@ def basis(s: int):
         raise InputError(f"stages must be one of {', '.join(map(str, STAGES))}, got {s!r}")
     roots = sorted(legendre(s).all_roots(), key=lambda r: float(sp.N(r, 30)))
     if any(isinstance(r, sp.CRootOf) for r in roots):
-        # exact binary rationals of the float64 roots (energy does not depend on the nodes)
-        roots = [sp.Rational(float(sp.N(r, 30))) for r in roots]
+        # exact binary rationals of the float64 roots (energy does not depend on the nodes),
+        # the upper half as 1 − the lower: symmetric nodes, so the method stays symmetric
+        low = [sp.Rational(float(sp.N(r, 30))) for r in roots[: s // 2]]
+        mid = [sp.Rational(1, 2)] if s % 2 else []
+        roots = low + mid + [1 - r for r in reversed(low)]
     c = [sp.radsimp(r) for r in roots]
     ell, Lam, b = [], [], []
     for j in range(s):
@@ -87,30 +119,107 @@ def basis(s: int):
     return tuple(c), tuple(ell), tuple(Lam), tuple(b)
 
 
-@lru_cache(maxsize=None)
 def quadrature(m: int) -> tuple:
-    """The m-node Gauss–Legendre rule on [0, 1]: ``((x_k, w_k), …)`` as 40-digit mpmath numbers,
-    from the exact nodes (roots of the shifted Legendre polynomial) and ``w_k = ∫_0^1 ℓ_k``."""
+    """The m-node Gauss–Legendre rule on [0, 1]: ``((x_k, w_k), …)`` as 60-digit mpmath numbers
+    (:func:`methodgen.schemes.quadrature.gauss_legendre`)."""
+    return gauss_legendre(m)
+
+
+@lru_cache(maxsize=None)
+def _mp_coefficients(expr) -> tuple:
+    """Coefficients of a polynomial in σ (highest first) as 60-digit mpmath numbers."""
     import mpmath as mp
 
-    from .gauss import legendre
+    with mp.workdps(DPS):
+        return tuple(mp.mpf(str(sp.N(c, DPS + 10))) for c in sp.Poly(expr, SIGMA).all_coeffs())
 
-    P = legendre(m)
-    with mp.workdps(50):
-        xs = [mp.mpf(str(sp.N(r, 50))) for r in sorted(P.all_roots(), key=lambda r: float(sp.N(r, 30)))]
-        out = []
-        for k, xk in enumerate(xs):
-            # w_k = ∫_0^1 ℓ_k(x) dx with ℓ_k the Lagrange polynomial of the nodes
-            coeffs = [mp.mpf(1)]
-            denom = mp.mpf(1)
-            for j, xj in enumerate(xs):
-                if j == k:
-                    continue
-                coeffs = [a - xj * b for a, b in zip([0] + coeffs, coeffs + [0])]
-                denom *= xk - xj
-            w = sum(c / (i + 1) for i, c in enumerate(coeffs)) / denom
-            out.append((xk, w))
-        return tuple(out)
+
+def _at(expr, x):
+    """The polynomial ``expr`` in σ at the mpmath number x (Horner, 60 digits)."""
+    import mpmath as mp
+
+    with mp.workdps(DPS):
+        return mp.polyval(list(_mp_coefficients(expr)), x)
+
+
+def _snap(v) -> float:
+    """``float(v)``, with the 60-digit round-off of an exact zero (|v| < 1e-50: ℓ_j(x_k) = 0
+    when a quadrature node is a collocation node) written as 0, not as 1e-62."""
+    return 0.0 if abs(v) < 1e-50 else float(v)
+
+
+def coefficient_tables(stages: int, m: int, consistent: bool = True) -> dict:
+    """The numbers the module uses, each computed at 60 digits and rounded to float64 once.
+
+    Returns
+    -------
+    dict
+        ``nodes``, ``weights``: the m-node rule (floats); ``path[k][i] = Λ_i(x_k)`` (the
+        stage points ``u(x_k) = y0 + Σ_i Λ_i(x_k) Z_i``); ``quad[j][k] = w_k ℓ_j(x_k)``;
+        ``inv_b[j] = 1/b_j`` and ``b[j]`` -- all float.
+    consistent : bool
+        Round the mirror entries so the symmetry relations hold exactly (default);
+        False rounds every entry on its own (the negative control: H drifts).
+    """
+    c, ell, Lam, b = basis(stages)
+    rule = quadrature(m)
+    nodes, weights = gauss_legendre_f64(m)
+    s, m = stages, len(rule)
+    # The method is symmetric because its nodes are: x_(m+1-k) = 1 − x_k, ℓ_j(1 − σ) =
+    # ℓ_(s+1-j)(σ), so  b_j = b_(s+1-j),  w_k ℓ_j(x_k) = w_(m+1-k) ℓ_(s+1-j)(x_(m+1-k))  and
+    # Λ_i(x_(m+1-k)) = b_i − Λ_(s+1-i)(x_k).  Rounded one by one, the floats break these
+    # relations by an ulp; the step is then not quite symmetric and H drifts linearly in long
+    # runs.  So the first half is rounded and the mirror entries are *defined* by the
+    # relations, exactly (see _mirror_pair).
+    b64 = [float(sp.N(bj, DPS)) for bj in b]
+    inv_b = [float(1 / sp.N(bj, DPS)) for bj in b]
+    quad = [[_snap(w * _at(ell[j], x)) for x, w in rule] for j in range(s)]
+    exact_path = [[_at(L, x) for L in Lam] for x, _ in rule]
+    if not consistent:
+        return {"nodes": nodes, "weights": weights, "path": tuple(tuple(_snap(v) for v in r) for r in exact_path),
+                "quad": tuple(tuple(r) for r in quad), "inv_b": tuple(inv_b), "b": tuple(b64)}
+    for j in range(s // 2):
+        b64[s - 1 - j], inv_b[s - 1 - j] = b64[j], inv_b[j]
+    for j in range(s):
+        for k in range(m):
+            if (j, k) > (s - 1 - j, m - 1 - k):          # the mirror of an entry set before
+                quad[j][k] = quad[s - 1 - j][m - 1 - k]
+    path = [[None] * s for _ in range(m)]
+    for k in range(m):
+        for i in range(s):
+            if path[k][i] is not None:
+                continue
+            mk, mi = m - 1 - k, s - 1 - i               # Λ_i(x_k) + Λ_(s+1-i)(x_(m+1-k)) = b_i
+            path[k][i], path[mk][mi] = _mirror_pair(exact_path[k][i], exact_path[mk][mi], b64[i])
+    return {"nodes": nodes, "weights": weights, "path": tuple(tuple(r) for r in path),
+            "quad": tuple(tuple(r) for r in quad), "inv_b": tuple(inv_b), "b": tuple(b64)}
+
+
+def _mirror_pair(u, v, total: float) -> tuple[float, float]:
+    """Floats ``(a, c)`` near the exact ``u``, ``v`` (``u + v = total``) with ``a + c == total``
+    exactly in real arithmetic: ``a`` is rounded on a grid coarse enough for ``total − a``
+    to be a float as well (a few ulp at most; exact zeros stay zeros).  ``u is v`` (the
+    middle entry, ``2a = total``) gives ``total/2``."""
+    from fractions import Fraction
+    import math
+
+    if u is v:
+        return total / 2, total / 2
+    if abs(u) < 1e-50 and abs(v - total) < 1e-50:
+        return 0.0, total
+    if abs(v) < 1e-50 and abs(u - total) < 1e-50:
+        return total, 0.0
+    T = Fraction(total)
+    U = Fraction(float(u)) if abs(u) >= 1e-50 else Fraction(0)
+    # grid: a power of two at least the ulp of the largest of |u|, |v|, |total|
+    g = Fraction(2) ** (math.frexp(max(abs(float(u)), abs(float(v)), abs(total)))[1] - 53)
+    for _ in range(8):
+        a = round(U / g) * g
+        c = T - a
+        if float(a) == a and float(c) == c:
+            return float(a), float(c)
+        g *= 2
+    raise ArithmeticError(f"no float pair for {u}, {v} summing to {total}")   # pragma: no cover
 
 
 def field_degree(system: Hamiltonian) -> int | None:
@@ -132,7 +241,8 @@ def nodes_needed(stages: int, degree: int) -> int:
     return max(1, -(-((stages - 1) + degree * stages + 1) // 2))
 
 
-def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
+def build(system: Hamiltonian, stages: int = DEFAULT_STAGES, *, consistent: bool = True) -> Scheme:
+    """The scheme; ``consistent=False`` (tests only) rounds the tables entry by entry."""
     c, ell, Lam, b = basis(stages)
     n = 2 * system.dim
     h = STEP
@@ -145,24 +255,36 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
     # is a polynomial in σ of known degree) -- far cheaper than expanding the integral
     # symbolically, and the same f(u(x_k)) serve every j.  Otherwise 2s + 2 nodes.
     m = nodes_needed(stages, degree) if exact else 2 * stages + 2
-    quad = quadrature(m)
-    U = [{v: v + sp.Add(*[_f64(Lam[k].subs(SIGMA, sp.Float(str(x), 40))) * Z[k][i] for k in range(stages)])
-          for i, v in enumerate(y0)} for x, _ in quad]
-    FU = [[fi.xreplace(Uk) for fi in f] for Uk in U]
-    integral = [[sp.Add(*[_f64(w * ell[j].subs(SIGMA, sp.Float(str(x), 40))) * FU[k][i]
-                          for k, (x, w) in enumerate(quad)]) for i in range(n)] for j in range(stages)]
+    if m > MAX_NODES:
+        raise InputError(f"energy-collocation: f = J∇H has degree {degree}, so exact quadrature with "
+                         f"stages={stages} needs {m} Gauss–Legendre nodes; at most {MAX_NODES} are offered "
+                         "(use fewer stages or a discrete-gradient method)")
+    tab = coefficient_tables(stages, m, consistent)
+    # Evaluation order, fixed with `grouped` (opaque to SymPy's distribution of numbers over
+    # sums): the stage value u_k = y + (Σ_i Λ_i(x_k) Z_i) -- the small sum first, one rounding
+    # onto y --, then f(u_k) as a whole, then Σ_k w_k ℓ_j(x_k) f(u_k).  Left to SymPy, the
+    # weights were distributed into the stage sums (0.5·(p + a z1 + b z2) → 0.5 p + 0.5a z1 +
+    # 0.5b z2), so y was added to one stage term before the other: the step was no longer
+    # symmetric in float64 and H drifted linearly (see MEASURED_DRIFT).
+    U = [{v: grouped(v + grouped(sp.Add(*[_f64(tab["path"][k][i]) * Z[i][iv] for i in range(stages)])))
+          for iv, v in enumerate(y0)} for k in range(m)]
+    FU = [[grouped(fi.xreplace(Uk)) for fi in f] for Uk in U]
+    integral = [[grouped(sp.Add(*[_f64(tab["quad"][j][k]) * FU[k][i] for k in range(m)])) for i in range(n)]
+                for j in range(stages)]
     if exact:
         how = (f"{m}-node Gauss–Legendre quadrature, exact for this polynomial field (degree {degree} in y: "
                f"the integrand has degree ≤ {(stages - 1) + degree * stages} in σ)")
     else:
         how = f"{m}-node Gauss–Legendre quadrature (H not a polynomial: H kept to the quadrature error)"
-    residual = sp.Matrix([Z[j][i] - h * _f64(1 / b[j]) * integral[j][i] for j in range(stages) for i in range(n)])
-    increment = sp.Matrix([sp.Add(*[_f64(b[j]) * Z[j][i] for j in range(stages)]) for i in range(n)])
-    guess = sp.Matrix([h * _f64(b[j]) * f[i] for j in range(stages) for i in range(n)])   # F_j ≈ f(y0)
+    residual = sp.Matrix([Z[j][i] - h * _f64(tab["inv_b"][j]) * integral[j][i]
+                          for j in range(stages) for i in range(n)])
+    increment = sp.Matrix([sp.Add(*[_f64(tab["b"][j]) * Z[j][i] for j in range(stages)]) for i in range(n)])
+    guess = sp.Matrix([h * _f64(tab["b"][j]) * f[i] for j in range(stages) for i in range(n)])   # F_j ≈ f(y0)
     traits = Traits(order=2 * stages, symmetric=True, symplectic=False, energy_preserving=exact,
                     preserved=("H",) if exact else (), solve="newton",
                     approximate=() if exact else ("H",),
-                    notes=(f"{stages}-stage energy-preserving collocation at Gauss nodes; {how}",))
+                    notes=(f"{stages}-stage energy-preserving collocation at Gauss nodes; {how}",)
+                    + ((f"H exact in exact arithmetic; {drift_note(stages)}",) if exact else ()))
     return Scheme(system=system, method=NAME, traits=traits,
                   unknowns=tuple(z for row in Z for z in row), residual=residual, guess=guess,
                   increment=increment, invariants=invariants(system),
@@ -171,5 +293,5 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
                   resolution=None, fixed_point=True,
                   options=(() if stages == DEFAULT_STAGES else (("stages", stages),)),
                   structure={"kind": "energy-collocation", "stages": stages, "exact": exact,
-                             "degree": degree, "nodes": m, "ell": ell, "Lam": Lam, "b": b,
+                             "degree": degree, "nodes": m, "tables": tab, "ell": ell, "Lam": Lam, "b": b,
                              "sigma": SIGMA, "Z": Z})

@@ -67,7 +67,7 @@ from .conjugacy import conjugacy_certificate
 from .compositions import (BASE_PREFIX, REF_HLW, BaseResults, float_coefficients_certificate,
                            inherited_certificates, order_certificate, symmetry_certificate)
 from .collocation import REF as COLLOCATION_REF, REF_ENERGY as ENERGY_COLLOCATION_REF
-from .collocation import energy_collocation_certificates, gauss_certificates
+from .collocation import energy_collocation_certificates, energy_collocation_claims, gauss_certificates
 from .timetransform import REF as TIME_TRANSFORM_REF, time_transform_certificates
 from .constrained import constrained_certificates, constrained_items
 from .discrete_gradients import dg_certificates, dg_items, dg_symmetry
@@ -234,9 +234,11 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         stages = scheme.structure["stages"]
         add(f"Gauss–Legendre coefficients, s = {stages}: B({2 * stages}), D({stages}), order "
             f"{2 * stages}, symplectic, symmetric", COLLOCATION_REF, lambda: _gauss(stages))
-    if (scheme.structure or {}).get("kind") == "energy-collocation" and scheme.structure.get("exact"):
-        add(f"energy-preserving collocation keeps H exactly ({step})", ENERGY_COLLOCATION_REF,
-            lambda: energy_collocation_certificates(scheme))
+    # Energy collocation: basis, nodes, order, symmetry and the module's float64 rule (H itself
+    # is the invariants group's claim: proved for polynomial H, else stated as approximate here).
+    if (scheme.structure or {}).get("kind") == "energy-collocation":
+        add(f"energy-preserving collocation: basis, nodes, order, symmetry, float64 rule ({step})",
+            ENERGY_COLLOCATION_REF, lambda: energy_collocation_claims(scheme))
     # The Poincaré time transformation K = g(q)(H + e), when the system is one.
     if system.time_transform is not None and system.time_transform.autonomised:
         tt = system.time_transform
@@ -557,8 +559,9 @@ def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = 
     Returns
     -------
     Report
-        ``.ok`` is False iff some applicable claim was refuted; ``.decided`` is
-        False if some claim is ``undecided``.  No exception escapes (except
+        ``.ok`` is True iff something was verified and no claim was refuted or left
+        ``undecided`` (``.verdict`` says which); ``.decided`` is False if some claim
+        is ``undecided``.  No exception escapes (except
         ``KeyboardInterrupt`` and the ``ValueError`` of a bad ``timeout``).
     """
     seconds = _claim_seconds(timeout)

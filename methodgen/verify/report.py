@@ -97,6 +97,11 @@ def _tex_escape(text: str) -> str:
     return out
 
 
+#: How each verdict reads in the text and Markdown reports.
+_HEADLINE = {"ok": "ok", "refuted": "REFUTED", "undecided": "UNDECIDED",
+             "nothing verified": "NOTHING VERIFIED (no certificate)"}
+
+
 @dataclass
 class Report:
     """All certificates for one scheme (or one system).
@@ -119,9 +124,28 @@ class Report:
     composition: dict | None = None
 
     @property
+    def verdict(self) -> str:
+        """``"refuted"`` (some claim refuted), ``"nothing verified"`` (no certificate at all),
+        ``"undecided"`` (some claim not decided: exception or time budget) or ``"ok"``."""
+        if self.refuted:
+            return "refuted"
+        if not self.certificates:
+            return "nothing verified"
+        return "undecided" if self.undecided else "ok"
+
+    @property
+    def refuted(self) -> bool:
+        """True iff some applicable claim was refuted."""
+        return any(c.status == REFUTED for c in self.certificates)
+
+    @property
     def ok(self) -> bool:
-        """False iff some applicable claim was refuted."""
-        return not any(c.status == REFUTED for c in self.certificates)
+        """True iff something was verified and every claim was decided, none refuted.
+
+        A report without certificates, or with an ``undecided`` one, is not ok (though
+        not refuted either): a scheme always has claims, and one not decided is not shown.
+        """
+        return self.verdict == "ok"
 
     @property
     def all_passed(self) -> bool:
@@ -157,7 +181,7 @@ class Report:
         return [c for c in self.certificates if text.lower() in c.claim.lower()]
 
     def to_dict(self) -> dict:
-        out = {"ok": self.ok, "title": self.title, "seconds": round(self.seconds, 3)}
+        out = {"ok": self.ok, "verdict": self.verdict, "title": self.title, "seconds": round(self.seconds, 3)}
         if self.method:
             out["method"] = self.method
         if self.composition is not None:
@@ -180,7 +204,7 @@ class Report:
     def markdown(self) -> str:
         """A Markdown section: a summary table, then one paragraph per certificate."""
         lines = [f"### Verification: {_md_escape(self.title)}", "",
-                 f"Overall: **{'ok' if self.ok else 'REFUTED CLAIMS'}** "
+                 f"Overall: **{_HEADLINE[self.verdict]}** "
                  f"({len(self.certificates)} claims{self._summary()}, {self.seconds:.2f} s)", ""]
         if self._composed_line():
             lines += [_md_escape(self._composed_line()), ""]
@@ -223,7 +247,7 @@ class Report:
         return "\n".join(out) + "\n"
 
     def __str__(self) -> str:
-        rows = [f"{self.title}: {'ok' if self.ok else 'REFUTED'}"
+        rows = [f"{self.title}: {_HEADLINE[self.verdict]}"
                 + (f" ({len(self.undecided)} undecided)" if self.undecided else "")]
         if self._composed_line():
             rows.append(f"  {self._composed_line()}")
