@@ -273,11 +273,11 @@ def _zero_status(expr: sp.Expr, system: Hamiltonian, simplify_limit: int | None 
     from .special import to_elementary
 
     syms = sorted(expr.free_symbols, key=lambda s: s.name)
-    screen = to_elementary(expr)     # removable-singularity helpers as their quotients (for evaluation)
-    for k in (3, 7):
-        point = {s: sp.Float(0.37 + 0.11 * ((i * k) % 13), 30) for i, s in enumerate(syms)}
+    elementary = to_elementary(expr)   # removable-singularity helpers as their quotients
+    for sample in sample_points(len(syms)):
+        point = {s: sp.Float(v, 30) for s, v in zip(syms, sample)}
         try:
-            val = complex(screen.xreplace(point).evalf(30))
+            val = complex(elementary.xreplace(point).evalf(30))
         except (TypeError, ValueError, ZeroDivisionError):
             break
         if abs(val) > 1e-20:
@@ -288,12 +288,40 @@ def _zero_status(expr: sp.Expr, system: Hamiltonian, simplify_limit: int | None 
         grouped = False
     if grouped:
         return "zero"
-    for reduce in (sp.expand, sp.cancel, sp.simplify):
-        if reduce is sp.simplify and simplify_limit is not None and sp.count_ops(expr) > simplify_limit:
-            break
-        if reduce(expr) == 0:
-            return "zero"
+    # With sinc_u and friends, a term may cancel only against the elementary form of another
+    # (dsinc_u(u) against cos(u)/u - sin(u)/u²): reduce the elementary form as well.  It is
+    # equal to expr wherever the quotients are defined, a dense set, and both are continuous,
+    # so its exact 0 is expr's.
+    forms = [expr] if elementary == expr else [expr, elementary]
+    for form in forms:
+        for reduce in (sp.expand, sp.cancel, sp.simplify):
+            if reduce is sp.simplify and simplify_limit is not None and sp.count_ops(form) > simplify_limit:
+                break
+            if reduce(form) == 0:
+                return "zero"
     return "unknown"
+
+
+def sample_points(n: int, count: int = 2) -> list[list[float]]:
+    """``count`` fixed pseudo-random points of ``n`` coordinates in (0.2, 1.4) (seeded: the
+    same on every run) for the cheap numerical screens.
+
+    Every coordinate differs from every other (almost surely, and checked), so a pair
+    potential ``U(q_i - q_j)`` or ``1/|q_a - q_b|`` is never sampled at its singular
+    point: a periodic pattern such as ``0.37 + 0.11·((i·k) mod 13)`` repeats after 13
+    coordinates, which puts bodies a and a + 13 of a planar N-body system on one point.
+    """
+    import random
+
+    rng = random.Random(20240516 + n)
+    out = []
+    for _ in range(count):
+        while True:
+            y = [rng.uniform(0.2, 1.4) for _ in range(n)]
+            if len(set(y)) == n:
+                break
+        out.append(y)
+    return out
 
 
 #: Below this many terms an expression is reduced whole (:func:`term_groups`).
@@ -354,8 +382,7 @@ def _gradient_samples(system: Hamiltonian):
         from .special import to_elementary
         fn = sp.lambdify(args, [to_elementary(e) for e in gradient(system)], modules="math")
         out = []
-        for k in (3, 7):
-            y = [0.37 + 0.11 * ((i * k) % 13) for i in range(len(system.y))]
+        for y in sample_points(len(system.y)):
             out.append((y, [float(v) for v in fn(*(y + pv))]))
         return out
     except Exception:
@@ -384,6 +411,11 @@ def _angular_screen(system: Hamiltonian):
     return ok
 
 
+#: Largest number of degrees of freedom for which :func:`angular_momenta` tests every plane
+#: exactly when the numerical screen is unavailable (H not finite at its sample points).
+ANGULAR_UNSCREENED_MAX_DIM = 6
+
+
 @_cache
 def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     """Components of angular momentum ``q × p`` that are first integrals.
@@ -391,7 +423,10 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     For each coordinate plane (i, j) the component ``L_ij = q_i p_j - q_j p_i``
     (in 3D ``(Lx, Ly, Lz) = q × p``) is kept if its Poisson bracket with H
     simplifies to exactly 0, i.e. H is invariant under rotations in that plane.
-    Constrained systems are skipped (the constraint forces may break it).
+    Constrained systems are skipped (the constraint forces may break it).  Planes whose
+    bracket is clearly nonzero at the sample points (:func:`sample_points`) are rejected
+    numerically, all at once; where H cannot be evaluated there, planes are tested exactly
+    only up to :data:`ANGULAR_UNSCREENED_MAX_DIM` degrees of freedom (else none is found).
     """
     if is_poisson(system):
         return ()
@@ -400,6 +435,11 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
         return ()
     out = []
     screen = _angular_screen(system)
+    if screen is None and d > ANGULAR_UNSCREENED_MAX_DIM:
+        # H cannot be evaluated at the sample points: each of the d(d-1)/2 planes would go
+        # to an exact reduction of its bracket with the whole of H (minutes for an N-body
+        # sum).  Not searched: only a proof adds an angular momentum, so none is claimed.
+        return ()
     for i in range(d):
         for j in range(i + 1, d):
             if screen is not None and not screen[i, j]:
@@ -556,6 +596,8 @@ def _commutes(system: Hamiltonian, I: sp.Expr) -> bool:
         by_families = _commutes_by_families(system, I)
         if by_families is not None:
             return by_families
+    if system.dim > DETECT_MAX_DIM:
+        return False     # not shown family by family: the whole-sum reduction is unbounded here
     g = gradient(system)
     d = system.dim
     dq, dp = _partials(I, system.q), _partials(I, system.p)

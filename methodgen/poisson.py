@@ -40,6 +40,7 @@ import sympy as sp
 
 from .errors import InputError
 from .parse import check_name, check_smooth, parse_expr
+from .special import fold_removable_quotients
 from .problem import DeclaredInvariant, _names
 
 __all__ = ["PoissonSystem", "JacobiResult", "Casimir", "is_poisson"]
@@ -204,7 +205,12 @@ class PoissonSystem:
     # -- construction helpers ---------------------------------------------------
     def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
         """Text through the whitelist parser, SymPy input mapped onto the declared symbols by
-        name; both checked finite, real and smooth (the rules of :class:`~methodgen.Hamiltonian`)."""
+        name; both checked finite, real and smooth (the rules of :class:`~methodgen.Hamiltonian`),
+        every ``sin(u)/u`` folded into ``sinc_u(u)`` as there."""
+        expr, source = self._checked(value, what)
+        return fold_removable_quotients(expr), source
+
+    def _checked(self, value, what: str) -> tuple[sp.Expr, str]:
         if isinstance(value, str):
             return parse_expr(value, self._symbols, what=what), value.strip()
         if isinstance(value, (int, float)) and not isinstance(value, bool):

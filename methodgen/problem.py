@@ -192,8 +192,6 @@ class Hamiltonian:
         object.__setattr__(self, "time", symbols[tn] if tn else None)
 
         expr, source = self._expr(H, "Hamiltonian")
-        # sin(u)/u as sinc_u(u): smooth at u = 0 and evaluated there (methodgen.special)
-        expr = fold_removable_quotients(expr)
         if not expr.free_symbols & set(self.p):
             raise InputError("the Hamiltonian does not depend on any momentum p; "
                              "it would not define a Hamiltonian flow")
@@ -261,6 +259,14 @@ class Hamiltonian:
         return tuple(out)
 
     def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
+        """``(expr, source)``: parsed or mapped onto the declared symbols, checked, and with
+        every ``sin(u)/u`` folded into ``sinc_u(u)`` (smooth at u = 0 and evaluated there,
+        :mod:`methodgen.special`) — H, constraints and declared invariants alike, so that
+        brackets between them cancel symbol for symbol."""
+        expr, source = self._checked(value, what)
+        return fold_removable_quotients(expr), source
+
+    def _checked(self, value, what: str) -> tuple[sp.Expr, str]:
         if isinstance(value, str):
             try:
                 return parse_expr(value, self._symbols, what=what), value.strip()

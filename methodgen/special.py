@@ -574,19 +574,41 @@ def fold_removable_quotients(expr: sp.Expr) -> sp.Expr:
     ``cos(u)/u - sin(u)/u²`` cancels like 1/u², and its product-rule divided difference
     like 1/u: as ``sinc_u`` it evaluates to 1 at 0 and gets the helpers of this module
     (derivatives, divided difference) that are accurate to round-off near 0.  A product
-    ``c·sin(u)·D⁻¹`` is folded when ``D/u`` is free of u's symbols (``sin(2q)/(2q)``,
-    ``k sin(q)/q``, ``sin(x² + y²)/(x² + y²)``).
+    ``c·sin(u)ⁿ·D⁻¹`` (n ≥ 1 an integer) is folded to ``c·sinc_u(u)ᵏ·sin(u)ⁿ⁻ᵏ·(uᵏ/D)`` for
+    the largest k ≤ n with ``D/uᵏ`` free of u's symbols (``sin(2q)/(2q)``, ``k sin(q)/q``,
+    ``sin(x² + y²)/(x² + y²)``, ``(sin(q)/q)**2``, ``sin(q)²/q``); ``u`` must depend on a
+    symbol (``sin(2)/3`` is a number).  The
+    rewriting is repeated until nothing changes, so every factor of
+    ``sin(x) sin(y)/(x y)`` is folded.
     """
+    def sin_power(f):
+        """``(u, n)`` for a factor ``sin(u)**n`` (n a positive integer) of a symbolic u, else None."""
+        base, n = (f.base, f.exp) if f.is_Pow else (f, sp.S.One)
+        if isinstance(base, sp.sin) and n.is_Integer and n > 0 and base.args[0].free_symbols:
+            return base.args[0], n
+        return None
+
     def fold(m):
         for f in m.args:
-            if not isinstance(f, sp.sin):
+            found = sin_power(f)
+            if found is None:
                 continue
-            u = f.args[0]
-            rest = m / f
-            num, den = sp.fraction(rest)
-            ratio = sp.cancel(den / u)
-            if ratio != 0 and not (ratio.free_symbols & u.free_symbols):
-                return sinc_u(u) * num / ratio
+            u, n = found
+            num, den = sp.fraction(m / f)
+            for k in range(int(n), 0, -1):    # sin(u)²/u folds one power: sinc_u(u)·sin(u)
+                ratio = sp.cancel(den / u**k)
+                if ratio != 0 and not (ratio.free_symbols & u.free_symbols):
+                    return sinc_u(u) ** k * sp.sin(u) ** (n - k) * num / ratio
         return m
 
-    return expr.replace(lambda e: e.is_Mul and any(isinstance(f, sp.sin) for f in e.args), fold)
+    def foldable(e):
+        return e.is_Mul and any(sin_power(f) is not None for f in e.args)
+
+    # Each pass folds one factor per product; a product of several quotients needs more
+    # (the count of sin factors bounds the passes: each one removes a sin).
+    for _ in range(expr.count(sp.sin) + 1):
+        folded = expr.replace(foldable, fold)
+        if folded == expr:
+            break
+        expr = folded
+    return expr

@@ -42,6 +42,7 @@ import sympy as sp
 
 from .errors import InputError
 from .parse import check_smooth, parse_expr
+from .special import fold_removable_quotients
 from .problem import Hamiltonian
 
 __all__ = ["TimeTransform", "time_transform", "autonomise"]
@@ -140,6 +141,7 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
         g_source = str(g)
     else:
         raise InputError(f"g must be a string or a SymPy expression, got {type(g).__name__}")
+    g_expr = fold_removable_quotients(g_expr)   # sin(u)/u as in H (methodgen.special)
     if g_expr.free_symbols & set(system.p):
         raise InputError(f"the time transformation g = {g_source} depends on momenta; it must be a "
                          "function of the coordinates q (and parameters) only")

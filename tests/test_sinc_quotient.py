@@ -11,6 +11,7 @@ difference of ``sin(q)·q⁻¹`` (what the unfolded H got) and the raw quotient 
 from __future__ import annotations
 
 import math
+import sys
 
 import mpmath
 import numpy as np
@@ -174,3 +175,135 @@ def test_energy_kept_on_numba(tmp_path):
         Y = mod.integrate(np.array(y0), h, n, check_resolution=False)
         H = mod.hamiltonian(Y)
         assert np.all(np.isfinite(H)) and np.abs(H - H[0]).max() <= 4 * EPS * abs(H[0]), (y0, H - H[0])
+
+
+# --- every expression is folded (H, invariants, constraints, PoissonSystem H, g) ----------------
+
+def _pair_system(name, invariants):
+    return mg.Hamiltonian("p1**2/2 + p2**2/2 + sin(q1 - q2)/(q1 - q2)", q=["q1", "q2"], p=["p1", "p2"],
+                          name=name, invariants=invariants)
+
+
+def test_declared_invariant_written_like_H_is_proved():
+    """Exact: E2 written as H (sin(u)/u) is folded like H, so {E2, H} = 0 cancels symbol for
+    symbol; monitored, it is finite at q1 = q2 (was NaN)."""
+    from methodgen.derive import declared
+    system = _pair_system("pair_e2", {"E2": "p1**2/2 + p2**2/2 + sin(q1 - q2)/(q1 - q2)"})
+    assert system.declared_invariants[0].expr == system.H
+    (e2,) = declared(system)
+    assert e2.exact and "{E2, H} = 0 exactly" in e2.why
+
+
+def test_declared_invariant_monitored_at_the_removable_point(tmp_path):
+    """Numerical: from q = 0 the monitor E2 (= H) is finite and constant to round-off.
+    Negative control: with the folding disabled for E2 only, the monitor is NaN at q = 0."""
+    import methodgen.problem as problem
+    src = "p**2/2 + sin(q)/q"
+    system = mg.Hamiltonian(src, q=["q"], p=["p"], name="sinc_e2", invariants={"E2": src})
+    mod = mg.build(system, "energy-momentum", tmp_path / "e2.py")
+    E2 = mod.invariants(mod.integrate(np.array([0.0, 0.1]), 0.1, 5, check_resolution=False))["E2"]
+    assert np.all(np.isfinite(E2)) and np.abs(E2 - E2[0]).max() <= 4 * EPS * abs(E2[0])
+    folded = problem.fold_removable_quotients
+    calls = []
+
+    def fold_only_H(e):        # the state before the fix: H folded, the invariant not
+        calls.append(e)
+        return folded(e) if len(calls) == 1 else e
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(problem, "fold_removable_quotients", fold_only_H)
+        raw = mg.Hamiltonian(src, q=["q"], p=["p"], name="sinc_e2_raw", invariants={"E2": src})
+    assert raw.H.has(sinc_u) and not raw.declared_invariants[0].expr.has(sinc_u)
+    mod = mg.build(raw, "energy-momentum", tmp_path / "e2_raw.py")
+    E2 = mod.invariants(mod.integrate(np.array([0.0, 0.1]), 0.1, 5, check_resolution=False))["E2"]
+    assert np.isnan(E2[0])
+
+
+def test_sinc_u_meets_its_elementary_form_in_a_bracket(monkeypatch):
+    """Exact: an invariant whose sin(u)/u the fold cannot see (sin(q)(q+1)/(q²+q)) against the
+    folded H: {E2, H} reduces on the elementary form (dsinc_u against cos(q)/q - sin(q)/q²).
+    Negative control: without the elementary form (to_elementary the identity) it is not shown."""
+    import methodgen.special as special
+    from methodgen.derive import declared
+
+    def system(name):
+        return mg.Hamiltonian("p**2/2 + sin(q)/q", q=["q"], p=["p"], name=name,
+                              invariants={"E2": "p**2/2 + sin(q)*(q + 1)/(q**2 + q)"})
+
+    s = system("mixed")
+    assert not s.declared_invariants[0].expr.has(sinc_u)
+    assert declared(s)[0].exact
+    monkeypatch.setattr(special, "to_elementary", lambda e: e)
+    (e2,) = declared(system("mixed_raw"))
+    assert not e2.exact and "not shown exactly" in e2.why
+
+
+def test_poisson_system_from_the_removable_point(tmp_path, monkeypatch):
+    """Numerical: PoissonSystem("w**2/2 + sin(x)/x") runs from x = 0 (was refused: "H is NaN"),
+    H constant to round-off.  Negative control: with its folding disabled it is refused."""
+    import methodgen.poisson as poisson
+
+    def make(name):
+        return mg.PoissonSystem("w**2/2 + sin(x)/x", y=["x", "w"], S=[[0, 1], [-1, 0]], name=name)
+
+    mod = mg.build(make("ps_sinc"), "avf", tmp_path / "ps.py")
+    H = mod.hamiltonian(mod.integrate(np.array([0.0, 0.1]), 0.1, 10, check_resolution=False))
+    assert np.all(np.isfinite(H)) and np.abs(H - H[0]).max() <= 4 * EPS * abs(H[0])
+    monkeypatch.setattr(poisson, "fold_removable_quotients", lambda e: e)
+    raw = mg.build(make("ps_sinc_raw"), "avf", tmp_path / "ps_raw.py")
+    with pytest.raises(Exception, match="H is NaN"):
+        raw.integrate(np.array([0.0, 0.1]), 0.1, 10, check_resolution=False)
+
+
+def test_constraint_and_time_transformation_are_folded():
+    system = mg.Hamiltonian("(p1**2 + p2**2)/2", q=["q1", "q2"], p=["p1", "p2"], name="c_sinc",
+                            constraints=["q1 - sin(q2)/q2"])
+    assert system.constraints[0] == system.q[0] - sinc_u(system.q[1])
+    tt = mg.time_transform(_sinc_system(), "2 + sin(q)/q")
+    assert tt.time_transform.g == 2 + sinc_u(tt.q[0])
+
+
+# --- the fold is complete, and its name stays internal -------------------------------------------
+
+def test_fold_repeats_and_takes_powers():
+    """Every factor of sin(x) sin(y)/(x y) and (sin(q)/q)² is folded; sin(2)/3 (a number) is not.
+    Negative control: the one-factor fold (what one pass gave) is NaN at y = 0, the full one is not."""
+    x, y, q = sp.symbols("x y q", real=True)
+    both = fold_removable_quotients(sp.sin(x) * sp.sin(y) / (x * y))
+    assert both == sinc_u(x) * sinc_u(y)
+    assert both.subs({x: 0, y: 0}) == 1
+    assert (sp.sin(y) * sinc_u(x) / y).subs({x: 0, y: 0}) is sp.nan
+    assert fold_removable_quotients((sp.sin(q) / q) ** 2) == sinc_u(q) ** 2
+    assert fold_removable_quotients(sp.sin(q) ** 2 / q) == sp.sin(q) * sinc_u(q)
+    assert fold_removable_quotients(q * sp.sin(2) / 3) == q * sp.sin(2) / 3
+    for e in (sp.sin(q) / q**2, sp.sin(q) ** 2 / q**3, sp.sin(q) / (q + 1)):
+        assert fold_removable_quotients(e) == e
+
+
+def test_internal_name_does_not_leak():
+    """str(scheme) and the verify title show the user's text, not sinc_u."""
+    from methodgen.verify import _title
+    system = mg.Hamiltonian("p**2/2 + sin(q)/q", q=["q"], p=["p"])
+    scheme = mg.discretize(system, "midpoint")
+    assert system.H.has(sinc_u)
+    head = str(scheme).splitlines()[0]
+    assert "sin(q)/q" in head and "sinc_u" not in head
+    assert "sin(q)/q" in _title(scheme) and "sinc_u" not in _title(scheme)
+
+
+def test_sinc_certificate_never_proved_through_the_fallback(monkeypatch):
+    """The series branch is a truncation: even when the first reduction fails and certify's
+    own reduction proves the identity branch, the verdict is numerical.  Negative control of
+    the old code path: certify itself does return 'proved' on that F."""
+    helpers = sys.modules["methodgen.verify.helpers"]
+    monkeypatch.setattr(helpers, "reduce_to_zero", lambda *a, **k: None)
+    _certificate.cache_clear()
+    try:
+        cert = helper_certificate(sinc_dd)
+        assert cert.status == "numerical" and cert.method.startswith("identity branch: ")
+        A, B = helpers._A, helpers._B
+        F = helpers.to_elementary(sinc_dd.branch_form(A, B)) * (B - A) - (sp.sin(B) / B - sp.sin(A) / A)
+        assert helpers.certify("c", F, helpers.Domain(positive=set())).status == "proved"
+    finally:
+        monkeypatch.undo()
+        _certificate.cache_clear()

@@ -324,7 +324,8 @@ class Scheme:
         return "$" + self.latex() + "$"
 
     def __str__(self) -> str:
-        lines = [f"{self.method} scheme for H = {self.system.H}"]
+        # the user's text: H itself may hold internal names (sinc_u for sin(u)/u)
+        lines = [f"{self.method} scheme for H = {getattr(self.system, 'source', self.system.H)}"]
         t = self.traits
         lines.append(f"  order {t.order}, symmetric={t.symmetric}, symplectic={t.symplectic}, "
                      f"energy_preserving={t.energy_preserving}, preserves {list(t.preserved)}")

@@ -517,7 +517,8 @@ def _key(scheme) -> str:
 def _title(scheme) -> str:
     try:
         system = scheme.system
-        return f"{_key(scheme)} on {system.name or 'H = ' + str(system.H)}"
+        # the user's text: H itself may hold internal names (sinc_u for sin(u)/u)
+        return f"{_key(scheme)} on {system.name or 'H = ' + str(getattr(system, 'source', system.H))}"
     except Exception:
         return f"{_key(scheme)} on an unprintable system"
 

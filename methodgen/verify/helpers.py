@@ -157,7 +157,13 @@ def _sinc_dd_certificate(helper: str, details: dict, t0: float) -> Certificate:
     details = {**details, "branch_form": str(sinc_dd.branch_form(_A, _B)), "series_tail": SINC_DD_TAIL,
                "reason": "the series branch is a truncation (numerical to round-off), the others are proved"}
     if method is None:
-        return certify(claim, F, Domain(positive=set()), REF, details=details)
+        cert = certify(claim, F, Domain(positive=set()), REF, details=details)
+        if cert.status == PROVED:
+            # certify reduced the identity branch; the claim still includes the series branch,
+            # which no reduction of F covers: never PROVED (a REFUTED identity branch stays so).
+            cert = replace(cert, status=NUMERICAL, method=f"identity branch: {cert.method}; series "
+                           "branch: tail bound", details={**cert.details, "passed": True})
+        return cert
     # Not PROVED: a truncated series is not an identity, however small its tail.
     return Certificate(claim, NUMERICAL, str(F), "", f"identity branch: {method}; series branch: tail bound",
                        time.perf_counter() - t0, REF, {**details, "passed": True})
