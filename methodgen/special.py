@@ -292,7 +292,8 @@ class exp_dd(DividedDifference):
         """What ``_expdd`` evaluates for ``b > a``, ``exp(b)·(1 - exp(a - b))/(b - a)`` (the same
         function written with the larger exponent outside, so no factor overflows where the
         value does not; the helper swaps the arguments of ``a > b``, the quotient being
-        symmetric, and takes ``exp(a)`` at ``a = b``)."""
+        symmetric, and takes ``exp(a)`` at ``a = b``; above hi = 709, where exp(hi) overflows
+        before the factor < 1, it multiplies exp(hi/2) twice)."""
         return sp.exp(b) * (1 - sp.exp(a - b)) / (b - a)
 
     def fdiff(self, argindex=1):
@@ -486,8 +487,10 @@ class dexp_dd(sp.Function):
     r"""``∂/∂b exp[a, b] = (exp(b) - exp[a, b])/(b - a)``, ``exp(a)/2`` at a = b.
 
     Jacobians only.  The generated helper evaluates ``exp(m)(sinhc(δ) + dsinhc(δ))/2``
-    (``m = (a+b)/2``, ``δ = (b-a)/2``) where ``|b - a| < 1`` and the quotient elsewhere
-    (no cancellation there, and no factor overflows where the value does not).
+    (``m = (a+b)/2``, ``δ = (b-a)/2``, ``exp(m) = exp(hi) exp(-|δ|)``, hi = max(a, b)) where
+    ``|b - a| < 1`` and ``exp(hi) g/D²`` elsewhere (``D = |b - a|``, ``g = D - 1 + exp(-D)``
+    for b > a, ``1 - exp(-D) - D exp(-D)`` for b < a: the quotient with exp(hi) taken out),
+    ``exp(hi)`` as ``exp(hi/2)²`` above 709, so no factor overflows where the value does not.
     """
 
     nargs = 2
@@ -551,7 +554,7 @@ HELPER_DEPENDENCIES: dict[str, tuple[str, ...]] = {
     "sinhdd": ("sinhc",), "coshdd": ("sinhc",), "tanhdd": ("sinhc",),
     "sindd": ("sinc",), "cosdd": ("sinc",), "tandd": ("sinc",),
     "logdd": ("atanhc",), "atandd": ("atanc",), "datandd": ("atanc", "datanc", "atandd"),
-    "dexpdd": ("sinhc", "dsinhc", "expdd"),
+    "dexpdd": ("sinhc", "dsinhc"),
     "sincdd": ("sinc",), "dsincdd": ("dsinc", "ddsinc", "sincdd"),
 }
 

@@ -166,6 +166,14 @@ def test_every_helper_compiles_and_agrees_on_numba(tmp_path):
                     assert np.isnan(got), (name, args)
                 else:
                     assert abs(got - want) <= 4 * np.spacing(abs(want)) + 1e-300, (name, args, got, want)
+    # exp's divided differences at the overflow threshold: the compiled helpers give mpmath's
+    # value (Python's math raised OverflowError where numba returned inf, and numpy nan)
+    from test_thin_barrier import THRESHOLD, _agree, _mp
+    for x, y in THRESHOLD:
+        nb._call_all(x, y, out)
+        for kind in ("expdd", "dexpdd"):
+            want = _mp(kind, x, y)
+            assert _agree(out[names.index(kind)], want), (kind, x, y, out[names.index(kind)], want)
 
 
 def test_a_helper_left_uncompiled_is_the_reported_crash(tmp_path):
