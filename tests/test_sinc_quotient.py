@@ -307,3 +307,51 @@ def test_sinc_certificate_never_proved_through_the_fallback(monkeypatch):
     finally:
         monkeypatch.undo()
         _certificate.cache_clear()
+
+
+# --- extended precision: _v_sincdd in long double -------------------------------------------------
+
+LD_PAIRS = [(0.3, 0.31), (1.0, 1.2), (1.5, 1.9), (0.01, 0.02), (-0.7, 0.4), (2.5, 2.7), (3.0, 5.0)]
+
+
+def _ld_to_mp(x):
+    n, d = np.longdouble(x).as_integer_ratio()
+    return mpmath.mpf(n) / d
+
+
+def _ld_errors(fn):
+    """Relative errors of fn(a, b) on long-double inputs against mpmath (80 digits)."""
+    L = np.longdouble
+    out = []
+    with mpmath.workdps(80):
+        for a, b in LD_PAIRS:
+            A, B = L(a), L(b)
+            got = fn(np.array([A]), np.array([B]))[0]
+            assert got.dtype == np.longdouble
+            ma, mb = _ld_to_mp(A), _ld_to_mp(B)
+            ref = (_sinc_mp(mb) - _sinc_mp(ma)) / (mb - ma)
+            out.append(float(abs((_ld_to_mp(got) - ref) / ref)))
+    return out
+
+
+@pytest.mark.skipif(np.finfo(np.longdouble).eps >= EPS, reason="long double is double here")
+def test_sinc_divided_difference_in_long_double():
+    """Numerical: _v_sincdd on long-double inputs (extended refinement) within 8 long-double
+    ulp (~8.7e-19) on every branch.  Negative control: the series with the float64
+    coefficients _SINCDD_C (the former helper) is off by more than 1e-17 on the series branch."""
+    hs = special_helpers()
+    ld_eps = float(np.finfo(np.longdouble).eps)
+    errs = _ld_errors(hs["_v_sincdd"])
+    assert max(errs) <= 8 * ld_eps, errs
+    coeffs = hs["_v_sincdd"].__globals__["_SINCDD_C"]
+
+    def float64_series(a, b):
+        u, v = a * a, b * b
+        h, uk, s = np.ones_like(u), np.ones_like(u), np.zeros_like(u)
+        for c in coeffs:
+            s, uk = s + c * h, uk * u
+            h = v * h + uk
+        return (a + b) * s
+
+    old = _ld_errors(float64_series)[:4]      # the pairs on the series branch
+    assert max(old) > 1e-17, old
