@@ -482,4 +482,6 @@ class PoissonSystem:
                 f"S={[list(r) for r in self.S_sources]}, params={self.param_values}{extra})")
 
     def _repr_latex_(self) -> str:
-        return f"$\\dot y = S(y)\\nabla H,\\quad H = {sp.latex(self.H)},\\quad S = {sp.latex(self.S)}$"
+        from .special import to_elementary   # sin(u)/u as the user wrote it, not sinc_u
+        return (f"$\\dot y = S(y)\\nabla H,\\quad H = {sp.latex(to_elementary(self.H))},"
+                f"\\quad S = {sp.latex(to_elementary(self.S))}$")

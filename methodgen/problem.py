@@ -367,4 +367,5 @@ class Hamiltonian:
                 f"p={[s.name for s in self.p]}, params={self.param_values}{extra})")
 
     def _repr_latex_(self) -> str:
-        return f"$H = {sp.latex(self.H)}$"
+        from .special import to_elementary   # sin(u)/u as the user wrote it, not sinc_u
+        return f"$H = {sp.latex(to_elementary(self.H))}$"

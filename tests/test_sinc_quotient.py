@@ -281,14 +281,18 @@ def test_fold_repeats_and_takes_powers():
 
 
 def test_internal_name_does_not_leak():
-    """str(scheme) and the verify title show the user's text, not sinc_u."""
+    """str(scheme), the verify title and the LaTeX reprs show the user's text, not sinc_u.
+    Negative control: str(H), what they showed, has it."""
     from methodgen.verify import _title
     system = mg.Hamiltonian("p**2/2 + sin(q)/q", q=["q"], p=["p"])
     scheme = mg.discretize(system, "midpoint")
-    assert system.H.has(sinc_u)
+    assert "sinc_u" in str(system.H)
     head = str(scheme).splitlines()[0]
     assert "sin(q)/q" in head and "sinc_u" not in head
     assert "sin(q)/q" in _title(scheme) and "sinc_u" not in _title(scheme)
+    assert "sinc" not in system._repr_latex_() and r"\sin" in system._repr_latex_()
+    ps = mg.PoissonSystem("w**2/2 + sin(x)/x", y=["x", "w"], S=[[0, 1], [-1, 0]])
+    assert "sinc" not in ps._repr_latex_() and r"\sin" in ps._repr_latex_()
 
 
 def test_sinc_certificate_never_proved_through_the_fallback(monkeypatch):
