@@ -121,3 +121,22 @@ def test_unscreened_angular_search_is_bounded():
     eight = radial(8)
     assert eight.dim > derive.ANGULAR_UNSCREENED_MAX_DIM
     assert derive._angular_screen(eight) is None and derive.angular_momenta(eight) == ()
+
+
+def test_above_the_limit_a_candidate_not_shown_by_families_is_not_detected(monkeypatch):
+    """Above DETECT_MAX_DIM, a bracket that cancels only across families (the linear terms
+    2 q0 and -2 q1 are families of their own, each piece nonzero) is not reduced on the whole
+    sum: P is not detected (documented), while below the limit the whole sum shows it.
+    Negative control: with the limit raised, the same 62-dof system finds P by the whole-sum
+    reduction the gate now skips."""
+    def ring(n):
+        T = " + ".join(f"p{i}**2/2" for i in range(n))
+        U = " + ".join(f"exp(q{i} - q{(i + 1) % n})" for i in range(n))
+        return mg.Hamiltonian(T + " + " + U + " + 2*q0 - 2*q1", q=[f"q{i}" for i in range(n)],
+                              p=[f"p{i}" for i in range(n)], name=f"ring_lin{n}")
+    big = ring(derive.DETECT_MAX_DIM + 2)
+    assert derive._commutes_by_families(big, sp.Add(*big.p)) is None
+    assert derive.detected_momenta(big) == ()
+    assert [inv.name for inv in derive.detected_momenta(ring(10))] == ["P"]
+    monkeypatch.setattr(derive, "DETECT_MAX_DIM", 1000)
+    assert [inv.name for inv in derive.detected_momenta(ring(62))] == ["P"]
