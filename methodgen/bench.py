@@ -119,21 +119,50 @@ def check_length(T: float, h_min: float) -> None:
                          f"{MAX_BENCH_STEPS * h_min:g} (or use --long / run for one long run)")
 
 
-def check_initial_state(scene) -> None:
-    """Refuse (:class:`InputError`) an initial state where the vector field is not finite (a
-    singularity of H, e.g. Kepler at r = 0): the reference solution and every method would
-    fail there, after minutes of work, instead of one line now."""
-    rhs, _ = ode_rhs(scene.system)
+def field_is_finite(scene) -> bool:
+    """Whether the vector field the peers integrate (:func:`ode_rhs`) is a finite number at
+    ``scene.y0`` with ``scene.system``'s parameter values.  A parameter value that makes the
+    field undefined (``1/m`` at ``m = 0`` is SymPy's ``zoo``, which lambdify cannot print)
+    counts as not finite, never as an exception."""
     y0 = np.asarray(scene.y0, dtype=float)
     with np.errstate(all="ignore"):
         try:
+            rhs, _ = ode_rhs(scene.system)
             f = np.asarray(rhs(0.0, y0), dtype=float)
-        except (ZeroDivisionError, ValueError, OverflowError, FloatingPointError):
-            f = np.array([math.nan])
-    if not np.isfinite(f).all():
-        raise InputError(f"the vector field is not finite at the initial state y0 = {list(map(float, y0))} "
-                         f"(parameters {dict(scene.system.param_values)}): y0 is outside the domain of H "
-                         "(a singularity such as r = 0); give another --y0")
+        except (ZeroDivisionError, ValueError, OverflowError, FloatingPointError, KeyError, TypeError,
+                NameError, np.linalg.LinAlgError):
+            return False
+    return bool(np.isfinite(f).all())
+
+
+def check_initial_state(scene, own=None) -> None:
+    """Refuse (:class:`InputError`) an initial state where the vector field is not finite (a
+    singularity of H, e.g. Kepler at r = 0), or parameter values that make it so (``m = 0`` in
+    ``p**2/(2*m)``, ``m = 1e-300`` overflowing): the reference solution and every method would
+    fail there, after minutes of work, instead of one line now.
+
+    ``own``: the same scene with the scene's own parameter values (before ``--param``).  When the
+    parameters differ and the field is finite at y0 with ``own``'s, the parameters are named as
+    the cause; when it is not finite with either, both y0 and the parameters are named.
+    """
+    if field_is_finite(scene):
+        return
+    y0 = list(map(float, scene.y0))
+    values = dict(scene.system.param_values)
+    changed = {} if own is None else {k: v for k, v in values.items()
+                                      if own.system.param_values.get(k) != v}
+    if changed:
+        given = ", ".join(f"{k}={v:g}" for k, v in changed.items())
+        if field_is_finite(own):
+            raise InputError(f"the parameters {given} make the vector field not finite at y0 = {y0} (with the "
+                             "scene's own values it is finite there: a division by zero or an overflow); give "
+                             "other --param values")
+        raise InputError(f"the vector field is not finite at y0 = {y0} with the parameters {given} (nor with the "
+                         "scene's own parameter values): y0 is outside the domain of H (a singularity such as "
+                         "r = 0); give another --y0, and check --param")
+    raise InputError(f"the vector field is not finite at the initial state y0 = {y0} "
+                     f"(parameters {values}): y0 is outside the domain of H "
+                     "(a singularity such as r = 0); give another --y0")
 
 
 def ode_rhs(system):
@@ -483,7 +512,8 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     orders = _check_orders(PEER_ORDERS if orders is None else orders)
     T = float(T if T is not None else scene.h * scene.steps)
     if not T > 0:
-        raise ValueError(f"the bench needs a positive final time, got T = {T}")
+        raise InputError(f"the bench needs a positive final time, got T = {T:g} (h = {scene.h:g} times "
+                         f"{scene.steps} steps); give --h > 0 or --t-final T > 0")
     check_length(T, abs(scene.h) * min(QUICK_PEER_FACTORS if quick else PEER_FACTORS))
     y0 = np.array(scene.y0)
     notes = []

@@ -4,6 +4,7 @@ optionally peers, solver variants, long runs, Brouwer's law)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 
 from ..emit import BACKENDS
@@ -124,6 +125,8 @@ def _bench_overrides(scene, args):
         values = parse_params(items, list(scene.system.param_values))
         scene = dataclasses.replace(scene, system=_with_param_values(scene.system, values))
     if h is not None:
+        if not h > 0:   # every bench run goes forward from t = 0 (a negative h: a negative final time)
+            raise InputError(f"--h must be positive for bench (its runs go forward in time from t = 0), got {h:g}")
         scene = dataclasses.replace(scene, h=float(h))
     return scene
 
@@ -131,9 +134,12 @@ def _bench_overrides(scene, args):
 def cmd_bench(args) -> int:
     from .. import bench
 
-    scene = _bench_overrides(load_scene(args.scene), args)
-    # A y0 at a singularity of H: one line now, not a failed reference solution minutes later.
-    bench.check_initial_state(bench.extended_scene(scene))
+    own = load_scene(args.scene)
+    scene = _bench_overrides(own, args)
+    # A y0 at a singularity of H, or parameters making the field undefined (m = 0) or overflow:
+    # one line now (naming --param when they are the cause), not a failure minutes later.
+    bench.check_initial_state(bench.extended_scene(scene),
+                              own=bench.extended_scene(dataclasses.replace(scene, system=own.system)))
     for flag in ("long_steps", "brouwer_steps"):
         if getattr(args, flag, None) is not None:
             check_steps(getattr(args, flag), f"--{flag.replace('_', '-')} {getattr(args, flag)}")
