@@ -51,7 +51,7 @@ def _print_report(rep: dict) -> None:
         others = [nonfinite.get(k, v) for k, v in r["invariant_errors"].items() if k != "H"]
         others.append(nonfinite.get("constraints", r["constraint_error"]))
         energy = nonfinite.get("H", r["energy_error"])
-        line = f"{r['method']:<18} {r['h']:9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
+        line = f"{r['method']:<18} {r.get('h_used', r['h']):9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
         line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {fmt(energy):>10} " \
                 f"{fmt(max_value(*others) if any(v is not None for v in others) else None):>10} " \
                 f"{fmt(r['final_error']):>10} " \
@@ -59,6 +59,9 @@ def _print_report(rep: dict) -> None:
         print(line)
         if r["error"]:
             print(f"{'':<18} {r['error'][:200]}")
+    if any(r.get("h_used", r["h"]) != r["h"] for r in rep["rows"]):
+        print("h: the step used, t_final/steps with steps = ceil(t_final/h) of the spec's h (ends at t_final; "
+              "--json gives h and h_used)")
     eng = rep["engine"]
     where = "in-process" if eng["kind"] == "in-process" else f"{eng['kind']} ({eng['workers']} workers)"
     rate = rep["trajectory_steps_per_second"]
