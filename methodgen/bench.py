@@ -319,6 +319,27 @@ def _errors(module, traj, y_ref, monitors=None):
     if hasattr(module, "constraint_residuals"):
         g, gv = module.constraint_residuals(traj)
         out["constraint_error"] = max_value(max_abs_error(g), max_abs_error(gv))
+    # Every value that is not a number (null in --json) with the reason, so that a null never
+    # reads as "no error": a quantity that stopped being finite, or no relative error (H(y0) = 0).
+    nulls = {}
+    if not math.isfinite(out["error"]):
+        nulls["error"] = "the final state is not finite"
+    for name, v in out["invariant_errors"].items():
+        if not math.isfinite(v):
+            nulls[f"invariant_errors.{name}"] = f"{name} is not finite along the run"
+    if "H" not in inv:
+        nulls["energy_error"] = "the module monitors no H"
+    elif not math.isfinite(out["energy_error"]):
+        nulls["energy_error"] = "H is not finite along the run"
+    if not math.isfinite(out["energy_rel_error"]) and "energy_error" not in nulls:
+        nulls["energy_rel_error"] = "H(y0) = 0: no relative error" if H0 == 0 else "H(y0) is not finite"
+    elif "energy_error" in nulls:
+        nulls["energy_rel_error"] = nulls["energy_error"]
+    if "constraint_error" in out and not math.isfinite(out["constraint_error"]):
+        nulls["constraint_error"] = "a constraint residual is not finite along the run"
+    out["status"] = "non-finite" if any("not finite" in why for why in nulls.values()) else "ok"
+    if nulls:
+        out["nulls"] = nulls
     return out
 
 
@@ -656,9 +677,24 @@ def growth_exponent(t, err) -> float:
     return float(np.polyfit(np.log(te[half:]), np.log(me[half:]), 1)[0])
 
 
+def _chunks(module, y0, h, steps: int, chunk: int, **kw):
+    """``module.iterate`` with ``integrate``'s keywords (``check_resolution``): consecutive states
+    in chunks, the first starting with ``y0``, one info dict carried through (as iterate does)."""
+    done, y, first, info = 0, y0, True, {}
+    while first or done < steps:
+        n = min(chunk, steps - done)
+        part = module.integrate(y, h, n, info=info, **kw)
+        yield part if first else part[1:]
+        y, done, first = part[-1], done + n, False
+
+
 def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | None = None,
-             progress: bool = False) -> dict:
-    """Energy-error envelope of the geometric methods and of DOP853 at a similar cost."""
+             progress: bool = False, check_resolution: bool = True) -> dict:
+    """Energy-error envelope of the geometric methods and of DOP853 at a similar cost.
+
+    ``check_resolution=False`` (``bench --no-check-resolution``) passes the same to the
+    modules' ``integrate``: no refusal of a step size estimated to under-resolve the motion.
+    """
     from scipy.integrate import solve_ivp
 
     scene = extended_scene(scene)
@@ -674,7 +710,8 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
         t0 = _cpu()
         err_parts, times = [], []
         done = 0
-        for part in _progress(module.iterate(y0, h, steps, chunk=100_000), progress, method,
+        for part in _progress(_chunks(module, y0, h, steps, 100_000, check_resolution=check_resolution),
+                              progress, method,
                               total=math.ceil(steps / 100_000)):
             H = module.hamiltonian(part)
             if H0 is None:
@@ -719,7 +756,7 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
 # --- Brouwer's law ------------------------------------------------------------------------
 
 def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed: int = 0,
-            progress: bool = False, dyadic: bool = False) -> dict:
+            progress: bool = False, dyadic: bool = False, check_resolution: bool = True) -> dict:
     """RMS energy error over random phases of the harmonic oscillator, midpoint rule.
 
     Steppers from the same generated module, all on the batched integrator:
@@ -736,6 +773,8 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
     outgrows the √t random walk after ~10⁵ steps; the refinement removes it.
     With ``dyadic=True`` the default stepper is also run with the nearest power
     of two to h (2⁻⁷ for 0.01), where the bias does not arise.
+
+    ``check_resolution``: passed to ``integrate`` (``bench --no-check-resolution``: False).
 
     Returns the RMS error curves and their log-log slopes fitted over the last
     two decades of t (≈ 0.5 for Brouwer's law, ≈ 1 for linear growth).  The
@@ -777,7 +816,8 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
         rms = []
         for target in _progress(record, progress, label):
             if target > done:
-                Y = module.integrate(Y, h, int(target - done), info=info, **kw)[-1]
+                Y = module.integrate(Y, h, int(target - done), info=info, check_resolution=check_resolution,
+                                     **kw)[-1]
             done = target
             rms.append(float(np.sqrt(np.mean((energy(Y, info["compensation"]) - H0) ** 2))))
         sec = _cpu() - t0
@@ -792,8 +832,12 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
 
 # --- solver variants -------------------------------------------------------------------------
 
-def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
-    """Iterations and µs per step of each nonlinear solver, per implicit method."""
+def solver_variants(scene: Scene, methods=None, *, steps: int = 2000, check_resolution: bool = True) -> dict:
+    """Iterations and µs per step of each nonlinear solver, per implicit method, at the scene's h.
+
+    ``check_resolution``: passed to ``integrate`` (``bench --no-check-resolution``: False); with
+    it a step size estimated to under-resolve the motion is a row ``failed`` saying so.
+    """
     scene = extended_scene(scene)
     methods = list(methods or scene.methods)
     y0 = np.array(scene.y0)
@@ -804,7 +848,8 @@ def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
             info = {}
             t0 = time.perf_counter()
             try:
-                traj = module.integrate(y0, scene.h, steps, solver=solver, info=info)
+                traj = module.integrate(y0, scene.h, steps, solver=solver, info=info,
+                                        check_resolution=check_resolution)
             except (RuntimeError, FloatingPointError) as exc:
                 rows.append({"method": method, "solver": solver, "failed": str(exc)})
                 continue

@@ -102,6 +102,13 @@ def dump_json(obj) -> str:
 NUMERICAL_ERRORS = ("ConvergenceError", "NonFiniteError", "ResolutionError")
 
 
+def cli_advice(text: str) -> str:
+    """A generated module's message on one line, its Python advice put in command-line terms:
+    ``check_resolution=False`` is ``--no-check-resolution`` on run, sweep and bench."""
+    text = " ".join(str(text).split())
+    return text.replace("pass check_resolution=False", "pass --no-check-resolution")
+
+
 def print_note(text: str) -> None:
     print(f"methodgen: note: {text}", file=sys.stderr)
 
@@ -118,7 +125,7 @@ def finite_number(text: str, what: str) -> float:
 
 
 def check_output_file(text, option: str) -> Path:
-    """The path of an output file (``--save``, ``--csv``) checked before any work: a file name
+    """The path of an output file (``--save``, ``--csv``, ``--plot``) checked before any work: a file name
     (not empty, not a folder) in a folder that exists and can be written.  The folder is never
     created: a typo in it would otherwise scatter results.  One-line :class:`InputError` else."""
     if text is None or not str(text).strip():
@@ -126,7 +133,8 @@ def check_output_file(text, option: str) -> Path:
     text = str(text)
     path = expand_user(text, option)
     if text.endswith(("/", os.sep)) or path.is_dir():
-        raise InputError(f"{option} {text}: is a folder; give a file name in it, e.g. {path / 'run.npz'}")
+        example = {"--plot": "run.png", "--csv": "rows.csv"}.get(option, "run.npz")
+        raise InputError(f"{option} {text}: is a folder; give a file name in it, e.g. {path / example}")
     folder = path.parent
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{option} {text}: {folder} is a file, not a folder")

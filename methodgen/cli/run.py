@@ -20,7 +20,7 @@ from ..scene import check_g_positive, load_scene
 from ..schemes import METHODS, composition_for, method_key, scheme_options
 from ..stats import ErrorMax
 from .common import (EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
-                     apply_overrides, check_output_file, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
+                     apply_overrides, check_output_file, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
                      print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
 
@@ -265,7 +265,10 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         raise InputError("--extended needs the numpy backend (numba has no long double)")
     if save is not None:
         save = str(check_output_file(save, "--save"))
-    if plot:
+    if plot is not None:
+        # Checked like --save, before any work: a missing folder is not created, a folder or an
+        # empty name is refused (an empty --plot used to be ignored, a folder failed after the run).
+        plot = str(check_output_file(plot, "--plot"))
         from ..plots import check_available
         check_available()  # a missing matplotlib is reported before the run, not after
     scene = resolve_time_transform(load_scene(scene_name), time_transform)
@@ -538,7 +541,7 @@ def cmd_run(args) -> int:
             where = f"; saved {n} states to {fail.saved}"
         else:
             where = f"; {fail.note}" if fail.note else ""
-        msg = " ".join(str(fail.exc).split()) or type(fail.exc).__name__  # one line, whatever the text
+        msg = cli_advice(fail.exc) or type(fail.exc).__name__  # one line, whatever the text
         print(f"methodgen: {what} at step {fail.report['steps_done']}: {msg}{where}", file=sys.stderr)
         if args.json:
             status = ("interrupted" if fail.code == 130 else "io-error" if isinstance(fail.exc, OSError)
