@@ -135,6 +135,32 @@ def field_is_finite(scene) -> bool:
     return bool(np.isfinite(f).all())
 
 
+#: Most work of one work-precision diagram without ``--peers``, in step equivalents (at the limit
+#: ``bench harmonic --quick --t-final 15000`` took 107 s on a shared 2-core machine): every row
+#: runs over the same T, so a long T multiplies all of them.  ``--peers`` rows are bounded one
+#: by one (:func:`check_length`) and show progress.
+MAX_BENCH_WORK = 10 ** 7
+
+#: Cost of a step of the rows other than methodgen's, in methodgen steps: fsolve's pure-Python
+#: step (measured about 5x a generated numpy step), and each scipy row counted as the finest
+#: methodgen row's number of steps (an estimate: their adaptive step counts are not known before).
+FSOLVE_WEIGHT = 5
+
+
+def check_work(T: float, methods: int, hs, fsolve_hs, scipy_rows: int) -> None:
+    """Refuse (:class:`InputError`) a work-precision diagram whose estimated total work over all
+    rows exceeds :data:`MAX_BENCH_WORK` step equivalents (see :data:`FSOLVE_WEIGHT`), naming
+    the largest ``--t-final`` within it."""
+    per_t = (methods * sum(1 / h for h in hs) + FSOLVE_WEIGHT * sum(1 / h for h in fsolve_hs)
+             + scipy_rows / min(hs))
+    work = T * per_t
+    if work > MAX_BENCH_WORK:
+        raise InputError(f"--t-final {T:g}: the work-precision rows would take about {work:.2g} steps in all "
+                         f"({methods} methods x {len(hs)} step sizes, {len(fsolve_hs)} fsolve and {scipy_rows} "
+                         f"scipy rows; an estimate), beyond the bench's limit of {MAX_BENCH_WORK:.0e}; give "
+                         f"--t-final at most {MAX_BENCH_WORK / per_t:.3g} (or use --long / run for one long run)")
+
+
 def check_initial_state(scene, own=None) -> None:
     """Refuse (:class:`InputError`) an initial state where the vector field is not finite (a
     singularity of H, e.g. Kepler at r = 0), or parameter values that make it so (``m = 0`` in
@@ -435,6 +461,10 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     y0 = np.array(scene.y0)
     hs = [0.1, 0.05, 0.025] if quick else [0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625]
     check_length(T, min(hs))   # before the reference solution, which may take as long
+    first = next((m for m in methods if m != "stormer-verlet"), None)
+    tols = QUICK_TOLERANCES if quick else TOLERANCES
+    check_work(T, len(methods), [h for h in hs if h <= T],
+               [] if first is None else [h for h in hs if h <= T][:2 if quick else 3], 3 * len(tols))
     ref = reference(scene.system, y0, T)
     hs = [h for h in hs if h <= T]
     rows = []
@@ -449,7 +479,6 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
         except (RuntimeError, FloatingPointError) as exc:
             rows.append({"method": method, "kind": "methodgen", "h": h, "failed": str(exc)})
     # The fsolve peer on the scene's first implicit method, two step sizes (it is slow).
-    first = next((m for m in methods if m != "stormer-verlet"), None)
     if first is not None:
         scheme = discretize(scene.system, first)
         module = build(scene.system, first, path=scene_module_path(scene, first))
@@ -458,7 +487,6 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
             rows.append(_fsolve_row(scene, first, scheme, module, y0, T / steps, steps, ref))
     rhs, jac = ode_rhs(scene.system)
     module = build(scene.system, methods[0], path=scene_module_path(scene, methods[0]))
-    tols = QUICK_TOLERANCES if quick else TOLERANCES
     for solver, tol in _progress([(s, t) for s in ("RK45", "DOP853", "Radau") for t in tols],
                                  progress, "scipy"):
         rows.append(_ivp_row(scene.system, module, solver, tol, y0, T, ref, rhs, jac))

@@ -201,17 +201,20 @@ class _Iterations:
         return self.total / self.count if self.count else 0.0
 
 
-def _check_size(scene, steps: int, h: float, t_final, every: int, save, chunk) -> None:
+def _check_size(scene, steps: int, h: float, t_final, every: int, save, chunk, plot=None) -> None:
     """Refuse, before any work, a run beyond :data:`~methodgen.limits.MAX_STEPS` or whose
-    states kept at once do not fit in memory (all of them without ``--save``, one chunk with it)."""
+    states kept at once do not fit in memory (all of them without ``--save``, one chunk with it;
+    all of them again with ``--plot``, which draws the whole trajectory read back from the file)."""
     what = (f"--t-final {t_final:g} with h = {h:g}" if t_final is not None and steps != scene.steps
             else f"--steps {steps}")
     check_steps(steps, what)
     width = len(scene.run_system.y)
-    at_once = min(steps, chunk or steps) if save else steps
+    at_once = min(steps, chunk or steps) if save and not plot else steps
     # the states kept (8 bytes a value) and the module's per-step iteration counts of a chunk
     need = 8 * (at_once // every + 2) * width + 8 * min(steps, chunk or steps)
-    if save:
+    if plot and save:
+        hint = "--plot draws every kept state (read back from the file): pass --save-every K to keep fewer"
+    elif save:
         hint = "pass --chunk N to write the states N steps at a time"
     else:
         hint = ("pass --save FILE.npz --chunk N to write them in chunks"
@@ -314,7 +317,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     every = 1 if save_every is None else int(save_every)
     if isinstance(save_every, bool) or every < 1:
         raise InputError(f"--save-every must be a positive integer, got {save_every!r}")
-    _check_size(scene, steps, h, t_final, every, save, chunk)
+    _check_size(scene, steps, h, t_final, every, save, chunk, plot)
     system = scene.run_system
     if scene.transformed is not None:
         check_g_positive(system, scene.y0, params)
