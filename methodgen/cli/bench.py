@@ -139,14 +139,18 @@ def cmd_bench(args) -> int:
     scene = _bench_overrides(own, args)
     # A y0 at a singularity of H, or parameters making the field undefined (m = 0) or overflow:
     # one line now (naming --param when they are the cause), not a failure minutes later.
-    bench.check_initial_state(bench.extended_scene(scene),
-                              own=bench.extended_scene(dataclasses.replace(scene, system=own.system)))
+    extended = bench.extended_scene(scene)
+    try:   # the same y0 with the scene's own parameters: tells whether --param is the cause
+        own = bench.extended_scene(dataclasses.replace(scene, system=own.system))
+    except InputError:
+        own = None
+    bench.check_initial_state(extended, own=own)
     for flag, least in (("long_steps", 1), ("brouwer_steps", 1), ("ensemble", 2)):
         value = getattr(args, flag, None)
         if value is None:
             continue
         if value < least:   # 0 is not "the default": a run of no steps, or a slope of one point
-            why = "a slope over random phases needs two" if flag == "ensemble" else "no steps measure nothing"
+            why = "a slope over random phases needs two" if flag == "ensemble" else "0 steps measure nothing"
             raise InputError(f"--{flag.replace('_', '-')} must be at least {least}, got {value} ({why})")
         if flag != "ensemble":
             check_steps(value, f"--{flag.replace('_', '-')} {value}")
