@@ -70,12 +70,11 @@ def test_bench_negative_h_is_one_line_exit_2(capsys):
     assert "--h must be positive for bench" in _one_line(err)
 
 
-def test_bench_negative_h_negative_control(monkeypatch):
-    """Without the check the peers' bench ends in its own final-time check (was a ValueError traceback)."""
-    args = argparse.Namespace(y0=None, param=None, h=-0.1)
-    monkeypatch.setattr(cli_bench, "_bench_overrides",
-                        lambda scene, a: __import__("dataclasses").replace(scene, h=-0.1))
-    scene = cli_bench._bench_overrides(cli_bench.load_scene("harmonic"), args)
+def test_bench_negative_h_negative_control():
+    """Without the CLI's check a negative h reaches the peers' bench: T = h*steps < 0 (it was a
+    ValueError traceback; now an InputError of bench itself)."""
+    import dataclasses
+    scene = dataclasses.replace(cli_bench.load_scene("harmonic"), h=-0.1)
     with pytest.raises(InputError, match="needs a positive final time, got T = -100"):
         bench.work_precision(scene, ["midpoint"], quick=True, peers=True)
 
