@@ -587,6 +587,17 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                              f"symmetric method: {', '.join(SYMMETRIC_METHODS)})")
                 break
             jobs.append((method, order))
+    # An upper bound of the base steps of methodgen's rows (a ladder may stop early), said before
+    # they start: these rows are bounded one by one (check_length), not in total.
+    estimate = 0
+    for method, order in jobs:
+        comp = composition_for(order)
+        st = comp.stages if comp is not None else 1
+        estimate += sum(st * max(1, round(T / h)) for h in composed_steps(scene.h, order, st, quick=quick))
+    if progress:
+        print(f"methodgen: note: the --peers rows of methodgen run at most about {estimate:.3g} steps in all "
+              f"({len(jobs)} method/order pairs; a row under 5 s runs 3 times for its CPU minimum)",
+              file=sys.stderr)
     for method, order in _progress(jobs, progress, "methodgen"):
         comp = composition_for(order)
         family = comp.family if comp is not None else None
@@ -657,7 +668,8 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             notes.append(str(exc))
     notes.append("scipy solve_ivp and fsolve rows are left out with --peers (run without --peers for them)")
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
-            "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "targets": targets(rows)}
+            "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "estimated_steps": estimate,
+            "targets": targets(rows)}
 
 
 def _solver_kw(solver):

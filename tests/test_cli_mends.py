@@ -486,3 +486,14 @@ def test_plot_of_a_saved_run_checks_memory(tmp_path, capsys, monkeypatch):
     assert not (tmp_path / "x.npz").exists()
     code, out, err = _main(capsys, *argv, "--json")        # negative control: without --plot it fits
     assert code == 0, err
+
+
+def test_peers_say_their_work_before_they_start(capsys):
+    wp = bench.work_precision(cli_bench.load_scene("harmonic"), ["midpoint"], quick=True, peers=True,
+                              progress=True, orders=(2, 4))
+    done = sum(r["steps"] * r.get("stages", 1) for r in wp["rows"] if r.get("kind") == "methodgen")
+    assert 0 < done <= wp["estimated_steps"] <= 2 * done   # an upper bound, and not a loose one here
+    assert "run at most about" in capsys.readouterr().err
+    # Negative control: without progress nothing is printed.
+    bench.work_precision(cli_bench.load_scene("harmonic"), ["midpoint"], quick=True, peers=True, orders=(2,))
+    assert "run at most about" not in capsys.readouterr().err
