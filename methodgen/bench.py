@@ -119,21 +119,76 @@ def check_length(T: float, h_min: float) -> None:
                          f"{MAX_BENCH_STEPS * h_min:g} (or use --long / run for one long run)")
 
 
-def check_initial_state(scene) -> None:
-    """Refuse (:class:`InputError`) an initial state where the vector field is not finite (a
-    singularity of H, e.g. Kepler at r = 0): the reference solution and every method would
-    fail there, after minutes of work, instead of one line now."""
-    rhs, _ = ode_rhs(scene.system)
+def field_is_finite(scene) -> bool:
+    """Whether the vector field the peers integrate (:func:`ode_rhs`) is a finite number at
+    ``scene.y0`` with ``scene.system``'s parameter values.  A parameter value that makes the
+    field undefined (``1/m`` at ``m = 0`` is SymPy's ``zoo``, which lambdify cannot print)
+    counts as not finite, never as an exception."""
     y0 = np.asarray(scene.y0, dtype=float)
     with np.errstate(all="ignore"):
         try:
+            rhs, _ = ode_rhs(scene.system)
             f = np.asarray(rhs(0.0, y0), dtype=float)
-        except (ZeroDivisionError, ValueError, OverflowError, FloatingPointError):
-            f = np.array([math.nan])
-    if not np.isfinite(f).all():
-        raise InputError(f"the vector field is not finite at the initial state y0 = {list(map(float, y0))} "
-                         f"(parameters {dict(scene.system.param_values)}): y0 is outside the domain of H "
-                         "(a singularity such as r = 0); give another --y0")
+        except (ZeroDivisionError, ValueError, OverflowError, FloatingPointError, KeyError, TypeError,
+                NameError, np.linalg.LinAlgError):
+            return False
+    return bool(np.isfinite(f).all())
+
+
+#: Most work of one work-precision diagram without ``--peers``, in step equivalents (at the limit
+#: ``bench harmonic --quick --t-final 15000`` took 107 s on a shared 2-core machine): every row
+#: runs over the same T, so a long T multiplies all of them.  ``--peers`` rows are bounded one
+#: by one (:func:`check_length`) and show progress.
+MAX_BENCH_WORK = 10 ** 7
+
+#: Cost of a step of the rows other than methodgen's, in methodgen steps: fsolve's pure-Python
+#: step (measured about 5x a generated numpy step), and each scipy row counted as the finest
+#: methodgen row's number of steps (an estimate: their adaptive step counts are not known before).
+FSOLVE_WEIGHT = 5
+
+
+def check_work(T: float, methods: int, hs, fsolve_hs, scipy_rows: int) -> None:
+    """Refuse (:class:`InputError`) a work-precision diagram whose estimated total work over all
+    rows exceeds :data:`MAX_BENCH_WORK` step equivalents (see :data:`FSOLVE_WEIGHT`), naming
+    the largest ``--t-final`` within it."""
+    per_t = (methods * sum(1 / h for h in hs) + FSOLVE_WEIGHT * sum(1 / h for h in fsolve_hs)
+             + scipy_rows / min(hs))
+    work = T * per_t
+    if work > MAX_BENCH_WORK:
+        raise InputError(f"--t-final {T:g}: the work-precision rows would take about {work:.2g} steps in all "
+                         f"({methods} methods x {len(hs)} step sizes, {len(fsolve_hs)} fsolve and {scipy_rows} "
+                         f"scipy rows; an estimate), beyond the bench's limit of {MAX_BENCH_WORK:.0e}; give "
+                         f"--t-final at most {MAX_BENCH_WORK / per_t:.3g} (or use --long / run for one long run)")
+
+
+def check_initial_state(scene, own=None) -> None:
+    """Refuse (:class:`InputError`) an initial state where the vector field is not finite (a
+    singularity of H, e.g. Kepler at r = 0), or parameter values that make it so (``m = 0`` in
+    ``p**2/(2*m)``, ``m = 1e-300`` overflowing): the reference solution and every method would
+    fail there, after minutes of work, instead of one line now.
+
+    ``own``: the same scene with the scene's own parameter values (before ``--param``).  When the
+    parameters differ and the field is finite at y0 with ``own``'s, the parameters are named as
+    the cause; when it is not finite with either, both y0 and the parameters are named.
+    """
+    if field_is_finite(scene):
+        return
+    y0 = list(map(float, scene.y0))
+    values = dict(scene.system.param_values)
+    changed = {} if own is None else {k: v for k, v in values.items()
+                                      if own.system.param_values.get(k) != v}
+    if changed:
+        given = ", ".join(f"{k}={v:g}" for k, v in changed.items())
+        if field_is_finite(own):
+            raise InputError(f"the parameters {given} make the vector field not finite at y0 = {y0} (with the "
+                             "scene's own values it is finite there: a division by zero or an overflow); give "
+                             "other --param values")
+        raise InputError(f"the vector field is not finite at y0 = {y0} with the parameters {given} (nor with the "
+                         "scene's own parameter values): y0 is outside the domain of H (a singularity such as "
+                         "r = 0); give another --y0, and check --param")
+    raise InputError(f"the vector field is not finite at the initial state y0 = {y0} "
+                     f"(parameters {values}): y0 is outside the domain of H "
+                     "(a singularity such as r = 0); give another --y0")
 
 
 def ode_rhs(system):
@@ -290,6 +345,27 @@ def _errors(module, traj, y_ref, monitors=None):
     if hasattr(module, "constraint_residuals"):
         g, gv = module.constraint_residuals(traj)
         out["constraint_error"] = max_value(max_abs_error(g), max_abs_error(gv))
+    # Every value that is not a number (null in --json) with the reason, so that a null never
+    # reads as "no error": a quantity that stopped being finite, or no relative error (H(y0) = 0).
+    nulls = {}
+    if not math.isfinite(out["error"]):
+        nulls["error"] = "the final state is not finite"
+    for name, v in out["invariant_errors"].items():
+        if not math.isfinite(v):
+            nulls[f"invariant_errors.{name}"] = f"{name} is not finite along the run"
+    if "H" not in inv:
+        nulls["energy_error"] = "the module monitors no H"
+    elif not math.isfinite(out["energy_error"]):
+        nulls["energy_error"] = "H is not finite along the run"
+    if not math.isfinite(out["energy_rel_error"]) and "energy_error" not in nulls:
+        nulls["energy_rel_error"] = "H(y0) = 0: no relative error" if H0 == 0 else "H(y0) is not finite"
+    elif "energy_error" in nulls:
+        nulls["energy_rel_error"] = nulls["energy_error"]
+    if "constraint_error" in out and not math.isfinite(out["constraint_error"]):
+        nulls["constraint_error"] = "a constraint residual is not finite along the run"
+    out["status"] = "non-finite" if any("not finite" in why for why in nulls.values()) else "ok"
+    if nulls:
+        out["nulls"] = nulls
     return out
 
 
@@ -385,6 +461,10 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     y0 = np.array(scene.y0)
     hs = [0.1, 0.05, 0.025] if quick else [0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625]
     check_length(T, min(hs))   # before the reference solution, which may take as long
+    first = next((m for m in methods if m != "stormer-verlet"), None)
+    tols = QUICK_TOLERANCES if quick else TOLERANCES
+    check_work(T, len(methods), [h for h in hs if h <= T],
+               [] if first is None else [h for h in hs if h <= T][:2 if quick else 3], 3 * len(tols))
     ref = reference(scene.system, y0, T)
     hs = [h for h in hs if h <= T]
     rows = []
@@ -399,7 +479,6 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
         except (RuntimeError, FloatingPointError) as exc:
             rows.append({"method": method, "kind": "methodgen", "h": h, "failed": str(exc)})
     # The fsolve peer on the scene's first implicit method, two step sizes (it is slow).
-    first = next((m for m in methods if m != "stormer-verlet"), None)
     if first is not None:
         scheme = discretize(scene.system, first)
         module = build(scene.system, first, path=scene_module_path(scene, first))
@@ -408,7 +487,6 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
             rows.append(_fsolve_row(scene, first, scheme, module, y0, T / steps, steps, ref))
     rhs, jac = ode_rhs(scene.system)
     module = build(scene.system, methods[0], path=scene_module_path(scene, methods[0]))
-    tols = QUICK_TOLERANCES if quick else TOLERANCES
     for solver, tol in _progress([(s, t) for s in ("RK45", "DOP853", "Radau") for t in tols],
                                  progress, "scipy"):
         rows.append(_ivp_row(scene.system, module, solver, tol, y0, T, ref, rhs, jac))
@@ -483,7 +561,8 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     orders = _check_orders(PEER_ORDERS if orders is None else orders)
     T = float(T if T is not None else scene.h * scene.steps)
     if not T > 0:
-        raise ValueError(f"the bench needs a positive final time, got T = {T}")
+        raise InputError(f"the bench needs a positive final time, got T = {T:g} (h = {scene.h:g} times "
+                         f"{scene.steps} steps); give --h > 0 or --t-final T > 0")
     check_length(T, abs(scene.h) * min(QUICK_PEER_FACTORS if quick else PEER_FACTORS))
     y0 = np.array(scene.y0)
     notes = []
@@ -508,6 +587,17 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                              f"symmetric method: {', '.join(SYMMETRIC_METHODS)})")
                 break
             jobs.append((method, order))
+    # An upper bound of the base steps of methodgen's rows (a ladder may stop early), said before
+    # they start: these rows are bounded one by one (check_length), not in total.
+    estimate = 0
+    for method, order in jobs:
+        comp = composition_for(order)
+        st = comp.stages if comp is not None else 1
+        estimate += sum(st * max(1, round(T / h)) for h in composed_steps(scene.h, order, st, quick=quick))
+    if progress:
+        print(f"methodgen: note: the --peers rows of methodgen run at most about {estimate:.3g} steps in all "
+              f"({len(jobs)} method/order pairs; a row under 5 s runs 3 times for its CPU minimum)",
+              file=sys.stderr)
     for method, order in _progress(jobs, progress, "methodgen"):
         comp = composition_for(order)
         family = comp.family if comp is not None else None
@@ -578,7 +668,8 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             notes.append(str(exc))
     notes.append("scipy solve_ivp and fsolve rows are left out with --peers (run without --peers for them)")
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
-            "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "targets": targets(rows)}
+            "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "estimated_steps": estimate,
+            "targets": targets(rows)}
 
 
 def _solver_kw(solver):
@@ -626,9 +717,24 @@ def growth_exponent(t, err) -> float:
     return float(np.polyfit(np.log(te[half:]), np.log(me[half:]), 1)[0])
 
 
+def _chunks(module, y0, h, steps: int, chunk: int, **kw):
+    """``module.iterate`` with ``integrate``'s keywords (``check_resolution``): consecutive states
+    in chunks, the first starting with ``y0``, one info dict carried through (as iterate does)."""
+    done, y, first, info = 0, y0, True, {}
+    while first or done < steps:
+        n = min(chunk, steps - done)
+        part = module.integrate(y, h, n, info=info, **kw)
+        yield part if first else part[1:]
+        y, done, first = part[-1], done + n, False
+
+
 def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | None = None,
-             progress: bool = False) -> dict:
-    """Energy-error envelope of the geometric methods and of DOP853 at a similar cost."""
+             progress: bool = False, check_resolution: bool = True) -> dict:
+    """Energy-error envelope of the geometric methods and of DOP853 at a similar cost.
+
+    ``check_resolution=False`` (``bench --no-check-resolution``) passes the same to the
+    modules' ``integrate``: no refusal of a step size estimated to under-resolve the motion.
+    """
     from scipy.integrate import solve_ivp
 
     scene = extended_scene(scene)
@@ -644,7 +750,8 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
         t0 = _cpu()
         err_parts, times = [], []
         done = 0
-        for part in _progress(module.iterate(y0, h, steps, chunk=100_000), progress, method,
+        for part in _progress(_chunks(module, y0, h, steps, 100_000, check_resolution=check_resolution),
+                              progress, method,
                               total=math.ceil(steps / 100_000)):
             H = module.hamiltonian(part)
             if H0 is None:
@@ -689,7 +796,7 @@ def long_run(scene: Scene, methods=None, *, steps: int = 1_000_000, h: float | N
 # --- Brouwer's law ------------------------------------------------------------------------
 
 def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed: int = 0,
-            progress: bool = False, dyadic: bool = False) -> dict:
+            progress: bool = False, dyadic: bool = False, check_resolution: bool = True) -> dict:
     """RMS energy error over random phases of the harmonic oscillator, midpoint rule.
 
     Steppers from the same generated module, all on the batched integrator:
@@ -706,6 +813,8 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
     outgrows the √t random walk after ~10⁵ steps; the refinement removes it.
     With ``dyadic=True`` the default stepper is also run with the nearest power
     of two to h (2⁻⁷ for 0.01), where the bias does not arise.
+
+    ``check_resolution``: passed to ``integrate`` (``bench --no-check-resolution``: False).
 
     Returns the RMS error curves and their log-log slopes fitted over the last
     two decades of t (≈ 0.5 for Brouwer's law, ≈ 1 for linear growth).  The
@@ -747,7 +856,8 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
         rms = []
         for target in _progress(record, progress, label):
             if target > done:
-                Y = module.integrate(Y, h, int(target - done), info=info, **kw)[-1]
+                Y = module.integrate(Y, h, int(target - done), info=info, check_resolution=check_resolution,
+                                     **kw)[-1]
             done = target
             rms.append(float(np.sqrt(np.mean((energy(Y, info["compensation"]) - H0) ** 2))))
         sec = _cpu() - t0
@@ -762,8 +872,12 @@ def brouwer(*, ensemble: int = 100, steps: int = 100_000, h: float = 0.01, seed:
 
 # --- solver variants -------------------------------------------------------------------------
 
-def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
-    """Iterations and µs per step of each nonlinear solver, per implicit method."""
+def solver_variants(scene: Scene, methods=None, *, steps: int = 2000, check_resolution: bool = True) -> dict:
+    """Iterations and µs per step of each nonlinear solver, per implicit method, at the scene's h.
+
+    ``check_resolution``: passed to ``integrate`` (``bench --no-check-resolution``: False); with
+    it a step size estimated to under-resolve the motion is a row ``failed`` saying so.
+    """
     scene = extended_scene(scene)
     methods = list(methods or scene.methods)
     y0 = np.array(scene.y0)
@@ -774,7 +888,8 @@ def solver_variants(scene: Scene, methods=None, *, steps: int = 2000) -> dict:
             info = {}
             t0 = time.perf_counter()
             try:
-                traj = module.integrate(y0, scene.h, steps, solver=solver, info=info)
+                traj = module.integrate(y0, scene.h, steps, solver=solver, info=info,
+                                        check_resolution=check_resolution)
             except (RuntimeError, FloatingPointError) as exc:
                 rows.append({"method": method, "solver": solver, "failed": str(exc)})
                 continue

@@ -193,7 +193,11 @@ def cache_dir() -> Path:
     env = os.environ.get("METHODGEN_CACHE")
     if env:
         # "~/x" is the home folder's x (as a shell would expand it), never a folder named "~".
-        return Path(env).expanduser()
+        try:
+            return Path(env).expanduser()
+        except RuntimeError as exc:   # "~nosuchuser/x": pathlib cannot find that home folder
+            raise StorageError(f"METHODGEN_CACHE={env}: cannot expand ~ ({exc}: no such user, or no "
+                               "home folder); give the cache folder without ~", path=env, errno=errno.ENOENT) from None
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "methodgen"
 

@@ -8,6 +8,7 @@ with a numpy traceback or running for months without a word.
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -66,3 +67,30 @@ def check_memory(need: int, what: str, hint: str, limit: int | None = None) -> N
     if limit is not None and need > MEMORY_SHARE * limit:
         raise InputError(f"{what}: about {fmt_bytes(need)} of memory, more than half of this machine's "
                          f"{fmt_bytes(limit)}; {hint}")
+
+
+def steps_for_time(span: float, h: float, what: str = "--t-final") -> tuple[int, float]:
+    """``(steps, h_used)`` of a run over the time ``span`` (T − t0) with step size ``h``: one rule
+    for ``run --t-final`` and a sweep's ``t_final``.
+
+    ``steps = ⌈span / h⌉`` (the nearest whole number when ``span / h`` is whole to 1e-9) and
+    ``h_used = span / steps``: the run ends at T exactly, with a step no larger than ``h``
+    (``|h_used| <= |h|``; the report gives both).  The sign of ``h`` must be that of ``span``
+    (a negative h runs backward, to a T before t0); ``what`` names the request in the one-line
+    :class:`InputError` otherwise.
+    """
+    if not (math.isfinite(span) and span != 0):
+        raise InputError(f"{what}: the time to run (T - t0 = {span!r}) must be finite and non-zero")
+    if not (math.isfinite(h) and h != 0):
+        raise InputError(f"{what}: h must be finite and non-zero, got {h!r}")
+    if (span > 0) != (h > 0):
+        raise InputError(f"{what}: h = {h:g} runs {'backward' if h < 0 else 'forward'} in time but T - t0 = "
+                         f"{span:g}; give h of the sign of T - t0 ({'positive' if span > 0 else 'negative'})")
+    ratio = span / h
+    if not math.isfinite(ratio):
+        raise InputError(f"{what} with h = {h:g} is more steps than a number can hold")
+    n = round(ratio)
+    if abs(ratio - n) > 1e-9 * max(1.0, ratio):
+        n = math.ceil(ratio)
+    n = max(1, int(n))
+    return n, span / n

@@ -183,6 +183,26 @@ def _check_double_range(expr: sp.Expr, what: str) -> None:
                 of = f" ({role}{sp.Float(n, 4)})" if role else ""
                 raise ParseError(f"{what}: the number {sp.Float(part, 4)}{of} is beyond the range of a double "
                                  "(about ±1.8e308)")
+    # Every other number-valued subexpression (exp(1000), cosh(800), pi**700) is evaluated by
+    # SymPy's evalf (mpmath, arbitrary precision; the user's text is never evaluated): the
+    # generated code computes it in doubles, where it would overflow to inf (or, for a nonzero
+    # value, underflow to 0) at run time and be blamed on the initial state.
+    for node in sp.preorder_traversal(expr):
+        if not isinstance(node, sp.Expr) or node.is_Rational or node.is_Float or node.free_symbols \
+                or isinstance(node, sp.NumberSymbol) or node is sp.E:
+            continue
+        try:
+            value = node.evalf(30)
+            re_, im_ = value.as_real_imag()
+            parts = [float(abs(re_)), float(abs(im_))]
+            exact_zero = [re_ == 0, im_ == 0]
+        except (TypeError, ValueError, OverflowError, AttributeError):
+            continue   # not a number (e.g. unevaluated): the other checks of the expression decide
+        for v, zero in zip(parts, exact_zero):
+            if not math.isfinite(v) or (v == 0 and not zero):
+                raise ParseError(f"{what}: {node} = {sp.Float(value, 4) if value.is_real else value} is beyond "
+                                 "the range of a double (magnitudes up to about 1.8e308, nonzero ones above about 5e-324): "
+                                 "the generated code would compute it in doubles; rescale the problem")
 
 
 def _needs(what: str) -> str:

@@ -26,16 +26,24 @@ class ErrorMax:
         Maximum over the finite errors folded in so far (0 before any).
     nonfinite_step : int or None
         Step index of the first row holding a non-finite error (None: every error was finite).
+    finite_before : int or None
+        With rows kept every ``stride > 1`` steps: the step of the kept row before that one
+        (the error became non-finite in ``(finite_before, nonfinite_step]``); None when the
+        first non-finite row is a row 0 or rows are every step.
     """
 
     finite_max: float = 0.0
     nonfinite_step: int | None = None
+    finite_before: int | None = None
 
-    def update(self, errors, offset: int = 0, stride: int = 1) -> "ErrorMax":
+    def update(self, errors, offset: int = 0, stride: int = 1, last: int | None = None) -> "ErrorMax":
         """Fold in ``errors`` (rows: one per step; any further axes are reduced).
 
         ``offset`` is the step index of row 0 and ``stride`` the steps between
-        rows (states kept every ``stride`` steps).  Returns ``self``.
+        rows (states kept every ``stride`` steps).  ``last`` is the step of the last
+        row when it is not on the grid (``save_every``: the last kept state is the one
+        after ``min(i·stride, steps)`` steps): row steps are capped there, so a report
+        never names a step past the end of the run.  Returns ``self``.
         """
         err = np.abs(np.asarray(errors, dtype=float))
         if err.ndim == 0:
@@ -46,7 +54,15 @@ class ErrorMax:
         with np.errstate(invalid="ignore"):
             bad = ~np.isfinite(err).all(axis=1)
         if bad.any() and self.nonfinite_step is None:
-            self.nonfinite_step = offset + stride * int(np.argmax(bad))
+            row = int(np.argmax(bad))
+
+            def step(r):
+                k = offset + stride * r
+                return k if last is None else min(k, last)
+
+            self.nonfinite_step = step(row)
+            if stride > 1 and row > 0:
+                self.finite_before = step(row - 1)
         good = err[~bad]
         if good.size:
             self.finite_max = max(self.finite_max, float(good.max()))

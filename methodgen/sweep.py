@@ -6,7 +6,7 @@ validated key by key, never evaluated)::
     scene = "kepler"            # built-in name, or path to a scene TOML (relative to the spec)
     methods = ["energy-momentum", "midpoint"]   # default: the scene's methods
     h = [0.02, 0.01, 0.005]     # a number or a list; default: the scene's h
-    steps = 1000                # or t_final = 10.0 (then steps = round(t_final / h)); default: the scene's
+    steps = 1000                # or t_final = 10.0 (then ceil(t_final/h) steps of t_final/steps <= h); default: the scene's
     check_resolution = true     # optional; false lets large h run past the h·ω guard
     [params]                    # optional: values per parameter (cartesian product)
     k = [1.0, 1.5]
@@ -57,7 +57,7 @@ else:  # pragma: no cover - Python 3.10
 import numpy as np
 
 from .errors import InputError, MethodgenError
-from .limits import MAX_STEPS, fmt_bytes, memory_limit
+from .limits import MAX_STEPS, fmt_bytes, memory_limit, steps_for_time
 from .stats import ErrorMax
 
 __all__ = ["SpecError", "EngineError", "SweepSpec", "Task", "load_spec", "parse_spec", "plan_sweep",
@@ -112,7 +112,8 @@ class SweepSpec:
     steps : int or None
         Steps per run (exclusive with ``t_final``).
     t_final : float or None
-        Final time; then each h runs ``round(t_final / h)`` steps of ``t_final / steps``.
+        Final time; then each h runs ``ceil(t_final / h)`` steps of ``h_used = t_final / steps``
+        (no larger than h, ending at t_final; :func:`methodgen.limits.steps_for_time`, as ``run``).
     params : tuple of (str, tuple of float)
         Swept parameters in the scene's parameter order, each with its values.
     count, batch, seed : int
@@ -488,8 +489,9 @@ def plan_sweep(spec: SweepSpec) -> Plan:
     for method, h, values in itertools.product(spec.methods, spec.h,
                                                itertools.product(*(v for _, v in spec.params))):
         if spec.t_final is not None:
-            steps = max(1, int(round(spec.t_final / h)))
-            h_used, T = spec.t_final / steps, spec.t_final
+            # ceil(t_final/h) steps of t_final/steps <= h, as `run --t-final` (limits.steps_for_time)
+            steps, h_used = steps_for_time(spec.t_final, h, f"t_final = {spec.t_final:g}")
+            T = spec.t_final
         else:
             steps, h_used = spec.steps, h
             T = h * steps

@@ -125,9 +125,10 @@ def test_t_final_with_steps_takes_h_as_t_over_n(capsys):
     assert code == 0 and rep["h"] == 0.2 and rep["steps"] == 50 and rep["t_final"] == pytest.approx(10.0)
     code, out, _ = _main(capsys, "run", "harmonic", "--h", "0.2", "--steps", "50", "--json")
     assert _no_nan_json(out)["y_final"] == rep["y_final"]
-    # Negative control: with --h 0.3 instead the run does not end at 10 (10/0.3 is not whole).
+    # With --h 0.3 (10/0.3 is not whole): ceil -> 34 steps of 10/34, still ending at 10.
     code, out, _ = _main(capsys, "run", "harmonic", "--t-final", "10", "--h", "0.3", "--json")
-    assert _no_nan_json(out)["t_final"] != pytest.approx(10.0)
+    rep = _no_nan_json(out)
+    assert rep["t_final"] == pytest.approx(10.0) and rep["steps"] == 34 and rep["h_requested"] == 0.3
 
 
 def test_t_final_with_steps_on_a_time_dependent_scene(tmp_path, capsys):
@@ -269,9 +270,18 @@ def test_bench_errors_keep_nan_and_the_table_says_so():
 
 
 def test_bench_constraint_error_keeps_nan():
-    """The builtin max(np.max(g), np.max(gv)) dropped a NaN of gv (negative control below)."""
-    g, gv = np.array([1e-12]), np.array([np.nan])
-    assert math.isnan(max_value(max_abs_error(g), max_abs_error(gv)))
+    """bench._errors itself (not a copy of its formula): a NaN velocity residual is kept
+    (tests/test_cli_mends.py has the constrained module, the table's cell and the negative control
+    with the builtin max)."""
+    class Constrained(_NaNModule):
+        @staticmethod
+        def constraint_residuals(Y):
+            return np.full(len(Y), 1e-12), np.where(np.arange(len(Y)) == 1, np.nan, 0.0)
+    traj = np.array([[1.0, 0.0], [1.0, 0.0]])
+    out = bench._errors(Constrained, traj, traj[-1])
+    assert math.isnan(out["constraint_error"]) and out["nulls"]["constraint_error"]
+    # Negative control: the builtin max(np.max(g), np.max(gv)) drops the NaN of gv.
+    g, gv = Constrained.constraint_residuals(traj)
     assert max(np.max(np.abs(g)), np.max(np.abs(gv))) == 1e-12
 
 
@@ -311,7 +321,7 @@ def test_bench_y0_at_a_singularity_is_one_line_exit_2(capsys):
 
 def test_bench_y0_negative_control(capsys, monkeypatch):
     """Without the check the reference solution fails: still one line (exit 3), no RuntimeError traceback."""
-    monkeypatch.setattr(bench, "check_initial_state", lambda scene: None)
+    monkeypatch.setattr(bench, "check_initial_state", lambda scene, own=None: None)
     code, out, err = _main(capsys, "bench", "kepler", "--quick", "--y0=0,0,0,0,0,0")
     # (numpy's warnings of the division by r = 0 come first, one line each)
     assert code == cli.EXIT_NUMERICAL and "Traceback" not in err

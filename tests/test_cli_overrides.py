@@ -41,7 +41,7 @@ def test_without_overrides_the_scene_values_are_used(capsys):
     (["--y0", "0.5,0,0,0,1.2,nan"], "entry 6: 'nan' is not finite"),
     (["--steps", "10", "--t-final", "1", "--h", "0.1"], "not all three"),
     (["--steps", "0", "--t-final", "1"], "--steps must be at least 1 with --t-final"),
-    (["--t-final", "-1"], "positive finite time"),
+    (["--t-final", "-1"], "runs forward in time but T - t0 = -1"),
 ])
 def test_bad_overrides_are_one_line_errors(capsys, argv, fragment):
     code, _, err = _run(capsys, *argv)

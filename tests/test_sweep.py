@@ -94,7 +94,7 @@ def test_spec_defaults_scene_path_and_tasks(tmp_path):
     plan = sw.plan_sweep(spec)
     assert [t.name for t in plan.tasks] == ["midpoint h=0.1 batch=0", "energy-momentum h=0.1 batch=0"]
     t = plan.tasks[0]
-    assert t.steps == 4 and t.h_used == pytest.approx(0.105) and t.y0.shape == (1, 2)
+    assert t.steps == 5 and t.h_used == pytest.approx(0.084) and t.y0.shape == (1, 2)   # ceil(4.2) steps
 
 
 def test_ensemble_is_seeded_and_split_into_batches():

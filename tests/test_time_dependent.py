@@ -313,7 +313,7 @@ def test_run_text_and_t_final(tmp_path, capsys):
     assert lines[1].startswith("time-dependent H: integrates K = H + e")
     assert lines[-1].startswith("y_final: x=") and lines[-1].endswith("; t=2.5")
     code, out, err = _main(capsys, "run", path, "--t-final", "0.2")
-    assert code == cli.EXIT_INPUT and "after t0 = 0.5" in err and "Traceback" not in err
+    assert code == cli.EXIT_INPUT and "from t0 = 0.5" in err and "Traceback" not in err   # before t0: h < 0 needed
 
 
 def test_verify_scene(tmp_path, capsys):

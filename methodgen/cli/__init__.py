@@ -7,7 +7,9 @@ command.  This module only wires them into :func:`make_parser` and :func:`main`.
 
 Every command that reports numbers takes ``--json`` and then prints exactly one
 JSON object on stdout and nothing else there (never ``NaN``/``Infinity``: a
-value that is not a number is ``null``, with a ``status`` saying why).  Errors a
+value that is not a number is ``null``, and the object holding it says why: a
+``status`` (run, sweep: ``non-finite`` with the first step) or, in a bench row,
+``nulls`` = {field: reason}).  Errors a
 user can cause print one line ``methodgen: error: …`` on stderr and exit
 non-zero, without a traceback: 2 for bad input (including a path that cannot be
 used: missing folder, no permission, a file in the way, an untrusted cache), 3
@@ -27,8 +29,8 @@ from .. import __version__
 from ..progress import stderr_reporting
 from ..errors import BAD_PATH_ERRNOS, MethodgenError, NumericalError, StorageError
 from . import bench, figures, generate, run, scenes, sweep, verify
-from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, Parser, join_negative_values, one_line_warning,
-                     oserror_line)
+from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, Parser, cli_advice, join_negative_values,
+                     one_line_warning, oserror_line)
 
 __all__ = ["main", "make_parser", "EXIT_INPUT", "EXIT_NUMERICAL"]
 
@@ -66,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     except (RuntimeError, FloatingPointError) as exc:
         # ConvergenceError / NonFiniteError / ResolutionError of generated modules.
         if type(exc).__name__ in NUMERICAL_ERRORS:
-            print(f"methodgen: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            print(f"methodgen: error: {cli_advice(exc)}", file=sys.stderr)
             return EXIT_NUMERICAL
         raise
     except KeyboardInterrupt:

@@ -4,6 +4,7 @@ optionally peers, solver variants, long runs, Brouwer's law)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 
 from ..emit import BACKENDS
@@ -11,7 +12,8 @@ from ..errors import InputError
 from ..limits import check_memory, check_steps
 from ..scene import load_scene
 from ..schemes import METHODS
-from .common import dump_json, fmt, parse_params, parse_y0, positive_int, step_size
+from ..stats import max_value
+from .common import check_output_file, cli_advice, dump_json, fmt, parse_params, parse_y0, positive_int, step_size
 
 
 def _print_bench(rep: dict) -> None:
@@ -25,7 +27,7 @@ def _print_bench(rep: dict) -> None:
               f"{'rel. dE':>9} {'inv/constr':>10} {'Newton':>6}")
         for r in wp["rows"]:
             if "failed" in r:
-                print(f"{r['method']:<{w}} {r.get('h', r.get('tol', 0)):9.3g}  failed: {r['failed'][:60]}")
+                print(f"{r['method']:<{w}} {r.get('h', r.get('tol', 0)):9.3g}  failed: {cli_advice(r['failed'])[:60]}")
                 continue
             par = r.get("h", r.get("tol"))
             others = [v for k, v in r["invariant_errors"].items() if k != "H"]
@@ -33,7 +35,7 @@ def _print_bench(rep: dict) -> None:
                 others.append(r["constraint_error"])
             print(f"{r['method']:<{w}} {par:9.3g} {r['steps']:7d} {r['seconds']:9.4f} {fmt(r['error']):>10} "
                   f"{fmt(r['energy_error']):>10} {fmt(r.get('energy_rel_error'), '.1e'):>9} "
-                  f"{fmt(max(others) if others else None):>10} {fmt(r.get('newton_mean'), '.2f'):>6}")
+                  f"{fmt(max_value(*others) if others else None):>10} {fmt(r.get('newton_mean'), '.2f'):>6}")
         tg = wp.get("targets")
         if tg:  # bench --peers: the cheapest run of each method at the issue-14 targets
             print(f"\ncheapest run with final error <= {tg['error']:g} and rel. dE <= {tg['energy_rel_error']:g}:")
@@ -53,7 +55,7 @@ def _print_bench(rep: dict) -> None:
         print(f"{'method':<18} {'solver':<12} {'iterations':>10} {'µs/step':>9} {'energy err':>10}")
         for r in sv["rows"]:
             if "failed" in r:
-                print(f"{r['method']:<18} {r['solver']:<12} failed: {r['failed'][:70]}")
+                print(f"{r['method']:<18} {r['solver']:<12} failed: {cli_advice(r['failed'])[:200]}")
             else:
                 print(f"{r['method']:<18} {r['solver']:<12} {r['mean_iterations']:10.2f} {r['us_per_step']:9.1f} "
                       f"{fmt(r['max_energy_error']):>10}")
@@ -124,6 +126,8 @@ def _bench_overrides(scene, args):
         values = parse_params(items, list(scene.system.param_values))
         scene = dataclasses.replace(scene, system=_with_param_values(scene.system, values))
     if h is not None:
+        if not h > 0:   # every bench run goes forward from t = 0 (a negative h: a negative final time)
+            raise InputError(f"--h must be positive for bench (its runs go forward in time from t = 0), got {h:g}")
         scene = dataclasses.replace(scene, h=float(h))
     return scene
 
@@ -131,16 +135,36 @@ def _bench_overrides(scene, args):
 def cmd_bench(args) -> int:
     from .. import bench
 
-    scene = _bench_overrides(load_scene(args.scene), args)
-    # A y0 at a singularity of H: one line now, not a failed reference solution minutes later.
-    bench.check_initial_state(bench.extended_scene(scene))
-    for flag in ("long_steps", "brouwer_steps"):
-        if getattr(args, flag, None) is not None:
-            check_steps(getattr(args, flag), f"--{flag.replace('_', '-')} {getattr(args, flag)}")
-    if args.long and args.long_steps:
+    own = load_scene(args.scene)
+    scene = _bench_overrides(own, args)
+    # A y0 at a singularity of H, or parameters making the field undefined (m = 0) or overflow:
+    # one line now (naming --param when they are the cause), not a failure minutes later.
+    extended = bench.extended_scene(scene)
+    try:   # the same y0 with the scene's own parameters: tells whether --param is the cause
+        own = bench.extended_scene(dataclasses.replace(scene, system=own.system))
+    except InputError:
+        own = None
+    bench.check_initial_state(extended, own=own)
+    for flag, least in (("long_steps", 1), ("brouwer_steps", 1), ("ensemble", 2)):
+        value = getattr(args, flag, None)
+        if value is None:
+            continue
+        if value < least:   # 0 is not "the default": a run of no steps, or a slope of one point
+            why = "a slope over random phases needs two" if flag == "ensemble" else "0 steps measure nothing"
+            raise InputError(f"--{flag.replace('_', '-')} must be at least {least}, got {value} ({why})")
+        if flag != "ensemble":
+            check_steps(value, f"--{flag.replace('_', '-')} {value}")
+    long_steps = args.long_steps if args.long_steps is not None else (20_000 if args.quick else 1_000_000)
+    brouwer_steps = args.brouwer_steps if args.brouwer_steps is not None else (10_000 if args.quick else 1_000_000)
+    if args.long:
         # The long run keeps the time and energy error of every step (and their concatenation).
-        check_memory(32 * args.long_steps, f"--long-steps {args.long_steps} keeps the energy error of every "
+        check_memory(32 * long_steps, f"--long-steps {long_steps} keeps the energy error of every "
                      "step", "take fewer --long-steps")
+    if args.plot is not None:
+        # Checked before the runs (minutes), like run's --save: folder exists, a file name, writable.
+        if args.only_extras:
+            raise InputError("--plot draws the work-precision diagram; drop --only-extras")
+        args.plot = str(check_output_file(args.plot, "--plot"))
     orders = getattr(args, "orders", None)
     if orders is not None and not args.peers and orders != (2,):
         raise InputError("--orders above 2 (compositions) are benchmarked with --peers; "
@@ -160,14 +184,14 @@ def cmd_bench(args) -> int:
         rep["work_precision"] = bench.work_precision(scene, methods, quick=args.quick, progress=progress,
                                                      peers=args.peers, backend=args.backend, T=args.t_final,
                                                      orders=orders, solver=solver)
-        rep["solvers"] = bench.solver_variants(scene, methods, steps=300 if args.quick else 2000)
+        rep["solvers"] = bench.solver_variants(scene, methods, steps=300 if args.quick else 2000,
+                                               check_resolution=args.check_resolution)
     if args.long:
-        rep["long"] = bench.long_run(scene, methods, steps=args.long_steps or (20_000 if args.quick else 1_000_000),
-                                     progress=progress)
+        rep["long"] = bench.long_run(scene, methods, steps=long_steps, progress=progress,
+                                     check_resolution=args.check_resolution)
     if args.brouwer:
-        rep["brouwer"] = bench.brouwer(ensemble=args.ensemble,
-                                       steps=args.brouwer_steps or (10_000 if args.quick else 1_000_000),
-                                       progress=progress, dyadic=not args.quick)
+        rep["brouwer"] = bench.brouwer(ensemble=args.ensemble, steps=brouwer_steps, progress=progress,
+                                       dyadic=not args.quick, check_resolution=args.check_resolution)
     if args.plot:
         if "work_precision" not in rep:
             raise InputError("--plot draws the work-precision diagram; drop --only-extras")
@@ -194,12 +218,13 @@ def add_parser(sub) -> None:
     p.add_argument("--methods", nargs="+", metavar="M", help="methods (default: the scene's)")
     p.add_argument("--quick", action="store_true", help="a small configuration (seconds)")
     p.add_argument("--long", action="store_true", help="also the long run (energy-error envelope)")
-    p.add_argument("--long-steps", type=positive_int, metavar="N", help="steps of the long run (default 10^6)")
+    p.add_argument("--long-steps", type=positive_int, metavar="N",
+                   help="steps of the long run, at least 1 (default 10^6; 2*10^4 with --quick)")
     p.add_argument("--brouwer", action="store_true",
                    help="also the Brouwer experiment (harmonic oscillator ensemble, midpoint)")
     p.add_argument("--brouwer-steps", type=positive_int, metavar="N",
-                   help="steps (default 10^6, about 10 min; 10^4 with --quick)")
-    p.add_argument("--ensemble", type=positive_int, default=100, help="ensemble size (default 100)")
+                   help="steps of the Brouwer experiment, at least 1 (default 10^6, about 10 min; 10^4 with --quick)")
+    p.add_argument("--ensemble", type=positive_int, default=100, help="ensemble size, at least 2 (default 100)")
     p.add_argument("--only-extras", action="store_true",
                    help="skip the work-precision and solver tables (run only --long/--brouwer)")
     p.add_argument("--plot", metavar="FILE", help="write the work-precision diagram")
@@ -209,7 +234,8 @@ def add_parser(sub) -> None:
     p.add_argument("--backend", choices=BACKENDS, default="numpy",
                    help="backend of methodgen's rows (numba: compiled loop, compiled before timing)")
     p.add_argument("--t-final", type=float, metavar="T",
-                   help="final time of the work-precision runs (default 20; with --peers the scene's h*steps)")
+                   help="final time of the work-precision runs (default 20, 2 with --quick; with --peers the "
+                        "scene's h*steps)")
     p.add_argument("--orders", type=_bench_orders, metavar="K,K,...",
                    help="with --peers: orders of methodgen's rows, each method at each order (default 2,4,6,8,10; "
                         "above 2 the symmetric composition of the order's default family, step sizes per order "
@@ -220,5 +246,9 @@ def add_parser(sub) -> None:
     p.add_argument("--param", action="append", metavar="NAME=VALUE",
                    help="parameter value (repeatable; the system is derived with it: its modules go to the cache)")
     p.add_argument("--h", type=step_size, help="the scene's step size for this bench (with --peers the step-size ladder is scaled from it)")
+    p.add_argument("--no-check-resolution", dest="check_resolution", action="store_false",
+                   help="the solver table, --long and --brouwer runs do not refuse a step size h estimated to "
+                        "under-resolve the motion (the work-precision rows never do: their step-size ladder is "
+                        "the measurement)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_bench)

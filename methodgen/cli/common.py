@@ -28,7 +28,13 @@ EXIT_NUMERICAL = 3
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with methodgen's exit status for bad input."""
+    """argparse with methodgen's exit status for bad input, and no abbreviated options
+    (``--y`` for ``--y0`` would slip past :func:`join_negative_values`, and a new option
+    would silently change what an abbreviation means)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):  # argparse's own errors: usage + exit 2, no traceback
         self.print_usage(sys.stderr)
@@ -96,6 +102,13 @@ def dump_json(obj) -> str:
 NUMERICAL_ERRORS = ("ConvergenceError", "NonFiniteError", "ResolutionError")
 
 
+def cli_advice(text: str) -> str:
+    """A generated module's message on one line, its Python advice put in command-line terms:
+    ``check_resolution=False`` is ``--no-check-resolution`` on run, sweep and bench."""
+    text = " ".join(str(text).split())
+    return text.replace("pass check_resolution=False", "pass --no-check-resolution")
+
+
 def print_note(text: str) -> None:
     print(f"methodgen: note: {text}", file=sys.stderr)
 
@@ -112,15 +125,16 @@ def finite_number(text: str, what: str) -> float:
 
 
 def check_output_file(text, option: str) -> Path:
-    """The path of an output file (``--save``, ``--csv``) checked before any work: a file name
+    """The path of an output file (``--save``, ``--csv``, ``--plot``) checked before any work: a file name
     (not empty, not a folder) in a folder that exists and can be written.  The folder is never
     created: a typo in it would otherwise scatter results.  One-line :class:`InputError` else."""
     if text is None or not str(text).strip():
         raise InputError(f"{option} needs a file name, got {str(text or '')!r}")
     text = str(text)
-    path = Path(text).expanduser()
+    path = expand_user(text, option)
     if text.endswith(("/", os.sep)) or path.is_dir():
-        raise InputError(f"{option} {text}: is a folder; give a file name in it, e.g. {path / 'run.npz'}")
+        example = {"--plot": "run.png", "--csv": "rows.csv"}.get(option, "run.npz")
+        raise InputError(f"{option} {text}: is a folder; give a file name in it, e.g. {path / example}")
     folder = path.parent
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{option} {text}: {folder} is a file, not a folder")
@@ -132,14 +146,42 @@ def check_output_file(text, option: str) -> Path:
     return path
 
 
-def join_negative_values(argv: list[str], options=("--y0", "--h", "--t-final")) -> list[str]:
+def expand_user(text: str, what: str) -> Path:
+    """``Path(text).expanduser()``, a one-line :class:`InputError` naming ``what`` when the home
+    folder in it cannot be found (``~nosuchuser/x``: pathlib raises RuntimeError)."""
+    try:
+        return Path(text).expanduser()
+    except RuntimeError as exc:
+        raise InputError(f"{what} {text}: cannot expand ~ ({exc.args[0] if exc.args else exc}: no such user, "
+                         "or no home folder); give the path without ~") from None
+
+
+#: Options whose value may start with "-": a number, a comma list of numbers (-inf, -nan
+#: included), or an expression (``--time-transform -x``, refused later with a reason).
+NEGATIVE_VALUE_OPTIONS = ("--y0", "--h", "--t-final", "--time-transform")
+
+_NEGATIVE_VALUE = re.compile(r"-([0-9.]|inf|nan)", re.IGNORECASE)
+
+
+def join_negative_values(argv: list[str], options=NEGATIVE_VALUE_OPTIONS) -> list[str]:
     """``--y0 -1,0`` as ``--y0=-1,0``: argparse takes a value that starts with ``-`` for an
-    option unless it is a plain negative number; a comma list or ``-1e3`` is not."""
+    option unless it is a plain negative number; a comma list, ``-1e3``, ``-inf,0`` or
+    ``-nan`` is not.  ``--time-transform`` takes any value that starts with ``-`` (an
+    expression).  Abbreviated options are refused by :class:`Parser`, so these are the
+    only spellings."""
     out: list[str] = []
     i = 0
     while i < len(argv):
         a = argv[i]
-        if a in options and i + 1 < len(argv) and re.match(r"-[0-9.]", argv[i + 1]):
+        if argv[i:i + 1] == ["--"]:   # everything after "--" is positional
+            out.extend(argv[i:])
+            break
+        nxt = argv[i + 1] if i + 1 < len(argv) else None
+        takes = nxt is not None and (
+            (a == "--time-transform" and nxt.startswith("-") and nxt not in ("-h", "--help")
+             and not nxt.startswith("--"))
+            or _NEGATIVE_VALUE.match(nxt) is not None)
+        if a in options and takes:
             out.append(f"{a}={argv[i + 1]}")
             i += 2
             continue

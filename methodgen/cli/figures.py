@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from .common import expand_user
 
 
 def _default_out() -> Path:
@@ -64,7 +65,9 @@ def cmd_figures(args) -> int:
     from .common import dump_json
     from ..plots import write_figures
 
-    out = Path(args.out) if args.out else _default_out()
+    if args.out is not None and not str(args.out).strip():
+        raise InputError("--out needs a folder name, got ''; leave --out out for the default")
+    out = expand_user(args.out, "--out") if args.out else _default_out()
     t0 = time.perf_counter()
     res = write_figures(out, args.format)
     seconds = time.perf_counter() - t0

@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..progress import about
 from ..scene import load_scene, scene_names
 from ..schemes import discretize
-from .common import add_order_args, add_variant_args, resolve_order, resolve_stages, resolve_time_transform, \
+from .common import expand_user, add_order_args, add_variant_args, resolve_order, resolve_stages, resolve_time_transform, \
     transformed_context
 
 
@@ -56,9 +56,12 @@ def _composed_files(names: list[str], backend: str) -> dict:
 
 
 def cmd_generate(args) -> int:
+    if args.out is not None and not str(args.out).strip():
+        # An empty --out is a mistake (an unset shell variable), not "the checkout's generated/".
+        raise InputError("--out needs a folder name, got ''; leave --out out to write the checkout's generated/")
     if args.backend != "numpy" and not args.out:
         raise InputError("generated/ holds the numpy modules only; pass --out DIR with --backend numba")
-    out = Path(args.out) if args.out else generated_dir()
+    out = expand_user(args.out, "--out") if args.out else generated_dir()
     if out is None:
         raise InputError("no generated/ folder found (not a source checkout); pass --out DIR")
     expected = set()

@@ -13,14 +13,14 @@ import numpy as np
 from ..build import build, scene_module_path
 from ..emit import BACKENDS
 from ..errors import InputError
-from ..limits import check_memory, check_steps
+from ..limits import check_memory, check_steps, steps_for_time
 from ..progress import about, phase
 from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
 from ..schemes import METHODS, composition_for, method_key, scheme_options
 from ..stats import ErrorMax
 from .common import (EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
-                     apply_overrides, check_output_file, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
+                     apply_overrides, check_output_file, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
                      print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
 
@@ -36,14 +36,15 @@ class RunFailure(Exception):
 
 
 def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: dict | None = None,
-                     stride: int = 1) -> dict:
+                     stride: int = 1, last: int | None = None) -> dict:
     """Update the running max errors of every monitored invariant with ``traj`` (rows of states).
 
     ``acc`` maps each name to ``{"initial", "final", "error"}``, ``error`` an
     :class:`~methodgen.stats.ErrorMax` (NaN never disappears into the maximum: the
     first step at which an invariant is not finite is recorded, to be reported as
     null with a status).  ``offset`` is the step index of ``traj[0]``, ``stride`` the
-    steps between rows (``--save-every``: the maxima are then over the kept states).
+    steps between rows (``--save-every``: the maxima are then over the kept states), ``last``
+    the step of the last row (``min(i·k, steps)``: a step is never reported past it).
     """
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # NaN is tracked below
         inv = module.invariants(traj) if params is None else module.invariants(traj, params)
@@ -55,7 +56,7 @@ def _invariant_stats(module, traj, acc: dict | None, offset: int = 0, params: di
         entry = acc[name]
         if len(vals):
             with np.errstate(invalid="ignore", over="ignore"):
-                entry["error"].update(vals - entry["initial"], offset=offset, stride=stride)
+                entry["error"].update(vals - entry["initial"], offset=offset, stride=stride, last=last)
             entry["final"] = float(vals[-1, 0])
     return acc
 
@@ -119,10 +120,16 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         init, abs_err, bad = v["initial"], v["error"].finite_max, v["error"].nonfinite_step
         if bad is not None:
             # Not a number: reported as null with the reason, never as an error of 0.
+            before = v["error"].finite_before
             report_inv[name] = {"initial": init, "final": v.get("final", init), "max_abs_error": None,
                                 "max_rel_error": None, "status": "non-finite", "first_nonfinite_step": bad}
+            if before is not None:
+                # --save-every: only kept states are seen; it became non-finite in (before, bad].
+                report_inv[name]["last_finite_step"] = before
             problems.append(f"{name} is not finite at step {bad}"
-                            + (f" ({name}(y0) = {init})" if bad == 0 else ""))
+                            + (f" ({name}(y0) = {init})" if bad == 0 else "")
+                            + (f" (the first kept state where it is not; it was finite at step {before}, the "
+                               "states between are not kept)" if before is not None else ""))
             continue
         if abs(init) <= _ZERO_SCALE * scale:
             # A quantity that starts at 0 (total momentum at rest, a constraint): no relative
@@ -194,35 +201,26 @@ class _Iterations:
         return self.total / self.count if self.count else 0.0
 
 
-def _check_size(scene, steps: int, h: float, t_final, every: int, save, chunk) -> None:
+def _check_size(scene, steps: int, h: float, t_final, every: int, save, chunk, plot=None) -> None:
     """Refuse, before any work, a run beyond :data:`~methodgen.limits.MAX_STEPS` or whose
-    states kept at once do not fit in memory (all of them without ``--save``, one chunk with it)."""
+    states kept at once do not fit in memory (all of them without ``--save``, one chunk with it;
+    all of them again with ``--plot``, which draws the whole trajectory read back from the file)."""
     what = (f"--t-final {t_final:g} with h = {h:g}" if t_final is not None and steps != scene.steps
             else f"--steps {steps}")
     check_steps(steps, what)
     width = len(scene.run_system.y)
-    at_once = min(steps, chunk or steps) if save else steps
+    at_once = min(steps, chunk or steps) if save and not plot else steps
     # the states kept (8 bytes a value) and the module's per-step iteration counts of a chunk
     need = 8 * (at_once // every + 2) * width + 8 * min(steps, chunk or steps)
-    if save:
+    if plot and save:
+        hint = "--plot draws every kept state (read back from the file): pass --save-every K to keep fewer"
+    elif save:
         hint = "pass --chunk N to write the states N steps at a time"
     else:
         hint = ("pass --save FILE.npz --chunk N to write them in chunks"
                 + (", or --save-every K to keep fewer" if every == 1 else ""))
     check_memory(need, f"{what} holds {at_once // every + 1:.3g} states of {width} values and "
                        f"{min(steps, chunk or steps):.3g} steps' Newton counts at once", hint)
-
-
-def _steps_for(t_final: float, h: float) -> int:
-    if not (math.isfinite(t_final) and t_final > 0):
-        raise InputError(f"--t-final must be a positive finite time, got {t_final!r}")
-    steps = t_final / abs(h)
-    if not math.isfinite(steps):
-        raise InputError(f"--t-final {t_final:g} with h = {h:g} is more steps than a number can hold")
-    n = round(steps)
-    if abs(steps - n) > 1e-9 * max(1.0, steps):
-        n = math.ceil(steps)   # the last step ends at or just after t_final; the report says where
-    return max(1, int(n))
 
 
 def run_scene(scene_name: str, method: str | None = None, h: float | None = None,
@@ -245,7 +243,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     (``integrate(..., extended=True)``: round-off that follows Brouwer's law).
     ``y0``, ``params`` ({name: value}) and ``t_final`` override the scene's initial
     state, parameter values (passed to the module at run time: nothing is
-    re-derived) and final time (``steps = round(t_final / h)``; not with ``steps``).
+    re-derived) and final time: with ``h``, ``steps = ⌈(t_final − t0)/h⌉`` and
+    ``h = (t_final − t0)/steps`` (ends at ``t_final`` exactly with a step no larger than the one
+    given, reported as ``h_requested`` when it differs; :func:`methodgen.limits.steps_for_time`,
+    the rule of a sweep's ``t_final`` too); the sign of ``h`` must be that of ``t_final − t0``
+    (t0: a time-dependent H's, else 0).
     ``order`` (2, 4, 6, 8, 10) and ``composition`` (a family) override the scene's
     ``[run] order``/``composition`` (:func:`resolve_order`): above 2 the method is
     composed symmetrically, its own module (and cache file) is used.
@@ -256,7 +258,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     refused, and the report's ``t_final`` is the physical time reached.
     ``save_every`` = k keeps every k-th state (and the last): what ``save`` writes, what is
     plotted and what the invariant errors are the maximum over (``integrate(..., save_every=k)``).
-    ``t_final`` with ``steps`` (and no ``h``) takes ``h = t_final / steps``.
+    ``t_final`` with ``steps`` (and no ``h``) takes ``h = (t_final − t0) / steps``.
     ``check_resolution=False`` (``--no-check-resolution``) passes the same to the module's
     ``integrate``: no refusal of a step size estimated to under-resolve the motion.
     Refused before any work (:class:`InputError`): more than :data:`~methodgen.limits.MAX_STEPS`
@@ -266,7 +268,10 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         raise InputError("--extended needs the numpy backend (numba has no long double)")
     if save is not None:
         save = str(check_output_file(save, "--save"))
-    if plot:
+    if plot is not None:
+        # Checked like --save, before any work: a missing folder is not created, a folder or an
+        # empty name is refused (an empty --plot used to be ignored, a folder failed after the run).
+        plot = str(check_output_file(plot, "--plot"))
         from ..plots import check_available
         check_available()  # a missing matplotlib is reported before the run, not after
     scene = resolve_time_transform(load_scene(scene_name), time_transform)
@@ -278,6 +283,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     key = method_key(method, composition_for(order, composition), scheme_options(method, options))
     h_given = h is not None
     h = scene.h if h is None else h
+    h_requested = None   # --h when --t-final rounds it to whole steps
     scene, params = apply_overrides(scene, y0, params)
     if t_final is not None:
         if scene.transformed is not None:
@@ -285,28 +291,33 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                              f"{scene.time_transform} h and steps are in fictive time τ (dt = g(q) dτ: the "
                              "physical time is known only after the run); give --steps instead — the "
                              "report gives the physical time reached")
-        if _time_dependent(scene):
-            if not (math.isfinite(t_final) and t_final > scene.t0):
-                raise InputError(f"--t-final is the final time of the time-dependent H; it must be after "
-                                 f"t0 = {scene.t0:g}, got {t_final!r}")
-            t_final = t_final - scene.t0
+        if not math.isfinite(t_final):
+            raise InputError(f"--t-final must be a finite time, got {t_final!r}")
+        # The time to run: from t0 (a time-dependent H's declared start, else 0) to T.
+        t_start = scene.t0 if _time_dependent(scene) else 0.0
+        span = t_final - t_start
+        if span == 0:
+            raise InputError(f"--t-final {t_final:g} is the start time t0 = {t_start:g}: nothing to run")
         if steps is not None:
-            # h = T/N, as numpy.linspace(t0, T, N + 1) spaces the times.
+            # h = (T - t0)/N, as numpy.linspace(t0, T, N + 1) spaces the times.
             if h_given:
                 raise InputError("give two of --h, --steps, --t-final, not all three (with --t-final T "
-                                 "--steps N, h = T/N)")
+                                 "--steps N, h = (T - t0)/N)")
             if steps < 1:
                 raise InputError(f"--steps must be at least 1 with --t-final, got {steps}")
-            if not (math.isfinite(t_final) and t_final > 0):
-                raise InputError(f"--t-final must be a positive finite time, got {t_final!r}")
-            h = t_final / steps
+            h = span / steps
         else:
-            steps = _steps_for(t_final, h)
+            # steps = ceil((T - t0)/h), h_used = (T - t0)/steps: ends at T exactly (limits.steps_for_time,
+            # the rule a sweep's t_final follows too); the h asked for is reported as h_requested.
+            h_requested = h
+            steps, h = steps_for_time(span, h, f"--t-final {t_final:g}"
+                                      + (f" from t0 = {t_start:g}" if t_start else ""))
+        t_final = span   # the time run (for the size check's message)
     steps = scene.steps if steps is None else steps
     every = 1 if save_every is None else int(save_every)
     if isinstance(save_every, bool) or every < 1:
         raise InputError(f"--save-every must be a positive integer, got {save_every!r}")
-    _check_size(scene, steps, h, t_final, every, save, chunk)
+    _check_size(scene, steps, h, t_final, every, save, chunk, plot)
     system = scene.run_system
     if scene.transformed is not None:
         check_g_positive(system, scene.y0, params)
@@ -369,7 +380,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             finally:
                 seconds += time.perf_counter() - t0
             rows = part if first else part[1:]
-            inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params, stride=every)
+            inv_acc = _invariant_stats(module, part, inv_acc, offset=done, params=params, stride=every,
+                                       last=done + n)
             its.add(info.get("newton_iterations", ()))
             if writer is not None:
                 writer.append(rows)
@@ -429,6 +441,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         code = 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL
         raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
     rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
+    if h_requested is not None and h_requested != h:
+        rep["h_requested"] = h_requested   # --t-final T --h H: h = (T - t0)/ceil((T - t0)/H) ends at T
     if every > 1:
         rep["save_every"] = every   # invariant errors are maxima over the kept states
     if writer is not None:
@@ -530,7 +544,7 @@ def cmd_run(args) -> int:
             where = f"; saved {n} states to {fail.saved}"
         else:
             where = f"; {fail.note}" if fail.note else ""
-        msg = " ".join(str(fail.exc).split()) or type(fail.exc).__name__  # one line, whatever the text
+        msg = cli_advice(fail.exc) or type(fail.exc).__name__  # one line, whatever the text
         print(f"methodgen: {what} at step {fail.report['steps_done']}: {msg}{where}", file=sys.stderr)
         if args.json:
             status = ("interrupted" if fail.code == 130 else "io-error" if isinstance(fail.exc, OSError)
@@ -564,8 +578,9 @@ def add_parser(sub) -> None:
     p.add_argument("--h", type=step_size, help="step size (default: the scene's)")
     p.add_argument("--steps", type=positive_int, help="number of steps (default: the scene's)")
     p.add_argument("--t-final", type=float, metavar="T",
-                   help="final time: with --h, steps = T/h rounded (the report gives t_final); with --steps N, "
-                        "h = T/N (as numpy.linspace); not with a time transformation (its steps are in "
+                   help="final time: with --h H, steps = ceil((T - t0)/H) of h = (T - t0)/steps <= H, ending "
+                        "at T (the report gives h and h_requested; H must have the sign of T - t0, t0 = 0 "
+                        "unless H depends on time); with --steps N, h = (T - t0)/N (as numpy.linspace); not with a time transformation (its steps are in "
                         "fictive time)")
     add_resolution_arg(p)
     p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")

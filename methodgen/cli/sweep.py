@@ -21,7 +21,7 @@ import dataclasses
 import sys
 
 from ..stats import max_value
-from .common import add_resolution_arg, check_output_file, dump_json, fmt
+from .common import add_resolution_arg, check_output_file, cli_advice, dump_json, fmt
 
 
 def _count(minimum: int):
@@ -51,14 +51,17 @@ def _print_report(rep: dict) -> None:
         others = [nonfinite.get(k, v) for k, v in r["invariant_errors"].items() if k != "H"]
         others.append(nonfinite.get("constraints", r["constraint_error"]))
         energy = nonfinite.get("H", r["energy_error"])
-        line = f"{r['method']:<18} {r['h']:9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
+        line = f"{r['method']:<18} {r.get('h_used', r['h']):9.4g} " + "".join(f"{r['params'][p]:9.4g} " for p in params)
         line += f"{r['batch']:5d} {r['trajectories']:5d} {r['status']:<15} {fmt(energy):>10} " \
                 f"{fmt(max_value(*others) if any(v is not None for v in others) else None):>10} " \
                 f"{fmt(r['final_error']):>10} " \
                 f"{fmt(r['newton_mean'], '.2f'):>6} {fmt(r['cpu_seconds'], '.3f'):>8}"
         print(line)
         if r["error"]:
-            print(f"{'':<18} {r['error'][:200]}")
+            print(f"{'':<18} {cli_advice(r['error'])[:200]}")
+    if any(r.get("h_used", r["h"]) != r["h"] for r in rep["rows"]):
+        print("h: the step used, t_final/steps with steps = ceil(t_final/h) of the spec's h (ends at t_final; "
+              "--json gives h and h_used)")
     eng = rep["engine"]
     where = "in-process" if eng["kind"] == "in-process" else f"{eng['kind']} ({eng['workers']} workers)"
     rate = rep["trajectory_steps_per_second"]
@@ -73,9 +76,10 @@ def cmd_sweep(args) -> int:
     from ..emit import write_atomic
     from ..sweep import load_spec, run_sweep, rows_to_csv
 
-    if args.csv:
-        # Checked before the run, which may take hours, not after it.
-        check_output_file(args.csv, "--csv")
+    if args.csv is not None:
+        # Checked before the run, which may take hours, not after it (an empty name is refused,
+        # not ignored).
+        args.csv = str(check_output_file(args.csv, "--csv"))
     spec = load_spec(args.spec)
     if not args.check_resolution:   # --no-check-resolution over the spec's check_resolution
         spec = dataclasses.replace(spec, check_resolution=False)
