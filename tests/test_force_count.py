@@ -32,7 +32,7 @@ import pytest
 import methodgen as mg
 
 #: ∇U and U evaluations per stage in the post kernel (see the module docstring).
-GRAD_PER_STAGE = 2
+GRAD_PER_STAGE = 1
 U_PER_STAGE = 1
 
 
