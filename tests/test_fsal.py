@@ -160,3 +160,13 @@ def test_composed_order(hh, hh_reference, K, N):
             for n in (N, 2 * N)]
     assert errs[1] > 3e-13, f"error {errs[1]:.1e} at 2N is at round-off: the case measures nothing"
     assert errs[0] / errs[1] >= 2 ** (K - 0.7), f"order {np.log2(errs[0] / errs[1]):.2f} < {K} - 0.7 ({errs})"
+
+
+def test_extended_refinement_with_the_carried_force(sv4):
+    """extended=True moves the state off the double-precision step, so there the force is
+    evaluated afresh at each stage's end: the same method to round-off, chunks bitwise."""
+    ref = sv4.integrate(HH_Y0, H, 60)
+    whole = sv4.integrate(HH_Y0, H, 60, extended=True)
+    assert np.abs(whole - ref).max() < TOL
+    parts = np.concatenate(list(sv4.iterate(HH_Y0, H, 60, chunk=25, extended=True)))
+    assert np.array_equal(parts, whole)
