@@ -170,3 +170,20 @@ def test_extended_refinement_with_the_carried_force(sv4):
     assert np.abs(whole - ref).max() < TOL
     parts = np.concatenate(list(sv4.iterate(HH_Y0, H, 60, chunk=25, extended=True)))
     assert np.array_equal(parts, whole)
+
+
+def test_the_plan_is_checked_against_the_scheme(hh):
+    """The first-same-as-last step with G0 = ∇U(q0) is the scheme's increment, expression for
+    expression (exact, no floating point); a scheme whose increment differs gets no plan."""
+    import dataclasses
+
+    from methodgen.fsal import fsal_plan
+    scheme = mg.discretize(hh, "stormer-verlet")
+    plan = fsal_plan(scheme)
+    assert plan is not None and len(plan.symbols) == 2
+    # negative control: the same method name with another increment (second kick doubled)
+    d = len(plan.symbols)
+    inc = list(scheme.increment)
+    changed = dataclasses.replace(scheme, increment=type(scheme.increment)(inc[:d] + [2 * e for e in inc[d:]]))
+    assert fsal_plan(changed) is None
+    assert fsal_plan(mg.discretize(hh, "midpoint")) is None
