@@ -273,6 +273,8 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
         vector["tguard"] = _vector_view(ir.vector["tguard"], [("_out", ir.vector["tguard"].shape)], "_out")
     if "hs" in ir.vector:
         vector["hs"] = _vector_view(ir.vector["hs"], [("_out", (2,))], "_out")
+    if "force" in ir.vector:   # first-same-as-last Störmer–Verlet: ∇U at a run's start
+        vector["force"] = _vector_view(ir.vector["force"], [("_out", ir.vector["force"].shape)], "_out")
     if ir.n_constraints:
         m, d = ir.n_constraints, ir.dim
         vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")

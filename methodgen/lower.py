@@ -32,6 +32,7 @@ from sympy.printing.pycode import PythonCodePrinter
 from .compensate import compensate, compensation_symbols
 from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, sum_pattern, table_names
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
+from .fsal import fsal_plan
 from .poisson import is_poisson
 from .schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
@@ -265,6 +266,10 @@ class ModuleIR:
     #: rows' fill stays within ``kl + ku``): a chain costs O(n), not O(n³), per solve
     #: (:func:`jacobian_band`).
     band: tuple[int, int] = (0, 0)
+    #: First-same-as-last Störmer–Verlet (:mod:`methodgen.fsal`): the names of the start
+    #: force ∇U(q0) that the post kernel takes as input ``_g`` and returns, as the end
+    #: force, right after Δy; empty for every other method.
+    fsal_vars: tuple[str, ...] = ()
 
     @property
     def stages(self) -> int:
@@ -643,6 +648,14 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     # The checks are written in symbols _dy0, _dy1, ... bound to the increment, so the
     # increment's code is exactly that of the increment kernel (same trajectories).
     links = tuple(sp.Symbol(f"_dy{i}", real=True) for i in range(d2))
+    # First-same-as-last Störmer–Verlet: the post kernel takes the start force and returns
+    # the end force after Δy (one ∇U per stage); Δy's code then differs from the increment
+    # kernel's only in reading the start force (see methodgen.fsal).
+    fplan = fsal_plan(scheme) if not looped and n == 0 and compensated else None
+    first, first_links = inc, links
+    if fplan is not None:
+        first = cmp_(fplan.increment + fplan.end_force, comp)
+        first_links = links + tuple(sp.Symbol(f"_gy{i}", real=True) for i in range(len(fplan.symbols)))
     # With loops, the force at the step's end is the sum _sK (Σ ∇U_t(q0 + Δq), Δq = z).
     field1 = None
     if looped:
@@ -661,10 +674,17 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
              + [u.xreplace(at1) for u in ejump])
     shared = lplan.shared if lplan else ()
     scalar["post"] = _with_loops(
-        _chained_kernel(inc, later, links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}), shared),
-        inc + later, plan, sp_, dim, compensated)
-    vector["post"] = _with_loops(_chained_kernel(inc, later, links, vp, rename, shared=shared),
-                                 inc + later, plan, vp, dim, compensated)
+        _chained_kernel(first, later, first_links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}),
+                        shared),
+        first + later, plan, sp_, dim, compensated)
+    vector["post"] = _with_loops(_chained_kernel(first, later, first_links, vp, rename, shared=shared),
+                                 first + later, plan, vp, dim, compensated)
+    if fplan is not None:
+        # The start force of a run: ∇U at the exact numerical state y + c, with the stage
+        # sums of the step without first-same-as-last.
+        force = cmp_(fplan.start_force, comp)
+        scalar["force"] = _kernel(force, (len(force),), sp_, rename)
+        vector["force"] = _kernel(force, (len(force),), vp, rename)
     # At the initial state: H and the whole vector field (the carried field values
     # of the first step are components of it), then the domain conditions.
     check = [system.H] + list(vector_field(system))
@@ -734,6 +754,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         poisson=_poisson_fields(system),
         loop_tables=_loop_tables(plan),
         band=band if n else (0, 0),
+        fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
     )
 
 

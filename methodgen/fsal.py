@@ -1,0 +1,80 @@
+"""First-same-as-last Störmer–Verlet: one evaluation of ∇U per stage.
+
+A Störmer–Verlet step (stage of a composition) is
+
+    p½ = p0 - (h/2) ∇U(q0),   q1 = q0 + h ∇T(p½),   p1 = p½ - (h/2) ∇U(q1),
+
+and the force at its end, ∇U(q1), is the force at the start of the next stage and of the
+next step.  Written with the start force as an input ``G0`` (symbols ``_g0``, ``_g1``, ...),
+the step needs ∇U once: at q1, which it returns as the next stage's ``G0``.  The
+generated runtimes carry it from stage to stage, from step to step and, through
+``info["force"]``, from chunk to chunk.
+
+The carried force is the one the step itself used for its final half kick, evaluated with
+the compensated stage sums at ``q0 + (Δq + c)`` -- the exact numerical state at the stage's
+end.  The step without first-same-as-last evaluated it afresh at ``q1 + c1`` (the stored
+state plus its new compensation): the same point in exact arithmetic, rounded differently.
+So the two agree to round-off, not to the bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from .derive import separable_split
+from .schemes.base import STEP
+
+__all__ = ["FsalPlan", "fsal_plan"]
+
+
+@dataclass(frozen=True)
+class FsalPlan:
+    """The first-same-as-last form of a Störmer–Verlet step (:func:`fsal_plan`).
+
+    Attributes
+    ----------
+    symbols : tuple of sympy.Symbol
+        ``G0``: ∇U at the step's start, an input of the step.
+    increment : list of sympy.Expr
+        Δy = (Δq, Δp) in the start state and ``G0``.
+    end_force : list of sympy.Expr
+        ∇U(q0 + Δq): the next step's ``G0`` (shares its code with Δp).
+    start_force : list of sympy.Expr
+        ∇U(q0), for the first step of a run.
+    """
+
+    symbols: tuple
+    increment: list
+    end_force: list
+    start_force: list
+
+
+def fsal_plan(scheme) -> FsalPlan | None:
+    """The first-same-as-last form of ``scheme`` if it is Störmer–Verlet (or a composition of
+    it), else None.
+
+    The plan is checked against the scheme: with ``G0 = ∇U(q0)`` its increment must be the
+    scheme's increment expression for expression (structural equality, no floating
+    point); otherwise None (the module is then generated without first-same-as-last).
+    """
+    system = scheme.system
+    if scheme.method != "stormer-verlet" or system.constraints:
+        return None
+    sep = separable_split(system)
+    if sep is None:
+        return None
+    h = STEP
+    q0, p0 = list(system.q), list(system.p)
+    gradU = sp.Matrix([sp.diff(sep.U, s) for s in q0])
+    gradT = sp.Matrix([sp.diff(sep.T, s) for s in p0])
+    G0 = sp.Matrix([sp.Symbol(f"_g{i}", real=True) for i in range(len(q0))])
+    phalf = sp.Matrix(p0) - h / 2 * G0
+    dq = h * gradT.xreplace(dict(zip(p0, phalf)))
+    g1 = gradU.xreplace(dict(zip(q0, sp.Matrix(q0) + dq)))
+    dp = -h / 2 * G0 - h / 2 * g1
+    inc = sp.Matrix(list(dq) + list(dp))
+    if inc.xreplace(dict(zip(G0, gradU))) != sp.Matrix(scheme.increment):
+        return None
+    return FsalPlan(symbols=tuple(G0), increment=list(inc), end_force=list(g1), start_force=list(gradU))
