@@ -41,7 +41,7 @@ import sympy as sp
 from .errors import InputError
 from .parse import check_name, check_smooth, parse_expr
 from .special import fold_removable_quotients
-from .problem import DeclaredInvariant, _names
+from .problem import DeclaredInvariant, _names, param_values
 
 __all__ = ["PoissonSystem", "JacobiResult", "Casimir", "is_poisson"]
 
@@ -157,19 +157,7 @@ class PoissonSystem:
         if len(yn) < 2:
             raise InputError(f"a Poisson system needs at least 2 state variables (a skew-symmetric "
                              f"1×1 matrix is 0), got {len(yn)}")
-        params = {} if params is None else params
-        if not isinstance(params, Mapping):
-            raise InputError(f"params must be a mapping name -> value, got {type(params).__name__}")
-        parn = _names(list(params), "parameter")
-        values: dict[str, float] = {}
-        for key, value in params.items():
-            key = key.name if isinstance(key, sp.Symbol) else key
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise InputError(f"parameter {key!r} must be a real number, got {value!r}")
-            value = float(value)
-            if not math.isfinite(value):
-                raise InputError(f"parameter {key!r} must be finite, got {value!r}")
-            values[key] = value
+        parn, values = param_values(params)
         seen: set[str] = set()
         for n in yn + parn:
             if n in seen:

@@ -87,6 +87,28 @@ def _names(items: Iterable, what: str) -> tuple[str, ...]:
     return tuple(out)
 
 
+def param_values(params) -> tuple[tuple[str, ...], dict[str, float]]:
+    """Check a parameter mapping (name or Symbol -> real number): its names and float values.
+
+    Raises :class:`InputError` naming what is wrong (not a mapping, a bad name, a value that is
+    not a finite real number).
+    """
+    params = {} if params is None else params
+    if not isinstance(params, Mapping):
+        raise InputError(f"params must be a mapping name -> value, got {type(params).__name__}")
+    parn = _names(list(params), "parameter")
+    values: dict[str, float] = {}
+    for key, value in params.items():
+        key = key.name if isinstance(key, sp.Symbol) else key
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"parameter {key!r} must be a real number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise InputError(f"parameter {key!r} must be finite, got {value!r}")
+        values[key] = value
+    return parn, values
+
+
 class Hamiltonian:
     """A Hamiltonian system ``H(q, p)`` with parameters and optional constraints.
 
@@ -162,19 +184,7 @@ class Hamiltonian:
             raise InputError(f"q has {len(qn)} names but p has {len(pn)}: each coordinate needs one momentum "
                              "(for a non-canonical system y' = S(y)∇H use methodgen.PoissonSystem(H, y=[...], "
                              "S=[[...]]))")
-        params = {} if params is None else params
-        if not isinstance(params, Mapping):
-            raise InputError(f"params must be a mapping name -> value, got {type(params).__name__}")
-        parn = _names(list(params), "parameter")
-        values: dict[str, float] = {}
-        for key, value in params.items():
-            key = key.name if isinstance(key, sp.Symbol) else key
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise InputError(f"parameter {key!r} must be a real number, got {value!r}")
-            value = float(value)
-            if not math.isfinite(value):
-                raise InputError(f"parameter {key!r} must be finite, got {value!r}")
-            values[key] = value
+        parn, values = param_values(params)
         allnames = qn + pn + parn
         seen: set[str] = set()
         for n in allnames:

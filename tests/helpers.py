@@ -42,3 +42,47 @@ def fpu_chain(n):
     T = " + ".join(f"p{i}**2/2" for i in range(n))
     return Hamiltonian(" + ".join([T] + springs + walls), q=q, p=[f"p{i}" for i in range(n)],
                        params={"beta": 0.7}, name=f"fpu{n}")
+
+
+# --- the CLI tests' shared pieces ------------------------------------------------------------------
+
+#: A time-dependent scene (forced oscillator) starting at t0 = 0.5.
+FORCED_SCENE = """name = "forced"
+[system]
+H = "p**2/2 + x**2/2 - F*x*cos(t)"
+q = ["x"]
+p = ["p"]
+time = "t"
+[params]
+F = 0.5
+[run]
+method = "midpoint"
+h = 0.05
+steps = 20
+y0 = [1.0, 0.0]
+t0 = 0.5
+"""
+
+
+def cli_main(capsys, *argv):
+    """Run ``methodgen argv`` in-process: (exit code, stdout, stderr)."""
+    import methodgen.cli as cli
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_line(err: str) -> str:
+    """The single line of ``err`` (asserting one line and no traceback)."""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def strict_json(text):
+    """``json.loads`` refusing NaN and Infinity (a report must say null, never NaN)."""
+    import json
+
+    def refuse(token):
+        raise AssertionError(f"{token} in the JSON output")
+    return json.loads(text, parse_constant=refuse)

@@ -26,39 +26,7 @@ from methodgen.cli.common import fmt, join_negative_values
 from methodgen.errors import InputError
 from methodgen.stats import ErrorMax, max_abs_error, max_value
 
-FORCED_SCENE = """name = "forced"
-[system]
-H = "p**2/2 + x**2/2 - F*x*cos(t)"
-q = ["x"]
-p = ["p"]
-time = "t"
-[params]
-F = 0.5
-[run]
-method = "midpoint"
-h = 0.05
-steps = 20
-y0 = [1.0, 0.0]
-t0 = 0.5
-"""
-
-
-def _main(capsys, *argv):
-    code = cli.main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def _one_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in err, err
-    return lines[0]
-
-
-def _no_nan_json(text):
-    def refuse(token):
-        raise AssertionError(f"{token} in the JSON output")
-    return json.loads(text, parse_constant=refuse)
+from helpers import FORCED_SCENE, cli_main as _main, one_line as _one_line, strict_json as _no_nan_json
 
 
 # --- 27.7: a run beyond the limits is one line, exit 2, naming the limit --------------------------
