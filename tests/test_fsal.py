@@ -95,46 +95,125 @@ def test_chunks_are_bitwise_one_piece(sv4, sv4_numba, backend, batch):
     mod = sv4 if backend == "numpy" else sv4_numba
     y0 = np.stack([HH_Y0, 0.8 * HH_Y0]) if batch else HH_Y0
     whole = mod.integrate(y0, H, 300)
-    assert np.array_equal(_chunked(mod, y0, H, [100, 77, 123]), whole)
-    # negative control: without the carried force each chunk starts from a fresh
-    # evaluation at y + c, which rounds differently from the carried one at some chunk
-    # boundaries only (measured: 138 of 300 one-step chunks for one trajectory, none of
-    # the two boundaries above), so the control chunks step by step, and the bits change
+    # One-step chunks: a fresh evaluation at y + c rounds differently from the carried
+    # force at some boundaries only (measured: 25 of 300 steps for one trajectory, and a
+    # differing force need not change the state's bits), so only chunks at every step make
+    # a record that is ignored visible.
+    assert np.array_equal(_chunked(mod, y0, H, [1] * 300), whole)
+    # negative control: without the carried force the bits change
     dropped = _chunked(mod, y0, H, [1] * 300, drop=True)
     assert not np.array_equal(dropped, whole)
     assert np.abs(dropped - whole).max() < TOL
 
 
+def _perturbed_record(info):
+    """``info`` with its force record's force changed by a relative 1e-3: a record the
+    module accepts (its key, state, compensation and parameters) whose use is visible."""
+    key, y, comp, p, g = info["force"]
+    return {"compensation": info["compensation"], "force": (key, y, comp, p, g * (1 + 1e-3))}
+
+
 def test_t_eval_and_iterate_carry_the_force(sv4):
     whole = sv4.integrate(HH_Y0, H, 300)
-    at = sv4.integrate(HH_Y0, H, t_eval=[0.0, 10 * H, 150 * H, 300 * H])
-    assert np.array_equal(at, whole[[0, 10, 150, 300]])
-    assert np.array_equal(np.concatenate(list(sv4.iterate(HH_Y0, H, 300, chunk=70))), whole)
+    every = np.arange(301) * H
+    assert np.array_equal(sv4.integrate(HH_Y0, H, t_eval=every), whole)
+    assert np.array_equal(np.concatenate(list(sv4.iterate(HH_Y0, H, 300, chunk=1))), whole)
+    # negative control: the same one-step segments without the carried force
+    assert not np.array_equal(_chunked(sv4, HH_Y0, H, [1] * 300, drop=True), whole)
+
+
+def test_t_eval_starts_from_an_incoming_record(sv4):
+    whole = sv4.integrate(HH_Y0, H, 300)
+    info = {}
+    part = sv4.integrate(HH_Y0, H, 37, info=info)
+    at = sv4.integrate(part[-1], H, t_eval=np.arange(264) * H, info=dict(info))
+    assert np.array_equal(at, whole[37:])
+    # The incoming record reaches the first segment: a (valid, perturbed) record changes the
+    # t_eval run exactly as it changes the plain run; without it passed on, the t_eval run
+    # would be the fresh one.
+    fresh = sv4.integrate(part[-1], H, 263, info={"compensation": info["compensation"]})
+    plain = sv4.integrate(part[-1], H, 263, info=_perturbed_record(info))
+    at = sv4.integrate(part[-1], H, t_eval=np.arange(264) * H, info=_perturbed_record(info))
+    assert np.abs(plain - fresh).max() > 1e-6  # control: the perturbed record is visible
+    assert np.array_equal(at, plain)
 
 
 def test_a_malformed_record_is_refused(sv4):
     info = {}
     part = sv4.integrate(HH_Y0, H, 10, info=info)
-    y, comp, p, g = info["force"]
-    with pytest.raises(ValueError, match=r"info\['force'\] holds a force of shape \(3,\)"):
-        sv4.integrate(part[-1], H, 10, info={"compensation": comp, "force": (y, comp, p, np.zeros(3))})
+    key, y, comp, p, g = info["force"]
+    with pytest.raises(ValueError, match=r"info\['force'\] is inconsistent: state \(4,\), compensation \(4,\), "
+                                         r"force \(3,\)"):
+        sv4.integrate(part[-1], H, 10, info={"compensation": comp, "force": (key, y, comp, p, np.zeros(3))})
     with pytest.raises(ValueError, match=r"info\['force'\] must be the record"):
         sv4.integrate(part[-1], H, 10, info={"compensation": comp, "force": g})
+    with pytest.raises(ValueError, match=r"info\['force'\] must be the record"):
+        sv4.integrate(part[-1], H, 10, info={"compensation": comp, "force": (y, comp, p, g)})
 
 
 def test_a_record_of_another_state_is_not_used(sv4):
     info = {}
     sv4.integrate(HH_Y0, H, 10, info=info)
-    y, comp, p, g = info["force"]
+    key, y, comp, p, g = info["force"]
     other = 0.9 * HH_Y0
     fresh = sv4.integrate(other, H, 50)
     # the record belongs to another state: it must not be used (a used one would start
     # the run with the force at y, wrong by O(|y - other|))
-    reused = sv4.integrate(other, H, 50, info={"force": (y, comp, p, g)})
+    reused = sv4.integrate(other, H, 50, info={"force": (key, y, comp, p, g)})
     assert np.array_equal(reused, fresh)
     # control: the same force presented as this state's record is used, and it is wrong
-    forged = sv4.integrate(other, H, 50, info={"force": (other.copy(), np.zeros(4), p, g)})
+    forged = sv4.integrate(other, H, 50, info={"force": (key, other.copy(), np.zeros(4), p, g)})
     assert np.abs(forged - fresh).max() > 1e-6
+
+
+def test_a_record_of_another_state_shape_is_ignored(sv4):
+    """A well-formed single-trajectory record given to a batch run (no compensation) is
+    "not this state": the batch starts afresh instead of raising."""
+    info = {}
+    sv4.integrate(HH_Y0, H, 5, info=info)
+    Y0 = np.stack([HH_Y0, HH_Y0])
+    assert np.array_equal(sv4.integrate(Y0, H, 5, info={"force": info["force"]}), sv4.integrate(Y0, H, 5))
+
+
+def _other_potential(y0_like):
+    """A module of another H with the state shape of ``y0_like`` and no parameters."""
+    import sympy as sp
+    d = len(y0_like) // 2
+    q = sp.symbols(f"q1:{d + 1}", real=True)
+    p = sp.symbols(f"p1:{d + 1}", real=True)
+    H = sum(pi ** 2 for pi in p) / 2 + sum(qi ** 4 for qi in q) / 4 + q[0] * q[-1]
+    return mg.build(mg.Hamiltonian(H, list(q), list(p), name=f"fsal_other_{d}"), "stormer-verlet", order=4)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_record_of_another_module_is_not_used(sv4, sv4_numba, backend):
+    """Two modules of the same state shape and parameters: continuing the second from the
+    first's end state with the first's info must not use the first's force."""
+    mod = sv4 if backend == "numpy" else sv4_numba
+    other = _other_potential(HH_Y0)  # numpy: the record's module, cheap
+    info = {}
+    end = other.integrate(HH_Y0, H, 10, info=info)[-1]
+    fresh = mod.integrate(end, H, 50, info={"compensation": info["compensation"]})
+    shared = mod.integrate(end, H, 50, info=dict(info))
+    assert np.array_equal(shared, fresh)
+    # negative control: the same record under this module's key (what the check on the key
+    # refuses) is used, and its force is the other H's: the trajectory is visibly off
+    key, y, comp, p, g = info["force"]
+    forged = mod.integrate(end, H, 50, info={"compensation": comp, "force": (mod._FSAL_KEY, y, comp, p, g)})
+    assert np.abs(forged - fresh).max() > 1e-4
+
+
+def test_the_record_keeps_the_compensation_used(sv4):
+    """compensated=False steps with the incoming compensation unchanged: the record holds it
+    (not zeros), so it describes the state the force was evaluated at."""
+    info = {}
+    sv4.integrate(HH_Y0, H, 37, info=info)
+    comp_in = info["compensation"].copy()
+    assert np.any(comp_in != 0)  # control: zeros would not tell the two apart
+    end = sv4.integrate(sv4.integrate(HH_Y0, H, 37)[-1], H, 20, info=info, compensated=False)[-1]
+    _, y, comp, _, _ = info["force"]
+    assert np.array_equal(y, end) and np.array_equal(comp, comp_in)
+    assert not np.any(info["compensation"])  # what integrate reports for compensated=False
 
 
 def test_a_record_for_other_parameters_is_not_used():
