@@ -9,12 +9,15 @@ the difference between runs of 2N and N steps divided by N, so the one-off evalu
 the initial state (the ``check`` and ``hs`` kernels) drop out.  The numba backend's
 kernels are compiled, so there the count is read off the generated ``_nb_post`` source.
 
-What the count is today (the baseline of the first-same-as-last work): per stage the
-``post`` kernel evaluates ∇U twice -- at the stage's start q0 (+ compensation) and at its
-end q1, where the end's force is the next stage's start force -- and U once (H at y1 for
-the energy-jump test, carried to the next stage as its start value).  The local error
-estimate costs no force (Δp is already the trapezoidal rule of the forces); a composition
-of s stages runs the whole per-stage sequence s times (2s ∇U, s U per step).
+What the count is (first-same-as-last): per stage the ``post`` kernel evaluates ∇U once,
+at the stage's end q1 -- the start force comes in as an input, the end force of the stage
+before -- and U once (H at y1 for the energy-jump test, carried to the next stage as its
+start value).  The local error estimate costs no force (Δp is already the trapezoidal rule
+of the forces); a composition of s stages runs the whole per-stage sequence s times (s ∇U,
+s U per step).  (Before first-same-as-last it was 2 ∇U per stage.)
+
+The shipped modules in generated/ are checked to have the first-same-as-last kernels, so a
+rewrite of the scheme or its lowering cannot turn it off unseen.
 
 Negative control: a module whose ``_s_post`` is called twice per stage doubles the
 count, so the instrument sees an extra evaluation.
@@ -122,3 +125,23 @@ def test_numba_post_kernel_source(pendulum):
     code = body.group(0)
     assert len(re.findall(r"\bmath\.sin\(", code)) == GRAD_PER_STAGE
     assert len(re.findall(r"\bmath\.cos\(", code)) == U_PER_STAGE
+
+
+_ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+def _has_fsal_kernels(text):
+    """The first-same-as-last pieces of a generated module: the post kernel takes the start
+    force ``_g``, the force kernels (one trajectory, batch), the record and its key."""
+    return (re.search(r"\ndef _s_post\(_y, _c, _g, _h, _p\)", text) is not None
+            and all(f"\ndef {name}(" in text for name in ("_s_force", "_v_force", "_start_force", "_force_record"))
+            and "\n_FSAL_KEY = " in text)
+
+
+def test_shipped_stormer_verlet_modules_are_first_same_as_last():
+    shipped = sorted((_ROOT / "generated").glob("*_stormer_verlet*.py"))
+    assert len(shipped) >= 4, [p.name for p in shipped]  # double well, Hénon–Heiles, outer solar system, pendulum
+    missing = [p.name for p in shipped if not _has_fsal_kernels(p.read_text())]
+    assert not missing, f"generated Störmer–Verlet modules without first-same-as-last: {missing}"
+    # negative control: the check tells a module without them (another method) apart
+    assert not _has_fsal_kernels((_ROOT / "generated" / "henon_heiles_2d_midpoint.py").read_text())
