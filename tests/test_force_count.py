@@ -145,3 +145,37 @@ def test_shipped_stormer_verlet_modules_are_first_same_as_last():
     assert not missing, f"generated Störmer–Verlet modules without first-same-as-last: {missing}"
     # negative control: the check tells a module without them (another method) apart
     assert not _has_fsal_kernels((_ROOT / "generated" / "henon_heiles_2d_midpoint.py").read_text())
+
+
+def _per_step_extended(mod, y0, monkeypatch):
+    """∇U (sin) per step with extended=True: (math, numpy) -- the post kernel's double-precision
+    force (math) and the long-double refinement's (numpy) apart."""
+    import math
+    pm, pn = _Counting(math), _Counting(np)
+    monkeypatch.setattr(mod, "math", pm)
+    monkeypatch.setattr(mod, "numpy", pn)
+    mod.integrate(y0, 0.05, 8, extended=True)
+    once = pm.calls["sin"], pn.calls["sin"]
+    mod.integrate(y0, 0.05, 16, extended=True)
+    twice = pm.calls["sin"] - once[0], pn.calls["sin"] - once[1]
+    monkeypatch.setattr(mod, "math", math)
+    monkeypatch.setattr(mod, "numpy", np)
+    return (twice[0] - once[0]) / 8, (twice[1] - once[1]) / 8
+
+
+def test_extended_force_evaluations_per_step(sv_module, pendulum, monkeypatch):
+    """extended=True: per stage ∇U once in double (the post kernel, whose end force starts the
+    next stage's checks) and twice in long double (the refined increment, a two-force step)."""
+    order, mod = sv_module
+    s = _stages(mod)
+    y0 = np.array(pendulum.y0)
+    assert _per_step_extended(mod, y0, monkeypatch) == (GRAD_PER_STAGE * s, 2 * s)
+    # negative control: a loop that evaluates the force afresh after each stage as well (as
+    # extended mode did before) is seen
+    real_post = mod._s_post
+
+    def post_and_force(y, comp, *rest):
+        mod._s_force(y, comp, rest[-1])
+        return real_post(y, comp, *rest)
+    monkeypatch.setattr(mod, "_s_post", post_and_force)
+    assert _per_step_extended(mod, y0, monkeypatch) == (2 * GRAD_PER_STAGE * s, 2 * s)

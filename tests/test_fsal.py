@@ -13,6 +13,8 @@ stage's end starts the next stage, step and chunk.
     ``info["force"]`` changes the bits (negative control); a malformed record is refused,
     one from another state or other parameters is not used.
 (c) The composed orders 4 and 8 are still reached (error ratios under halving h).
+(d) A record of another module (its key: backend, signature, method, order, H) or of another
+    state shape is not used; the record keeps the compensation the last stage used.
 The force count per stage is measured in tests/test_force_count.py.
 """
 
@@ -242,13 +244,27 @@ def test_composed_order(hh, hh_reference, K, N):
 
 
 def test_extended_refinement_with_the_carried_force(sv4):
-    """extended=True moves the state off the double-precision step, so there the force is
-    evaluated afresh at each stage's end: the same method to round-off, chunks bitwise."""
+    """extended=True: the refined increment is evaluated afresh in long double (two forces) and
+    does not use the carried force, which feeds only the checks of the next post kernel.  So
+    this shows the same method to round-off and extended chunks bitwise the run in one piece
+    -- not that the force is carried (the trajectory does not depend on it); that is
+    test_chunks_are_bitwise_one_piece's job."""
     ref = sv4.integrate(HH_Y0, H, 60)
     whole = sv4.integrate(HH_Y0, H, 60, extended=True)
     assert np.abs(whole - ref).max() < TOL
     parts = np.concatenate(list(sv4.iterate(HH_Y0, H, 60, chunk=25, extended=True)))
     assert np.array_equal(parts, whole)
+
+
+def test_extended_record_holds_the_force_at_its_state(sv4):
+    """The refined state is off the double-precision step's end, so the record an extended run
+    leaves is evaluated at the state it names (y + compensation), bitwise."""
+    info = {}
+    sv4.integrate(HH_Y0, H, 60, extended=True, info=info)
+    _, y, comp, p, g = info["force"]
+    assert np.array_equal(g, sv4._v_force(y, comp, p))
+    # control: the comparison sees the compensation (the force at y alone differs)
+    assert not np.array_equal(g, sv4._v_force(y, np.zeros_like(comp), p))
 
 
 def test_the_plan_is_checked_against_the_scheme(hh):
