@@ -205,9 +205,11 @@ def test_a_record_of_another_module_is_not_used(sv4, sv4_numba, backend):
     assert np.abs(forged - fresh).max() > 1e-4
 
 
-def test_the_record_keeps_the_compensation_used(sv4):
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_the_record_keeps_the_compensation_used(sv4, sv4_numba, backend):
     """compensated=False steps with the incoming compensation unchanged: the record holds it
     (not zeros), so it describes the state the force was evaluated at."""
+    sv4 = sv4 if backend == "numpy" else sv4_numba
     info = {}
     sv4.integrate(HH_Y0, H, 37, info=info)
     comp_in = info["compensation"].copy()
