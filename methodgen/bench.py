@@ -63,7 +63,7 @@ from .stats import max_abs_error, max_value
 
 __all__ = ["Reference", "reference", "work_precision", "long_run", "brouwer", "solver_variants",
            "ode_rhs", "PEER_FACTORS", "PEER_ORDERS", "composed_steps", "row_label", "targets",
-           "extended_scene"]
+           "frontier", "FRONTIER_LEVELS", "extended_scene"]
 
 TOLERANCES = [10.0 ** -k for k in range(3, 14)]
 QUICK_TOLERANCES = [1e-3, 1e-6, 1e-9]
@@ -82,6 +82,8 @@ PEER_MAX_POINTS = 40
 #: The targets of issue 14 (``wp["targets"]``): final error and max relative energy error.
 TARGET_ERROR = 1e-10
 TARGET_ENERGY = 1e-14
+#: ``wp["frontier"]``: the final-error levels of the frontier table.
+FRONTIER_LEVELS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 
 
 def _cpu() -> float:
@@ -552,6 +554,73 @@ def targets(rows, error: float = TARGET_ERROR, energy: float = TARGET_ENERGY) ->
             "heyoka": brief(heyoka) if heyoka else None, "ias15": brief(ias15) if ias15 else None}
 
 
+def _tool(row) -> str | None:
+    """The tool a work-precision row belongs to, for :func:`frontier` (None: not compared)."""
+    kind = row.get("kind")
+    if kind == "methodgen":
+        return "methodgen"
+    if kind == "heyoka":
+        return "heyoka"
+    if kind == "rebound":
+        return "REBOUND " + ("IAS15" if "IAS15" in str(row.get("method")) else "WHFast")
+    return None
+
+
+def frontier(rows, levels=FRONTIER_LEVELS, energy: float = TARGET_ENERGY) -> dict:
+    """The cheapest configuration of each tool at each final-error level, and the ratio to ours.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Work-precision rows (``kind``, ``method``, ``seconds``, ``error``,
+        ``energy_rel_error``); rows without ``seconds`` or with a non-finite error
+        (failed runs) never count.
+    levels : sequence of float
+        Final-error levels: a row qualifies for a level when its error is ≤ the level.
+    energy : float
+        The column ``methodgen, energy kept`` takes only methodgen's rows whose maximum
+        relative energy error over every step is ≤ this (energy kept to round-off,
+        *measured*, whatever the method claims).
+
+    Returns
+    -------
+    dict
+        ``{"levels", "tools", "energy_rel_error", "table"}``; ``table`` one entry per
+        level: ``{"level", "best": {tool: brief row or None}, "ratio": {peer: our
+        seconds / peer seconds or None}}``.  A ratio above 1 means the peer is faster.
+        Tools: ``methodgen``, ``methodgen, energy kept``, then each peer present in
+        ``rows`` (``heyoka``, ``REBOUND IAS15``, ``REBOUND WHFast``).
+    """
+    def brief(r):
+        keep = ("method", "kind", "order", "h", "tol", "steps", "seconds", "error", "energy_rel_error")
+        return {k: r[k] for k in keep if k in r}
+
+    ok = [r for r in rows if "seconds" in r and isinstance(r.get("error"), (int, float))
+          and math.isfinite(r["error"]) and _tool(r) is not None]
+    peers = sorted({_tool(r) for r in ok} - {"methodgen"})
+    ours_exact = "methodgen, energy kept"
+    tools = ["methodgen", ours_exact] + peers
+    table = []
+    for level in levels:
+        best: dict[str, dict | None] = {t: None for t in tools}
+        for r in ok:
+            if not r["error"] <= level:
+                continue
+            names = [_tool(r)]
+            de = r.get("energy_rel_error")
+            if names[0] == "methodgen" and de is not None and math.isfinite(de) and de <= energy:
+                names.append(ours_exact)
+            for t in names:
+                if best[t] is None or r["seconds"] < best[t]["seconds"]:
+                    best[t] = r
+        ours = best["methodgen"]
+        ratio = {t: (ours["seconds"] / best[t]["seconds"] if ours is not None and best[t] is not None
+                     and best[t]["seconds"] > 0 else None) for t in peers}
+        table.append({"level": level, "best": {t: brief(r) if r else None for t, r in best.items()},
+                      "ratio": ratio})
+    return {"levels": list(levels), "tools": tools, "energy_rel_error": energy, "table": table}
+
+
 def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None, progress: bool,
                           backend: str, orders=None, solver: str | None = None) -> dict:
     """``work_precision(..., peers=True)``: see there and :mod:`methodgen.peers`."""
@@ -669,7 +738,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     notes.append("scipy solve_ivp and fsolve rows are left out with --peers (run without --peers for them)")
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
             "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "estimated_steps": estimate,
-            "targets": targets(rows)}
+            "targets": targets(rows), "frontier": frontier(rows)}
 
 
 def _solver_kw(solver):

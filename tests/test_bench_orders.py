@@ -72,6 +72,37 @@ def test_targets_picks_the_cheapest_row_that_meets_both():
     assert tg["heyoka"]["seconds"] == 0.01 and tg["ias15"] is None
 
 
+def test_frontier_cheapest_per_tool_and_level():
+    rows = [{"method": "sv o10", "kind": "methodgen", "h": 0.1, "seconds": 0.04, "error": 5e-11,
+             "energy_rel_error": 3e-13},
+            {"method": "sv o4", "kind": "methodgen", "h": 0.1, "seconds": 0.01, "error": 1e-7,
+             "energy_rel_error": 1e-9},
+            {"method": "em o8", "kind": "methodgen", "h": 0.2, "seconds": 0.09, "error": 8e-11,
+             "energy_rel_error": 2e-15},
+            {"method": "em o8", "kind": "methodgen", "h": 0.1, "seconds": 0.001, "error": float("nan"),
+             "energy_rel_error": 2e-15},                                       # failed numerically
+            {"method": "heyoka (Taylor)", "kind": "heyoka", "tol": 1e-15, "seconds": 0.02, "error": 2e-11,
+             "energy_rel_error": 1e-15},
+            {"method": "REBOUND IAS15", "kind": "rebound", "tol": 1e-9, "seconds": 0.05, "error": 3e-7,
+             "energy_rel_error": 1e-15},
+            {"method": "scipy DOP853", "kind": "scipy", "tol": 1e-9, "seconds": 1e-6, "error": 1e-12},
+            {"method": "x", "kind": "methodgen", "h": 1.0}]                      # a run without numbers
+    fr = bench.frontier(rows, levels=(1e-6, 1e-10, 1e-12))
+    assert fr["tools"] == ["methodgen", "methodgen, energy kept", "REBOUND IAS15", "heyoka"]
+    at = {e["level"]: e for e in fr["table"]}
+    # 1e-6: the cheap o4 run qualifies for "methodgen" but not for "energy kept" (rel. dE 1e-9)
+    assert at[1e-6]["best"]["methodgen"]["method"] == "sv o4"
+    assert at[1e-6]["best"]["methodgen, energy kept"]["method"] == "em o8"
+    assert at[1e-6]["best"]["REBOUND IAS15"]["seconds"] == 0.05
+    assert at[1e-6]["ratio"]["heyoka"] == pytest.approx(0.01 / 0.02)
+    # 1e-10: IAS15 (3e-7) does not qualify; the NaN row never counts, scipy rows are not compared
+    assert at[1e-10]["best"]["methodgen"]["method"] == "sv o10"
+    assert at[1e-10]["best"]["REBOUND IAS15"] is None and at[1e-10]["ratio"]["REBOUND IAS15"] is None
+    assert at[1e-10]["ratio"]["heyoka"] == pytest.approx(2.0)
+    # 1e-12: nobody of ours gets there
+    assert at[1e-12]["best"]["methodgen"] is None and at[1e-12]["ratio"]["heyoka"] is None
+
+
 def test_cli_json_has_the_composed_rows(capsys, tmp_path):
     pytest.importorskip("matplotlib")
     png = tmp_path / "wp.png"
@@ -92,6 +123,7 @@ def test_cli_table_names_the_orders(capsys):
     out = capsys.readouterr().out
     assert "energy-momentum o4 (suzuki)" in out
     assert "cheapest run with final error <= 1e-10" in out
+    assert "frontier: the cheapest run of each tool" in out
 
 
 @pytest.mark.parametrize("value, fragment", [

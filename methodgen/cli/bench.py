@@ -49,6 +49,9 @@ def _print_bench(rep: dict) -> None:
                 if r:
                     print(f"  for comparison, {name}: {r['seconds']:.4f} s, error {fmt(r['error'])}, "
                           f"rel. dE {fmt(r.get('energy_rel_error'), '.1e')}")
+        fr = wp.get("frontier")
+        if fr:
+            _print_frontier(fr)
     sv = rep.get("solvers")
     if sv:
         print(f"\nnonlinear solvers on {sv['scene']} (h = {sv['h']:g}, {sv['steps']} steps)")
@@ -75,6 +78,37 @@ def _print_bench(rep: dict) -> None:
         for r in br["rows"]:
             print(f"  {r['stepper']:<62} RMS energy error slope {r['slope']:.2f} "
                   f"(final {r['rms_energy_error'][-1]:.2e}, {r['seconds']:.1f} s)")
+
+
+def _print_frontier(fr: dict) -> None:
+    """The frontier table of ``bench --peers``: per final-error level, the cheapest run of each
+    tool (CPU s, and what it was) and our time over each peer's (> 1: the peer is faster)."""
+    peers = [t for t in fr["tools"] if not t.startswith("methodgen")]
+    print(f"\nfrontier: the cheapest run of each tool at each final error (CPU s; "
+          f"'energy kept': rel. dE <= {fr['energy_rel_error']:g} at every step; ratio = ours / peer's)")
+    head = f"{'error <=':>9} " + " ".join(f"{t:>22}" for t in fr["tools"]) + "".join(
+        f" {'ratio ' + t.split()[-1]:>13}" for t in peers)
+    print(head)
+    for e in fr["table"]:
+        cells = []
+        for t in fr["tools"]:
+            r = e["best"][t]
+            cells.append(f"{'—':>22}" if r is None else f"{r['seconds']:>9.3g} {_short(r):>12}")
+        ratios = "".join(f" {'—' if e['ratio'][t] is None else format(e['ratio'][t], '.2f'):>13}" for t in peers)
+        print(f"{e['level']:>9.0e} " + " ".join(cells) + ratios)
+    if fr["table"] and any(e["best"]["methodgen"] for e in fr["table"]):
+        print("  (methodgen's cheapest runs: " + "; ".join(
+            f"{e['level']:.0e}: {e['best']['methodgen']['method']} h = {e['best']['methodgen'].get('h', 0):.3g}"
+            for e in fr["table"] if e["best"]["methodgen"]) + ")")
+
+
+def _short(row: dict) -> str:
+    """A short name of the run behind a frontier cell (its step size or tolerance)."""
+    if "tol" in row:
+        return f"tol {row['tol']:.0e}"
+    if "h" in row:
+        return f"h {row['h']:.3g}"
+    return ""
 
 
 def _bench_orders(text: str) -> tuple[int, ...]:
