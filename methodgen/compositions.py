@@ -82,6 +82,11 @@ _SOFSPA = {
 }
 FAMILIES = {"triple-jump": (4, 6, 8, 10), "suzuki": (4, 6, 8, 10), "kahan-li": (6, 8),
             "sofroniou-spaletta": (10,)}
+# Splitting families of H = T + U (methodgen.splittings): Störmer–Verlet only, run as
+# kick/drift/kick stages rather than as compositions of the base step.
+from .splittings import SPLITTING_FAMILIES as _SPLIT  # noqa: E402
+
+FAMILIES.update(_SPLIT)
 
 
 @dataclass(frozen=True)
@@ -135,6 +140,9 @@ def composition(order: int, family: str | None = None) -> Composition:
         raise ValueError(f"unknown composition family {family!r}; valid: {sorted(FAMILIES)}")
     if order not in FAMILIES[family]:
         raise ValueError(f"the {family} family has orders {FAMILIES[family]}, not {order}")
+    if family in _SPLIT:
+        from .splittings import splitting
+        return splitting(order, family)
     if family == "triple-jump":
         return Composition(family, order, _recursive(order, 3), True, "Creutz–Gocksch 1989, Yoshida 1990")
     if family == "suzuki":

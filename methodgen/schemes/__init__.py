@@ -126,6 +126,8 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         scheme = dataclasses.replace(scheme, resolution=None)
     if comp is None:
         return scheme
+    if getattr(comp, "kind", None) == "splitting":
+        return scheme.compose(_check_splitting(comp, method, system))
     t = scheme.traits
     if not (t.symmetric and t.order == 2):
         ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
@@ -134,6 +136,23 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
             f"order 2; {method} is {'not symmetric' if not t.symmetric else f'of order {t.order}'} "
             f"for this system. Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
     return scheme.compose(comp)
+
+
+def _check_splitting(comp, method: str, system):
+    """``comp`` (a :class:`methodgen.splittings.Splitting`) if it applies to ``method`` on
+    ``system``, else InputError / MethodNotApplicable saying why."""
+    from ..derive import separable_split
+
+    if method != "stormer-verlet":
+        raise InputError(f"composition={comp.family!r} is a splitting of H = T + U: it is run with "
+                         f"method 'stormer-verlet' only, not {method!r} (valid families for "
+                         f"{method}: triple-jump, suzuki, kahan-li, sofroniou-spaletta)")
+    if comp.rkn and separable_split(system).Minv is None:
+        raise MethodNotApplicable(
+            f"the {comp.family} splitting has order {comp.order} for T = p^T M^-1 p / 2 with a constant "
+            f"mass matrix only (Runge-Kutta-Nystrom); this T is not of that form. Use "
+            f"composition='blanes-moan' or 'mclachlan' (order 4 for every splitting)")
+    return comp
 
 
 #: Methods that are symmetric of order 2 on every system they apply to (Itoh–Abe is not).
