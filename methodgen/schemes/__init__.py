@@ -183,7 +183,7 @@ def composition_for(order, family: str | None = None):
         For an order not in :data:`~methodgen.compositions.ORDERS`, an unknown family,
         or a family without that order (the message lists what is valid).
     """
-    from ..compositions import DEFAULT_FAMILY, FAMILIES, ORDERS, composition as _composition
+    from ..compositions import DEFAULT_FAMILY, ALL_FAMILIES, ORDERS, composition as _composition
 
     if isinstance(order, bool) or not isinstance(order, int) or order not in ORDERS:
         raise InputError(f"order must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
@@ -191,11 +191,11 @@ def composition_for(order, family: str | None = None):
         if family not in (None, "base"):
             raise InputError(f"composition={family!r} needs order > 2 (order 2 is the base method)")
         return None
-    if family is not None and family not in FAMILIES:
-        raise InputError(f"unknown composition family {family!r}; families: {', '.join(FAMILIES)} "
+    if family is not None and family not in ALL_FAMILIES:
+        raise InputError(f"unknown composition family {family!r}; families: {', '.join(ALL_FAMILIES)} "
                          f"(default for order {order}: {DEFAULT_FAMILY[order]})")
-    if family is not None and order not in FAMILIES[family]:
-        have = [f for f, orders in FAMILIES.items() if order in orders]
-        raise InputError(f"the {family} family has orders {', '.join(map(str, FAMILIES[family]))}, not "
+    if family is not None and order not in ALL_FAMILIES[family]:
+        have = [f for f, orders in ALL_FAMILIES.items() if order in orders]
+        raise InputError(f"the {family} family has orders {', '.join(map(str, ALL_FAMILIES[family]))}, not "
                          f"{order}; families with order {order}: {', '.join(have)}")
     return _composition(order, family)

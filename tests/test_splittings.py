@@ -1,0 +1,190 @@
+"""Splitting methods made for H = T + U (issue 26, item 2; methodgen/splittings.py).
+
+(a) Order conditions in the free associative algebra on {A, B} (60 digits): each family's
+    general order is what is claimed (4), exactly zero defects (< 1e-40) for McLachlan's
+    algebraic coefficients, round-off of the 15 published digits for Blanes & Moan.
+    Control: a symmetric perturbation of one kick (the sums kept) fails the order-3
+    conditions (general order 2).
+(b) Measured orders on Hénon–Heiles (error ratio under halving h against DOP853), including
+    the RKN order 6 of SRKN_11^b, which (a) does not decide (its general order is 4).
+    Control: one stage fraction perturbed in the module (the sums kept, symmetry lost)
+    drops the measured order to 2.
+(c) Stages: stage 0 = (b_1, a_1, b_2), stage k >= 1 = (0, a_{k+1}, b_{k+2}); the fractions
+    sum to 1; one ∇U per stage (first-same-as-last), counted.
+(d) A run in chunks passing ``info`` is bitwise the run in one piece (numpy, one trajectory
+    and a batch; numba); a perturbed ``info["force"]`` changes the bits (control: the
+    record is used).
+(e) Clear errors: a splitting with another method, an RKN family with a T that is not
+    quadratic, ``extended=True``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from conftest import HH_T, HH_Y0
+from methodgen.errors import InputError, MethodNotApplicable
+from methodgen.splittings import (SPLITTING_FAMILIES, Splitting, general_order, splitting,
+                                  splitting_defects)
+
+CASES = [(f, o) for f, orders in SPLITTING_FAMILIES.items() for o in orders]
+
+
+@pytest.fixture(scope="module")
+def hh():
+    return mg.load_scene("henon-heiles-2d").run_system
+
+
+# --- (a) order conditions ---------------------------------------------------------------
+
+@pytest.mark.parametrize("family, order", CASES)
+def test_general_order_decided(family, order):
+    s = splitting(order, family)
+    d = splitting_defects(s, 5)
+    assert general_order(s) == 4, d
+    # the first condition that fails is a real one, far above the tolerance
+    assert d[5] > 1e-6
+    if s.exact:
+        assert max(d[w] for w in range(1, 5)) < 1e-40
+
+
+def test_a_perturbed_kick_fails_the_order_conditions():
+    s = splitting(4, "blanes-moan")
+    b = [float(x) for x in s.kicks]
+    eps = 1e-6   # symmetric (both ends) and the middle kick keeps Σ b = 1
+    b[0] += eps
+    b[-1] += eps
+    b[len(b) // 2] -= 2 * eps
+    bad = Splitting("perturbed", 4, tuple(repr(x) for x in b), s.drifts, False, "test")
+    d = splitting_defects(bad, 5)
+    assert d[1] < 1e-13 and d[3] > 1e-8
+    assert general_order(bad) == 2
+
+
+# --- (b) measured orders ----------------------------------------------------------------
+
+#: (family, order, N): N and 2N steps over HH_T, both above round-off and in the asymptotic range.
+MEASURED = [("blanes-moan", 4, 25), ("blanes-moan-rkn", 4, 25), ("blanes-moan-rkn", 6, 25),
+            ("mclachlan", 4, 25)]
+
+
+def _errors(mod, ref, N):
+    return [float(np.abs(mod.integrate(HH_Y0, HH_T / n, n, check_resolution=False)[-1] - ref).max())
+            for n in (N, 2 * N)]
+
+
+@pytest.mark.parametrize("family, K, N", MEASURED)
+def test_measured_order(hh, hh_reference, family, K, N):
+    mod = mg.build(hh, "stormer-verlet", order=K, composition=family)
+    errs = _errors(mod, hh_reference, N)
+    assert errs[1] > 3e-13, f"error {errs[1]:.1e} at 2N is at round-off: the case measures nothing"
+    rate = math.log2(errs[0] / errs[1])
+    assert K - 0.5 < rate < K + 0.7, f"measured order {rate:.2f}, claimed {K} ({errs})"
+
+
+def test_a_perturbed_stage_loses_the_order(hh, hh_reference, monkeypatch):
+    mod = mg.build(hh, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+    kb = list(mod._KICK_B)
+    kb[1] += 1e-3       # one kick moved to another stage: Σ b = 1 kept, symmetry lost
+    kb[-2] -= 1e-3
+    monkeypatch.setattr(mod, "_KICK_B", tuple(kb))
+    errs = _errors(mod, hh_reference, 25)
+    assert math.log2(errs[0] / errs[1]) < 2.5, errs
+
+
+# --- (c) stages -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("family, order", CASES)
+def test_stage_fractions(family, order):
+    s = splitting(order, family)
+    ka, dr, kb = s.stage_fractions()
+    b = [float(x) for x in s.kicks]
+    assert len(ka) == len(dr) == len(kb) == s.stages == len(b) - 1
+    assert ka[0] == b[0] and all(x == 0.0 for x in ka[1:]) and list(kb) == b[1:]
+    assert math.isclose(sum(dr), 1.0, abs_tol=1e-14) and math.isclose(sum(ka) + sum(kb), 1.0, abs_tol=1e-14)
+    # symmetric: the palindromes b and a
+    assert list(dr) == list(dr)[::-1] and b == b[::-1]
+
+
+@pytest.mark.parametrize("batch", [False, True], ids=["one", "batch"])
+def test_one_force_per_stage(monkeypatch, batch):
+    """∇U evaluations per step = stages (the pendulum's sin calls; see test_force_count.py)."""
+    from test_force_count import _per_step
+    scene = mg.load_scene("simple-pendulum")
+    mod = mg.build(scene.run_system, "stormer-verlet", order=4, composition="blanes-moan")
+    y0 = np.array(scene.y0)
+    if batch:
+        per = _per_step(mod, np.stack([y0, 0.9 * y0]), 0.05, 8, "numpy", np, monkeypatch)
+    else:
+        per = _per_step(mod, y0, 0.05, 8, "math", math, monkeypatch)
+    assert per["sin"] == len(mod.DRIFT) == 6
+
+
+# --- (d) chunks ---------------------------------------------------------------------------
+
+def _chunked(mod, y0, h, splits, perturb=False):
+    """The run in chunks passing ``info``; ``perturb``: each chunk's force record changed by a
+    relative 1e-9 (a record the module accepts, whose use is then visible in the bits).
+    (Dropping the record is no control here: the force evaluated afresh at y + c has the
+    carried force's bits at most boundaries.)"""
+    info = {}
+    y, parts = np.asarray(y0, dtype=float), []
+    for n in splits:
+        part = mod.integrate(y, h, n, info=info)
+        parts.append(part if not parts else part[1:])
+        y = part[-1]
+        if perturb:
+            key, yy, comp, p, g = info["force"]
+            info["force"] = (key, yy, comp, p, g * (1 + 1e-9))
+    return np.concatenate(parts)
+
+
+@pytest.mark.parametrize("batch", [False, True], ids=["one", "batch"])
+def test_chunks_are_bitwise_one_piece(hh, batch):
+    mod = mg.build(hh, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+    y0 = np.stack([HH_Y0, 0.8 * HH_Y0]) if batch else HH_Y0
+    whole = mod.integrate(y0, 0.2, 200)
+    assert np.array_equal(_chunked(mod, y0, 0.2, [1] * 200), whole)
+    assert np.array_equal(_chunked(mod, y0, 0.2, [70, 1, 129]), whole)
+    # negative control: the carried force is what the next chunk uses (perturbed, the bits change)
+    changed = _chunked(mod, y0, 0.2, [1] * 200, perturb=True)
+    assert not np.array_equal(changed, whole)
+    assert np.abs(changed - whole).max() < 1e-6
+
+
+def test_numba_chunks_and_agreement(hh):
+    pytest.importorskip("numba")
+    nb = mg.build(hh, "stormer-verlet", order=4, composition="blanes-moan", backend="numba")
+    npm = mg.build(hh, "stormer-verlet", order=4, composition="blanes-moan")
+    whole = nb.integrate(HH_Y0, 0.2, 200)
+    assert np.array_equal(_chunked(nb, HH_Y0, 0.2, [1] * 200), whole)
+    assert not np.array_equal(_chunked(nb, HH_Y0, 0.2, [1] * 200, perturb=True), whole)
+    assert np.abs(npm.integrate(HH_Y0, 0.2, 200) - whole).max() < 1e-12
+
+
+# --- (e) errors ---------------------------------------------------------------------------
+
+def test_a_splitting_with_another_method_is_refused(hh):
+    with pytest.raises(InputError, match="stormer-verlet"):
+        mg.discretize(hh, "midpoint", order=4, composition="blanes-moan")
+
+
+def test_rkn_family_needs_quadratic_t():
+    rel = mg.Hamiltonian("sqrt(1 + p**2) + q**2/2", q=["q"], p=["p"])
+    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom"):
+        mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+    # the general families apply (order 4 for every splitting)
+    assert mg.discretize(rel, "stormer-verlet", order=4, composition="blanes-moan").traits.order == 4
+
+
+def test_extended_is_refused(hh):
+    mod = mg.build(hh, "stormer-verlet", order=4, composition="mclachlan")
+    with pytest.raises(ValueError, match="extended=True is not available for a splitting"):
+        mod.integrate(HH_Y0, 0.1, 5, extended=True)
+    # control: a composition of Störmer–Verlet refines
+    sv4 = mg.build(hh, "stormer-verlet", order=4)
+    assert np.isfinite(sv4.integrate(HH_Y0, 0.1, 5, extended=True)).all()
