@@ -188,3 +188,47 @@ def test_extended_is_refused(hh):
     # control: a composition of Störmer–Verlet refines
     sv4 = mg.build(hh, "stormer-verlet", order=4)
     assert np.isfinite(sv4.integrate(HH_Y0, 0.1, 5, extended=True)).all()
+
+
+# --- (f) verify ---------------------------------------------------------------------------
+
+def test_verify_certificates():
+    from methodgen.verify.report import NUMERICAL, PROVED
+    from methodgen.verify.splittings import (splitting_float_certificate, splitting_order_certificate,
+                                             splitting_symmetry_certificate)
+    mcl = splitting(4, "mclachlan")
+    assert splitting_order_certificate(mcl).status == PROVED          # √19: exact zeros
+    assert splitting_order_certificate(splitting(4, "blanes-moan")).status == NUMERICAL
+    rkn = splitting_order_certificate(splitting(6, "blanes-moan-rkn"))
+    assert rkn.status == NUMERICAL and "measured" in rkn.details["rkn_order"]   # general order 4 only
+    for s in (mcl, splitting(6, "blanes-moan-rkn")):
+        assert splitting_float_certificate(s).status == NUMERICAL
+        assert splitting_symmetry_certificate(s).status == PROVED
+
+
+def test_verify_negative_controls():
+    """A perturbed exact coefficient (symmetric, sums kept) is refuted exactly; a perturbed
+    decimal one numerically; a non-palindromic set is not symmetric."""
+    import sympy as sp
+    from methodgen.verify.report import REFUTED
+    from methodgen.verify.splittings import splitting_order_certificate, splitting_symmetry_certificate
+    mcl = splitting(4, "mclachlan")
+    d = list(mcl.drifts)
+    eps = sp.Rational(1, 1000)
+    d[0] += eps
+    d[-1] += eps
+    d[2] -= eps
+    d[3] -= eps
+    bad = Splitting("perturbed", 4, mcl.kicks, tuple(d), True, "test")
+    assert splitting_order_certificate(bad).status == REFUTED
+    bm = splitting(4, "blanes-moan")
+    b = [float(x) for x in bm.kicks]
+    b[0] += 1e-6
+    b[-1] += 1e-6
+    b[3] -= 2e-6
+    assert splitting_order_certificate(Splitting("p", 4, tuple(map(repr, b)), bm.drifts, False, "t")).status == REFUTED
+    b = [float(x) for x in bm.kicks]
+    b[0] += 1e-6
+    b[3] -= 1e-6
+    assert splitting_symmetry_certificate(Splitting("p", 4, tuple(map(repr, b)), bm.drifts, False, "t")).status \
+        == REFUTED
