@@ -29,11 +29,11 @@ from methodgen import peers
 
 #: (order, family, step sizes) per scene: the rows of methodgen.
 ROWS = {
-    "henon-heiles-2d": [(10, None, (0.2,)), (8, None, (0.2, 0.25)), (6, "blanes-moan-rkn", (0.2, 0.25, 0.3, 0.4)),
-                        (4, "blanes-moan-rkn", (0.05, 0.1)), (4, "blanes-moan", (0.05, 0.1)),
-                        (4, "mclachlan", (0.05,))],
-    "outer-solar-system": [(8, None, (40.0,)), (6, "blanes-moan-rkn", (40.0, 50.0, 62.5, 80.0, 100.0)),
-                           (4, "blanes-moan-rkn", (20.0, 40.0)), (4, "blanes-moan", (20.0, 40.0))],
+    "henon-heiles-2d": [(10, None, (0.2,)), (8, None, (0.2,)),
+                        (6, "blanes-moan-rkn", (0.1, 0.125, 0.2, 0.4)), (6, "blanes-moan", (0.1, 0.2)),
+                        (4, "blanes-moan-rkn", (0.05,)), (4, "blanes-moan", (0.05,)), (4, "mclachlan", (0.05,))],
+    "outer-solar-system": [(8, None, (40.0,)), (6, "blanes-moan-rkn", (20.0, 25.0, 40.0, 80.0)),
+                           (6, "blanes-moan", (20.0, 40.0)), (4, "blanes-moan-rkn", (20.0,))],
 }
 T_OF = {"henon-heiles-2d": 1e4, "outer-solar-system": 2e5}
 

@@ -16,15 +16,16 @@ per stage.  (A symmetric composition of Störmer–Verlet with coefficients γ_k
 
 Families (the published constants, cross-checked against their order conditions here):
 
-``"blanes-moan"`` (Blanes & Moan 2002, Table 2, S6)
-    order 4 for every splitting, 6 stages (force evaluations).
+``"blanes-moan"`` (Blanes & Moan 2002, Table 2, S6 and S10)
+    order 4 (6 stages = force evaluations) and order 6 (10 stages) for every splitting.
 ``"blanes-moan-rkn"`` (Blanes & Moan 2002, Table 3, SRKN_6^b and SRKN_11^b)
     order 4 (6 stages) and order 6 (11 stages) for Runge–Kutta–Nyström problems
     (T quadratic in p with a constant mass matrix, so [B,[B,[B,A]]] = 0); only order 2 for a
     general splitting (see below).
-``"mclachlan"`` (McLachlan 1995; [HLW06, (V.3.6)])
-    order 4, 6 stages, exact algebraic coefficients (√19): the 5-fold composition of
-    symplectic Euler with its adjoint.
+``"mclachlan"`` (McLachlan 1995, S5; [HLW06, (V.3.6)])
+    order 4, 5 stages, exact algebraic coefficients (√19): the 5-fold composition of
+    symplectic Euler with its adjoint, written with the kicks at both ends (6 kicks, 5
+    drifts: 5 force evaluations).
 
 Order conditions are decided, not assumed: the product of exponentials is expanded in the
 free associative algebra on the two generators A and B, truncated at degree K + 1, and its
@@ -58,7 +59,7 @@ __all__ = ["Splitting", "SPLITTING_FAMILIES", "RKN_FAMILIES", "splitting", "is_s
 DPS = 60
 
 #: family → orders (the order claimed: for every splitting, or RKN for RKN_FAMILIES).
-SPLITTING_FAMILIES = {"blanes-moan": (4,), "blanes-moan-rkn": (4, 6), "mclachlan": (4,)}
+SPLITTING_FAMILIES = {"blanes-moan": (4, 6), "blanes-moan-rkn": (4, 6), "mclachlan": (4,)}
 #: Families whose order holds only for RKN problems (T = ½ pᵀ M⁻¹ p, M constant).
 RKN_FAMILIES = ("blanes-moan-rkn",)
 
@@ -66,6 +67,9 @@ RKN_FAMILIES = ("blanes-moan-rkn",)
 # middle coefficient of the longer list is fixed by Σ = 1 (below), as the papers do.
 _BM_S6 = (["0.0792036964311957", "0.353172906049774", "-0.0420650803577195"],
           ["0.209515106613362", "-0.143851773179818"])
+_BM_S10 = (["0.0502627644003922", "0.413514300428344", "0.0450798897943977", "-0.188054853819569",
+            "0.541960678450780"],
+           ["0.148816447901042", "-0.132385865767784", "0.067307604692185", "0.432666402578175"])
 _BM_SRKN6 = (["0.0829844064174052", "0.396309801498368", "-0.0390563049223486"],
              ["0.245298957184271", "0.604872665711080"])
 _BM_SRKN11 = (["0.0414649985182624", "0.198128671918067", "-0.0400061921041533",
@@ -155,7 +159,9 @@ def _decimal_symmetric(kicks_half: list, drifts_half: list, exact=False):
 
 def _mclachlan():
     """[HLW06, (V.3.6)]: Ψ_h = Φ_{α_5 h} ∘ Φ*_{β_5 h} ∘ … ∘ Φ_{α_1 h} ∘ Φ*_{β_1 h}, with Φ
-    symplectic Euler (kick then drift) and Φ* its adjoint (drift then kick), as one splitting."""
+    symplectic Euler (drift then kick) and Φ* its adjoint (kick then drift), as one splitting:
+    adjacent kicks merge, so the drifts are 2/5, -1/10, 2/5, -1/10, 2/5 and the 6 kicks the
+    sums of α and β (the order conditions do not depend on which flow is called A)."""
     r = sp.sqrt(19)
     alpha = [(146 + 5 * r) / 540, (-2 + 10 * r) / 135, sp.Rational(1, 5), (-23 - 20 * r) / 270,
              (14 - r) / 108]
@@ -164,7 +170,7 @@ def _mclachlan():
     # Φ_{α_1 h} = drift(α_1 h) ∘ kick(α_1 h) (kick first), ...
     seq = []   # (letter, coefficient), first applied first
     for al, be in zip(alpha, beta):
-        seq += [("A", be), ("B", be), ("B", al), ("A", al)]
+        seq += [("B", be), ("A", be), ("A", al), ("B", al)]
     return _merge(seq)
 
 
@@ -193,8 +199,9 @@ def splitting(order: int, family: str) -> Splitting:
     if order not in SPLITTING_FAMILIES[family]:
         raise ValueError(f"the {family} family has orders {SPLITTING_FAMILIES[family]}, not {order}")
     if family == "blanes-moan":
-        k, d = _decimal_symmetric(*_BM_S6)
-        return Splitting(family, 4, k, d, False, "Blanes & Moan 2002, S6 (15 digits)")
+        k, d = _decimal_symmetric(*(_BM_S6 if order == 4 else _BM_S10))
+        return Splitting(family, order, k, d, False,
+                         f"Blanes & Moan 2002, {'S6' if order == 4 else 'S10'} (15 digits)")
     if family == "blanes-moan-rkn":
         src = _BM_SRKN6 if order == 4 else _BM_SRKN11
         k, d = _decimal_symmetric(*src)
@@ -202,7 +209,7 @@ def splitting(order: int, family: str) -> Splitting:
         return Splitting(family, order, k, d, False, f"Blanes & Moan 2002, {name} (15 digits; RKN order)",
                          rkn=True)
     k, d = _mclachlan()
-    return Splitting(family, 4, k, d, True, "McLachlan 1995, order 4 with 5 compositions (exact, √19)")
+    return Splitting(family, 4, k, d, True, "McLachlan 1995, S5 (exact, √19)")
 
 
 # --- order conditions in the free associative algebra on {A, B} -------------------------
