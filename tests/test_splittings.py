@@ -233,3 +233,22 @@ def test_verify_negative_controls():
     b[3] -= 1e-6
     assert splitting_symmetry_certificate(Splitting("p", 4, tuple(map(repr, b)), bm.drifts, False, "t")).status \
         == REFUTED
+
+
+# --- (g) command line ---------------------------------------------------------------------
+
+def test_cli_run_with_a_splitting(capsys, tmp_path, monkeypatch):
+    import json
+    from methodgen import cli
+    monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
+    code = cli.main(["run", "henon-heiles-2d", "--method", "stormer-verlet", "--order", "6",
+                     "--composition", "blanes-moan-rkn", "--steps", "20", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["order"] == 6 and "blanes-moan-rkn" in json.dumps(rep["composition"])
+    # a splitting with another method: one line, exit 2, no traceback
+    code = cli.main(["run", "henon-heiles-2d", "--method", "midpoint", "--order", "4",
+                     "--composition", "blanes-moan", "--steps", "2"])
+    out, err = capsys.readouterr()
+    assert code == 2 and "stormer-verlet" in err and "Traceback" not in err

@@ -50,6 +50,9 @@ def cmd_methods(args) -> int:
         print("  families (--composition, [run] composition): "
               + ", ".join(f"{f} ({', '.join(map(str, o))})" for f, o in ALL_FAMILIES.items()))
         print("  default: " + ", ".join(f"order {o} {DEFAULT_FAMILY[o]}" for o in high))
+        from ..splittings import RKN_FAMILIES, SPLITTING_FAMILIES
+        print(f"  splittings of T + U (stormer-verlet only): {', '.join(SPLITTING_FAMILIES)}; "
+              f"{', '.join(RKN_FAMILIES)}: order 6 for T quadratic with a constant mass only (RKN)")
     return 0
 
 
