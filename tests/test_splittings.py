@@ -252,3 +252,18 @@ def test_cli_run_with_a_splitting(capsys, tmp_path, monkeypatch):
                      "--composition", "blanes-moan", "--steps", "2"])
     out, err = capsys.readouterr()
     assert code == 2 and "stormer-verlet" in err and "Traceback" not in err
+
+
+def test_bench_peers_rows_use_the_family():
+    """``work_precision(..., peers=True, composition=F)``: the rows above order 2 of
+    stormer-verlet are F's; a method F does not apply to keeps the order's default family."""
+    pytest.importorskip("heyoka")
+    from methodgen import bench
+    wp = bench.work_precision(mg.load_scene("henon-heiles-2d"), ["stormer-verlet", "midpoint"], quick=True,
+                              T=2.0, peers=True, orders=(6,), composition="blanes-moan-rkn")
+    labels = {r["method"] for r in wp["rows"] if r["kind"] == "methodgen"}
+    assert any("blanes-moan-rkn" in m and "stormer-verlet" in m for m in labels), labels
+    assert not any("blanes-moan-rkn" in m and "midpoint" in m for m in labels), labels
+    with pytest.raises(InputError, match="unknown composition family"):
+        bench.work_precision(mg.load_scene("henon-heiles-2d"), ["stormer-verlet"], quick=True, T=2.0,
+                             peers=True, orders=(6,), composition="bogus")
