@@ -400,6 +400,13 @@ class LocalErrorPlan:
     shared: tuple = ()              # subexpressions to compute once (the components of E)
 
 
+#: What E is measured against in a first-same-as-last stage (E = Δq minus it for a Störmer–Verlet
+#: stage; for a splitting's stage the same formula in its kick and drift steps).
+_FSAL_PARTNER = "the trapezoidal rule of the positions (the momenta already are one)"
+_SPLIT_PARTNER = ("the trapezoidal rule of the positions, for a stage kick a·h, drift d·h, kick b·h written "
+                  "as E = d(a + b)h²/4 M⁻¹(∇U(q1) - ∇U(q0)), its value at a = b = d/2")
+
+
 def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErrorPlan | None:
     """The embedded error estimate ``E`` of one step ``y0 → y1 = y0 + Δy`` of ``scheme``.
 
@@ -484,15 +491,14 @@ def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErro
                 E = [w * (G1[i] - G0[i]) for i in q]
                 if sep.isotropic:
                     return LocalErrorPlan("direct", q, q, (squares(E), M[0, 0] ** 2 * squares(inc[:d])),
-                                          sp.Integer(1), "the curvature of U along the stage's drift",
-                                          tuple(E))
+                                          sp.Integer(1), _FSAL_PARTNER, tuple(E))
                 D = list(M * sp.Matrix(inc[:d]))
             else:
                 Tpp = sp.hessian(sep.T, system.p)
                 E = list(w * Tpp * sp.Matrix([G1[i] - G0[i] for i in q]))
                 D = inc[:d]
-            return LocalErrorPlan("direct", q, q, (squares(E), squares(D)), sp.Integer(1),
-                                  "the curvature of U along the stage's drift", tuple(E) + tuple(D))
+            return LocalErrorPlan("direct", q, q, (squares(E), squares(D)), sp.Integer(1), _FSAL_PARTNER,
+                                  tuple(E) + tuple(D))
         if sep is not None and sep.Minv is not None:
             # ∂H/∂p = M⁻¹p is linear, so M E = M Δq - (h/2)(2 p0 + Δp): measured in the
             # mass-weighted norm |M·| (the same ratio for a multiple of the identity),
@@ -704,6 +710,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     lplan = local_error_plan(scheme, links, field_at_end=field1,
                              fsal=None if fplan is None else
                              (fplan.symbols, first_links[d2:], fplan.steps))
+    if lplan is not None and is_splitting(scheme.composition):
+        lplan = replace(lplan, partner=_SPLIT_PARTNER)
     conds = domain_conditions(system)
     # A time transformation's guard values (g, the level-set defect and its scale) at y1.
     tguard = time_scale_guard(system) if not is_poisson(system) else ()

@@ -267,3 +267,18 @@ def test_bench_peers_rows_use_the_family():
     with pytest.raises(InputError, match="unknown composition family"):
         bench.work_precision(mg.load_scene("henon-heiles-2d"), ["stormer-verlet"], quick=True, T=2.0,
                              peers=True, orders=(6,), composition="bogus")
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_an_unresolved_step_is_refused(hh, backend):
+    """The per-stage local error estimate refuses a step that does not resolve the dynamics
+    (Hénon–Heiles, SRKN_11^b, h = 2: estimate 0.118 > 0.1), naming the stage; h = 1 runs."""
+    if backend == "numba":
+        pytest.importorskip("numba")
+    mod = mg.build(hh, "stormer-verlet", order=6, composition="blanes-moan-rkn", backend=backend)
+    assert np.isfinite(mod.integrate(HH_Y0, 1.0, 200)).all()
+    with pytest.raises(mod.ResolutionError, match=r"DRIFT\[\d+\] \* h") as exc:
+        mod.integrate(HH_Y0, 2.0, 200)
+    assert exc.value.suggested_h is not None and exc.value.suggested_h < 2.0
+    # control: without the check the run goes on (the estimate is what refused it)
+    assert mod.integrate(HH_Y0, 2.0, 20, check_resolution=False).shape == (21, 4)
