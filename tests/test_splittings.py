@@ -282,3 +282,26 @@ def test_an_unresolved_step_is_refused(hh, backend):
     assert exc.value.suggested_h is not None and exc.value.suggested_h < 2.0
     # control: without the check the run goes on (the estimate is what refused it)
     assert mod.integrate(HH_Y0, 2.0, 20, check_resolution=False).shape == (21, 4)
+
+
+def test_verify_report_of_a_splitting_scheme(hh):
+    rep = mg.verify(mg.discretize(hh, "stormer-verlet", order=6, composition="blanes-moan-rkn"))
+    assert rep.ok
+    claims = " | ".join(c.claim for c in rep.certificates)
+    assert "splitting coefficients" in claims and "symplectic" in claims and "symmetric" in claims
+
+
+def test_a_scene_declares_a_splitting(tmp_path, capsys, monkeypatch):
+    from methodgen import cli
+    monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
+    f = tmp_path / "hh.toml"
+    f.write_text('name = "hh"\n[system]\nH = "(p1**2 + p2**2)/2 + (q1**2 + q2**2)/2 + q1**2*q2 - q2**3/3"\n'
+                 'q = ["q1", "q2"]\np = ["p1", "p2"]\n[run]\nmethod = "stormer-verlet"\nh = 0.1\nsteps = 10\n'
+                 'order = 4\ncomposition = "mclachlan"\ny0 = [0.0, 0.0, 0.4330127018922193, 0.25]\n')
+    assert mg.load_scene(f).composition == "mclachlan"
+    assert cli.main(["run", str(f)]) == 0
+    assert "mclachlan composition, 5 stages" in capsys.readouterr().out
+    # control: a family without that order is refused at load, naming what is valid
+    f.write_text(f.read_text().replace("order = 4", "order = 8"))
+    with pytest.raises(Exception, match="mclachlan family has order 4, not 8"):
+        mg.load_scene(f)
