@@ -5,8 +5,10 @@
     algebraic coefficients, round-off of the 15 published digits for Blanes & Moan.
     Control: a symmetric perturbation of one kick (the sums kept) fails the order-3
     conditions (general order 2).
+    The RKN order (T quadratic) is decided modulo the ideal of [B, [B, [B, A]]]: SRKN_11^b
+    has RKN order 6 and general order 4 (control: without the ideal, and a perturbed kick).
 (b) Measured orders on Hénon–Heiles (error ratio under halving h against DOP853), including
-    the RKN order 6 of SRKN_11^b, which (a) does not decide (its general order is 4).
+    the RKN order 6 of SRKN_11^b.
     Control: one stage fraction perturbed in the module (the sums kept, symmetry lost)
     drops the measured order to 2.
 (c) Stages: stage 0 = (b_1, a_1, b_2), stage k >= 1 = (0, a_{k+1}, b_{k+2}); the fractions
@@ -44,13 +46,38 @@ def hh():
 @pytest.mark.parametrize("family, order", CASES)
 def test_general_order_decided(family, order):
     s = splitting(order, family)
-    K = 4 if s.rkn else order          # an RKN order is not a general one (measured below)
+    K = 4 if s.rkn else order          # an RKN order is not a general one (see below)
     d = splitting_defects(s, K + 1)
     assert general_order(s) == K, d
     # the first condition that fails is a real one, far above the tolerance
     assert d[K + 1] > 1e-6
     if s.exact:
         assert max(d[w] for w in range(1, K + 1)) < 1e-40
+
+
+@pytest.mark.parametrize("family, order", CASES)
+def test_rkn_order_decided(family, order):
+    """Modulo the ideal of [B, [B, [B, A]]] (zero for T quadratic): every family has its order
+    for RKN problems, SRKN_11^b 6 although its general order is 4."""
+    from methodgen.splittings import rkn_defects, rkn_order
+    s = splitting(order, family)
+    assert rkn_order(s) == order, rkn_defects(s, order + 1)
+
+
+def test_rkn_ideal_is_what_makes_srkn11_order_6():
+    """Control: without the ideal (general conditions) the degree-5 defect of SRKN_11^b is
+    1e-5; modulo the ideal it is at the printed digits; a symmetric perturbation of two
+    kicks (the sum kept) breaks the RKN conditions at degree 3."""
+    from methodgen.splittings import rkn_defects, rkn_order
+    s = splitting(6, "blanes-moan-rkn")
+    assert splitting_defects(s, 5)[5] > 1e-6 and rkn_defects(s, 5)[5] < 1e-15
+    b = [float(x) for x in s.kicks]
+    b[0] += 1e-6
+    b[-1] += 1e-6
+    b[5] -= 1e-6
+    b[6] -= 1e-6
+    bad = Splitting("perturbed", 6, tuple(map(repr, b)), s.drifts, False, "test", rkn=True)
+    assert rkn_order(bad) == 2 and rkn_defects(bad, 3)[3] > 1e-8
 
 
 def test_a_perturbed_kick_fails_the_order_conditions():
@@ -201,7 +228,7 @@ def test_verify_certificates():
     assert splitting_order_certificate(mcl).status == PROVED          # √19: exact zeros
     assert splitting_order_certificate(splitting(4, "blanes-moan")).status == NUMERICAL
     rkn = splitting_order_certificate(splitting(6, "blanes-moan-rkn"))
-    assert rkn.status == NUMERICAL and "measured" in rkn.details["rkn_order"]   # general order 4 only
+    assert rkn.status == NUMERICAL and "Runge–Kutta–Nyström" in rkn.claim and rkn.details["general_order"] == 4
     for s in (mcl, splitting(6, "blanes-moan-rkn")):
         assert splitting_float_certificate(s).status == NUMERICAL
         assert splitting_symmetry_certificate(s).status == PROVED

@@ -285,7 +285,7 @@ class Scheme:
             return self
         t = self.traits
         if getattr(composition, "kind", None) == "splitting":
-            note = (f"order {composition.order}{' (RKN: T quadratic, measured)' if composition.rkn else ''}: "
+            note = (f"order {composition.order}{' (RKN: T quadratic, M constant)' if composition.rkn else ''}: "
                     f"symmetric splitting of T + U, {composition.family} family "
                     f"({composition.stages} stages; {composition.source})")
         else:

@@ -217,7 +217,7 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
     split = comp is not None and getattr(comp, "kind", None) == "splitting"
     if split:
         from .splittings import (REF_SPLIT, splitting_float_certificate, splitting_order_certificate)
-        add(f"splitting coefficients: order {comp.order}{' (RKN, measured)' if comp.rkn else ''} "
+        add(f"splitting coefficients: order {comp.order}{' (RKN)' if comp.rkn else ''} "
             f"({comp.family}, {scheme.key})", REF_SPLIT, lambda: splitting_order_certificate(comp))
         add(f"float64 stage fractions of the generated module ({scheme.key})", REF_SPLIT,
             lambda: splitting_float_certificate(comp, key=scheme.key))
