@@ -112,6 +112,8 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         raise MethodNotApplicable(f"{reason}. Methods that apply to this system: "
                                   f"{', '.join(ok) if ok else '(none)'}")
     comp = composition_for(order, composition)
+    if getattr(comp, "kind", None) == "splitting":
+        _check_splitting(comp, method, system)   # before deriving the base step
     try:
         scheme = mod.build(system, **options)
     except TypeError as exc:
@@ -127,7 +129,7 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
     if comp is None:
         return scheme
     if getattr(comp, "kind", None) == "splitting":
-        return scheme.compose(_check_splitting(comp, method, system))
+        return scheme.compose(comp)
     t = scheme.traits
     if not (t.symmetric and t.order == 2):
         ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
@@ -147,7 +149,8 @@ def _check_splitting(comp, method: str, system):
         raise InputError(f"composition={comp.family!r} is a splitting of H = T + U: it is run with "
                          f"method 'stormer-verlet' only, not {method!r} (valid families for "
                          f"{method}: triple-jump, suzuki, kahan-li, sofroniou-spaletta)")
-    if comp.rkn and separable_split(system).Minv is None:
+    sep = separable_split(system)
+    if comp.rkn and (sep is None or sep.Minv is None):
         raise MethodNotApplicable(
             f"the {comp.family} splitting has order {comp.order} for T = p^T M^-1 p / 2 with a constant "
             f"mass matrix only (Runge-Kutta-Nystrom); this T is not of that form. Use "
