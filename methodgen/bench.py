@@ -423,7 +423,7 @@ def _ivp_row(system, module, solver, tol, y0, T, ref, rhs, jac):
 
 def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float | None = None,
                    progress: bool = False, peers: bool = False, backend: str = "numpy",
-                   orders=None, solver: str | None = None) -> dict:
+                   orders=None, solver: str | None = None, composition: str | None = None) -> dict:
     """Work-precision data for ``scene``: methodgen methods, fsolve and solve_ivp peers.
 
     Returns a dict with ``scene``, ``T``, ``reference`` and ``rows`` (one dict
@@ -444,6 +444,10 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     over 5 s: :func:`methodgen.peers.min_cpu`).  ``targets`` summarises the cheapest row
     of each method at the issue-14 targets (:func:`targets`).
 
+    ``composition``: the family of the rows above order 2 where it has that order and applies
+    (a splitting family, :mod:`methodgen.splittings`, to ``stormer-verlet`` only; the
+    others keep the order's default family); with ``peers`` only.
+
     Without ``peers``, ``orders`` must be None or ``(2,)`` (the scipy comparison is of
     the base methods).  A time-dependent H is benchmarked as its autonomous extension
     (:func:`extended_scene`): states, errors and the reference are on ``(q, t; p, e)``.
@@ -452,7 +456,10 @@ def work_precision(scene: Scene, methods=None, *, quick: bool = False, T: float 
     methods = list(methods or scene.methods)
     if peers:
         return _work_precision_peers(scene, methods, quick=quick, T=T, progress=progress, backend=backend,
-                                     orders=orders, solver=solver)
+                                     orders=orders, solver=solver, composition=composition)
+    if composition is not None:
+        raise InputError("composition= (--composition) chooses the family of the --peers rows above order 2; "
+                         "without peers=True the base methods are compared")
     if orders is not None and tuple(orders) != (2,):
         raise InputError("orders above 2 (compositions) are benchmarked with peers=True (--peers) only")
     if solver is not None:
@@ -622,7 +629,8 @@ def frontier(rows, levels=FRONTIER_LEVELS, energy: float = TARGET_ENERGY) -> dic
 
 
 def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None, progress: bool,
-                          backend: str, orders=None, solver: str | None = None) -> dict:
+                          backend: str, orders=None, solver: str | None = None,
+                          composition: str | None = None) -> dict:
     """``work_precision(..., peers=True)``: see there and :mod:`methodgen.peers`."""
     from . import peers as pe
     from .emit import resolve_backend
@@ -658,9 +666,22 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             jobs.append((method, order))
     # An upper bound of the base steps of methodgen's rows (a ladder may stop early), said before
     # they start: these rows are bounded one by one (check_length), not in total.
+    def family_for(method, order):
+        from .compositions import ALL_FAMILIES
+        from .splittings import SPLITTING_FAMILIES
+        if composition is None or order not in ALL_FAMILIES.get(composition, ()):
+            return None
+        if composition in SPLITTING_FAMILIES and method != "stormer-verlet":
+            return None
+        return composition
+
+    if composition is not None:
+        from .compositions import ALL_FAMILIES
+        if composition not in ALL_FAMILIES:
+            raise InputError(f"unknown composition family {composition!r}; families: {', '.join(ALL_FAMILIES)}")
     estimate = 0
     for method, order in jobs:
-        comp = composition_for(order)
+        comp = composition_for(order, family_for(method, order))
         st = comp.stages if comp is not None else 1
         estimate += sum(st * max(1, round(T / h)) for h in composed_steps(scene.h, order, st, quick=quick))
     if progress:
@@ -668,7 +689,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
               f"({len(jobs)} method/order pairs; a row under 5 s runs 3 times for its CPU minimum)",
               file=sys.stderr)
     for method, order in _progress(jobs, progress, "methodgen"):
-        comp = composition_for(order)
+        comp = composition_for(order, family_for(method, order))
         family = comp.family if comp is not None else None
         stages = comp.stages if comp is not None else 1
         label = row_label(method, order, family)

@@ -49,7 +49,7 @@ from functools import lru_cache
 import mpmath as mp
 import sympy as sp
 
-__all__ = ["Composition", "FAMILIES", "ORDERS", "DEFAULT_FAMILY", "composition", "order_defects",
+__all__ = ["Composition", "FAMILIES", "ALL_FAMILIES", "ORDERS", "DEFAULT_FAMILY", "composition", "order_defects",
            "achieved_order", "error_constant", "efficiency", "triple_jump_exact"]
 
 ORDERS = (2, 4, 6, 8, 10)
@@ -82,6 +82,12 @@ _SOFSPA = {
 }
 FAMILIES = {"triple-jump": (4, 6, 8, 10), "suzuki": (4, 6, 8, 10), "kahan-li": (6, 8),
             "sofroniou-spaletta": (10,)}
+# Splitting families of H = T + U (methodgen.splittings): Störmer–Verlet only, run as
+# kick/drift/kick stages rather than as compositions of the base step.
+from .splittings import SPLITTING_FAMILIES as _SPLIT  # noqa: E402
+
+#: Every family ``composition=`` accepts: the compositions above, then the splittings.
+ALL_FAMILIES = {**FAMILIES, **_SPLIT}
 
 
 @dataclass(frozen=True)
@@ -131,10 +137,13 @@ def composition(order: int, family: str | None = None) -> Composition:
     if order == 2:
         return Composition("base", 2, (sp.Integer(1),), True, "the base method itself")
     family = family or DEFAULT_FAMILY[order]
-    if family not in FAMILIES:
-        raise ValueError(f"unknown composition family {family!r}; valid: {sorted(FAMILIES)}")
-    if order not in FAMILIES[family]:
-        raise ValueError(f"the {family} family has orders {FAMILIES[family]}, not {order}")
+    if family not in ALL_FAMILIES:
+        raise ValueError(f"unknown composition family {family!r}; valid: {sorted(ALL_FAMILIES)}")
+    if order not in ALL_FAMILIES[family]:
+        raise ValueError(f"the {family} family has orders {ALL_FAMILIES[family]}, not {order}")
+    if family in _SPLIT:
+        from .splittings import splitting
+        return splitting(order, family)
     if family == "triple-jump":
         return Composition(family, order, _recursive(order, 3), True, "Creutz–Gocksch 1989, Yoshida 1990")
     if family == "suzuki":

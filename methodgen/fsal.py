@@ -6,7 +6,10 @@ A Störmer–Verlet step (stage of a composition) is
 
 and the force at its end, ∇U(q1), is the force at the start of the next stage and of the
 next step.  Written with the start force as an input ``G0`` (symbols ``_g0``, ``_g1``, ...),
-the step needs ∇U once: at q1, which it returns as the next stage's ``G0``.  The
+the step needs ∇U once: at q1, which it returns as the next stage's ``G0``.  The step is
+written with three step symbols, kick ``ha`` - drift ``hd`` - kick ``hb`` ((h/2, h, h/2) for
+Störmer–Verlet), so that the same kernel runs every stage of a splitting
+(:mod:`methodgen.splittings`).  The
 generated runtimes carry it from stage to stage, from step to step and, through
 ``info["force"]``, from chunk to chunk.
 
@@ -26,7 +29,10 @@ import sympy as sp
 from .derive import separable_split
 from .schemes.base import STEP
 
-__all__ = ["FsalPlan", "fsal_plan"]
+__all__ = ["FsalPlan", "fsal_plan", "STAGE_STEPS"]
+
+#: The three step symbols of a stage (the post kernel's arguments ``_ha, _hd, _hb``).
+STAGE_STEPS = (sp.Symbol("_ha", real=True), sp.Symbol("_hd", real=True), sp.Symbol("_hb", real=True))
 
 
 @dataclass(frozen=True)
@@ -37,8 +43,10 @@ class FsalPlan:
     ----------
     symbols : tuple of sympy.Symbol
         ``G0``: ∇U at the step's start, an input of the step.
+    steps : tuple of sympy.Symbol
+        ``(ha, hd, hb)``: the first kick's, the drift's and the last kick's step.
     increment : list of sympy.Expr
-        Δy = (Δq, Δp) in the start state and ``G0``.
+        Δy = (Δq, Δp) in the start state, ``G0`` and the three steps.
     end_force : list of sympy.Expr
         ∇U(q0 + Δq): the next step's ``G0`` (shares its code with Δp).
     start_force : list of sympy.Expr
@@ -46,6 +54,11 @@ class FsalPlan:
     """
 
     symbols: tuple
+    #: The stage's step fractions times h: ``(ha, hd, hb)``, symbols ``_ha, _hd, _hb`` —
+    #: kick by ha with G0, drift by hd, kick by hb with the end force.  Störmer–Verlet is
+    #: (h/2, h, h/2); a splitting's stages are its (a_k h, d_k h, b_k h)
+    #: (:mod:`methodgen.splittings`).
+    steps: tuple
     increment: list
     end_force: list
     start_force: list
@@ -70,11 +83,14 @@ def fsal_plan(scheme) -> FsalPlan | None:
     gradU = sp.Matrix([sp.diff(sep.U, s) for s in q0])
     gradT = sp.Matrix([sp.diff(sep.T, s) for s in p0])
     G0 = sp.Matrix([sp.Symbol(f"_g{i}", real=True) for i in range(len(q0))])
-    phalf = sp.Matrix(p0) - h / 2 * G0
-    dq = h * gradT.xreplace(dict(zip(p0, phalf)))
+    ha, hd, hb = STAGE_STEPS
+    phalf = sp.Matrix(p0) - ha * G0
+    dq = hd * gradT.xreplace(dict(zip(p0, phalf)))
     g1 = gradU.xreplace(dict(zip(q0, sp.Matrix(q0) + dq)))
-    dp = -h / 2 * G0 - h / 2 * g1
+    dp = -ha * G0 - hb * g1
     inc = sp.Matrix(list(dq) + list(dp))
-    if inc.xreplace(dict(zip(G0, gradU))) != sp.Matrix(scheme.increment):
+    sv = {ha: h / 2, hd: h, hb: h / 2, **dict(zip(G0, gradU))}
+    if inc.xreplace(sv) != sp.Matrix(scheme.increment):
         return None
-    return FsalPlan(symbols=tuple(G0), increment=list(inc), end_force=list(g1), start_force=list(gradU))
+    return FsalPlan(symbols=tuple(G0), steps=STAGE_STEPS, increment=list(inc), end_force=list(g1),
+                    start_force=list(gradU))

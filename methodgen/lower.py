@@ -33,7 +33,9 @@ from .compensate import compensate, compensation_symbols
 from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, sum_pattern, table_names
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .fsal import fsal_plan
+from .splittings import composition_stages, is_splitting
 from .poisson import is_poisson
+from .errors import InputError
 from .schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from .special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 from .timetransform import time_scale_guard
@@ -270,6 +272,14 @@ class ModuleIR:
     #: force ∇U(q0) that the post kernel takes as input ``_g`` and returns, as the end
     #: force, right after Δy; empty for every other method.
     fsal_vars: tuple[str, ...] = ()
+    #: For first-same-as-last modules: each stage's step fractions (kick with the carried
+    #: force, drift, kick with the new force), as reprs; (γ_k/2, γ_k, γ_k/2) for a
+    #: composition, the splitting's stages for a splitting (:mod:`methodgen.splittings`).
+    stage_kick_a: tuple[str, ...] = ("0.5",)
+    stage_drift: tuple[str, ...] = ("1.0",)
+    stage_kick_b: tuple[str, ...] = ("0.5",)
+    #: True for a splitting family (stages that are not Störmer–Verlet steps).
+    splitting: bool = False
 
     @property
     def stages(self) -> int:
@@ -390,7 +400,14 @@ class LocalErrorPlan:
     shared: tuple = ()              # subexpressions to compute once (the components of E)
 
 
-def local_error_plan(scheme, dy=None, field_at_end=None) -> LocalErrorPlan | None:
+#: What E is measured against in a first-same-as-last stage (E = Δq minus it for a Störmer–Verlet
+#: stage; for a splitting's stage the same formula in its kick and drift steps).
+_FSAL_PARTNER = "the trapezoidal rule of the positions (the momenta already are one)"
+_SPLIT_PARTNER = ("the trapezoidal rule of the positions, for a stage kick a·h, drift d·h, kick b·h written "
+                  "as E = d(a + b)h²/4 M⁻¹(∇U(q1) - ∇U(q0)), its value at a = b = d/2")
+
+
+def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErrorPlan | None:
     """The embedded error estimate ``E`` of one step ``y0 → y1 = y0 + Δy`` of ``scheme``.
 
     The classical embedded pair for second-order one-step methods is the
@@ -438,6 +455,14 @@ def local_error_plan(scheme, dy=None, field_at_end=None) -> LocalErrorPlan | Non
     ``field_at_end``: the field written so that ``y → y + Δy`` gives f(y1) (a module that
     loops over sums of like terms passes its force at the step's end as the sum ``_sK``);
     default the system's vector field.
+
+    ``fsal``: ``(G0, G1, (ha, hd, hb))`` for a first-same-as-last stage kick ha - drift hd -
+    kick hb (:mod:`methodgen.fsal`; G0, G1 the symbols of ∇U at its start and end).  The
+    trapezoidal form above holds for ha = hb = hd/2 only; a splitting's stage (say
+    (0, a, b)) is not a consistent step on its own, so E is written as what it is for
+    Störmer–Verlet, ``(h²/4) M⁻¹ (∇U(q1) - ∇U(q0))``, with ``h²/4 → hd (ha + hb)/4``: the
+    curvature of U along the stage's drift, measured against Δq as before (same value for
+    Störmer–Verlet in exact arithmetic).
     """
     system = scheme.system
     if is_linear_field(system) and not system.constraints:
@@ -458,6 +483,22 @@ def local_error_plan(scheme, dy=None, field_at_end=None) -> LocalErrorPlan | Non
         d = system.dim
         q = tuple(range(d))
         sep = separable_split(system)
+        if fsal is not None:
+            G0, G1, (ha, hd, hb) = fsal
+            w = hd * (ha + hb) / 4
+            if sep.Minv is not None:
+                M = sep.Minv.inv()
+                E = [w * (G1[i] - G0[i]) for i in q]
+                if sep.isotropic:
+                    return LocalErrorPlan("direct", q, q, (squares(E), M[0, 0] ** 2 * squares(inc[:d])),
+                                          sp.Integer(1), _FSAL_PARTNER, tuple(E))
+                D = list(M * sp.Matrix(inc[:d]))
+            else:
+                Tpp = sp.hessian(sep.T, system.p)
+                E = list(w * Tpp * sp.Matrix([G1[i] - G0[i] for i in q]))
+                D = inc[:d]
+            return LocalErrorPlan("direct", q, q, (squares(E), squares(D)), sp.Integer(1), _FSAL_PARTNER,
+                                  tuple(E) + tuple(D))
         if sep is not None and sep.Minv is not None:
             # ∂H/∂p = M⁻¹p is linear, so M E = M Δq - (h/2)(2 p0 + Δp): measured in the
             # mass-weighted norm |M·| (the same ratio for a multiple of the identity),
@@ -653,6 +694,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     # kernel's only in reading the start force (see methodgen.fsal).
     fplan = fsal_plan(scheme) if not looped and n == 0 and compensated else None
     first, first_links = inc, links
+    if fplan is None and is_splitting(scheme.composition):
+        raise InputError(f"the {scheme.composition.family} splitting runs as first-same-as-last "
+                         "kick-drift-kick stages, which this module does not have (it needs a "
+                         "separable H written without loops, compensated=True); use a composition "
+                         "family (triple-jump, suzuki, kahan-li, sofroniou-spaletta)")
     if fplan is not None:
         first = cmp_(fplan.increment + fplan.end_force, comp)
         first_links = links + tuple(sp.Symbol(f"_gy{i}", real=True) for i in range(len(fplan.symbols)))
@@ -661,7 +707,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     if looped:
         sep = separable_split(system)
         field1 = list(sep.Minv * sp.Matrix(system.p)) + [-sp.Symbol(f"_sK{i}", real=True) for i in range(dim)]
-    lplan = local_error_plan(scheme, links, field_at_end=field1)
+    lplan = local_error_plan(scheme, links, field_at_end=field1,
+                             fsal=None if fplan is None else
+                             (fplan.symbols, first_links[d2:], fplan.steps))
+    if lplan is not None and is_splitting(scheme.composition):
+        lplan = replace(lplan, partner=_SPLIT_PARTNER)
     conds = domain_conditions(system)
     # A time transformation's guard values (g, the level-set defect and its scale) at y1.
     tguard = time_scale_guard(system) if not is_poisson(system) else ()
@@ -755,6 +805,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         loop_tables=_loop_tables(plan),
         band=band if n else (0, 0),
         fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
+        **(_stage_fields(scheme) if fplan is not None else {}),
     )
 
 
@@ -818,6 +869,19 @@ def _time_transform_fields(system, invs) -> dict | None:
             # per-step guard of g > 0 and of the level set (timetransform.time_scale_guard)
             "guard": bool(time_scale_guard(system)),
             "h_index": [inv.name for inv in invs].index(PHYSICAL_ENERGY)}
+
+
+def _stage_fields(scheme) -> dict:
+    """KICK_A, DRIFT, KICK_B of a first-same-as-last module's stages (reprs)."""
+    comp = getattr(scheme, "composition", None)
+    if comp is None:
+        return {}
+    if is_splitting(comp):
+        ka, dr, kb = comp.stage_fractions()
+    else:
+        ka, dr, kb = composition_stages(comp.floats())
+    return {"stage_kick_a": tuple(map(repr, ka)), "stage_drift": tuple(map(repr, dr)),
+            "stage_kick_b": tuple(map(repr, kb)), "splitting": is_splitting(comp)}
 
 
 def _composition_fields(scheme) -> dict:

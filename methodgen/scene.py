@@ -208,14 +208,14 @@ def _number(value, where: str) -> float:
 
 
 def _orders(family: str) -> str:
-    from .compositions import FAMILIES
-    o = FAMILIES[family]
+    from .compositions import ALL_FAMILIES
+    o = ALL_FAMILIES[family]
     return f"order{'s' if len(o) > 1 else ''} {', '.join(map(str, o))}"
 
 
 def _families_text() -> str:
-    from .compositions import FAMILIES
-    return ", ".join(f"{f} ({_orders(f)})" for f in FAMILIES)
+    from .compositions import ALL_FAMILIES
+    return ", ".join(f"{f} ({_orders(f)})" for f in ALL_FAMILIES)
 
 
 def check_order(order, composition=None, *, order_name: str = "order",
@@ -229,7 +229,7 @@ def check_order(order, composition=None, *, order_name: str = "order",
     is valid.  Whether the *method* can be composed (it must be symmetric of order 2
     on the system) is decided when it is discretised.
     """
-    from .compositions import DEFAULT_FAMILY, FAMILIES, ORDERS
+    from .compositions import DEFAULT_FAMILY, ALL_FAMILIES, ORDERS
 
     orders = ", ".join(map(str, ORDERS))
     if isinstance(order, bool) or not isinstance(order, int) or order not in ORDERS:
@@ -237,14 +237,14 @@ def check_order(order, composition=None, *, order_name: str = "order",
                     f"composition of it), got {order!r}")
     if composition is None or (order == 2 and composition == "base"):
         return order, None
-    if not isinstance(composition, str) or composition not in FAMILIES:
+    if not isinstance(composition, str) or composition not in ALL_FAMILIES:
         raise error(f"{composition_name}: unknown composition family {composition!r}; families: "
                     f"{_families_text()}")
     if order == 2:
         raise error(f"{composition_name} = {composition!r} needs {order_name} above 2 (order 2 is the "
                     f"method itself, not composed); the {composition} family has {_orders(composition)}")
-    if order not in FAMILIES[composition]:
-        have = [f for f, o in FAMILIES.items() if order in o]
+    if order not in ALL_FAMILIES[composition]:
+        have = [f for f, o in ALL_FAMILIES.items() if order in o]
         raise error(f"{composition_name}: the {composition} family has {_orders(composition)}, not "
                     f"{order}; families with order "
                     f"{order}: {', '.join(have)} (default {DEFAULT_FAMILY[order]})")

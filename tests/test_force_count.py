@@ -133,7 +133,7 @@ _ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
 def _has_fsal_kernels(text):
     """The first-same-as-last pieces of a generated module: the post kernel takes the start
     force ``_g``, the force kernels (one trajectory, batch), the record and its key."""
-    return (re.search(r"\ndef _s_post\(_y, _c, _g, _h, _p\)", text) is not None
+    return (re.search(r"\ndef _s_post\(_y, _c, _g, _ha, _hd, _hb, _p\)", text) is not None
             and all(f"\ndef {name}(" in text for name in ("_s_force", "_v_force", "_start_force", "_force_record"))
             and "\n_FSAL_KEY = " in text)
 

@@ -217,7 +217,8 @@ def cmd_bench(args) -> int:
             raise InputError(f"--t-final must be a positive number, got {args.t_final}")
         rep["work_precision"] = bench.work_precision(scene, methods, quick=args.quick, progress=progress,
                                                      peers=args.peers, backend=args.backend, T=args.t_final,
-                                                     orders=orders, solver=solver)
+                                                     orders=orders, solver=solver,
+                                                     composition=getattr(args, "composition", None))
         rep["solvers"] = bench.solver_variants(scene, methods, steps=300 if args.quick else 2000,
                                                check_resolution=args.check_resolution)
     if args.long:
@@ -274,6 +275,9 @@ def add_parser(sub) -> None:
                    help="with --peers: orders of methodgen's rows, each method at each order (default 2,4,6,8,10; "
                         "above 2 the symmetric composition of the order's default family, step sizes per order "
                         "down to a final error of 1e-12); without --peers only 2")
+    p.add_argument("--composition", metavar="FAMILY",
+                   help="with --peers: the family of the rows above order 2 where it has the order (a splitting "
+                        "family, e.g. blanes-moan-rkn, for stormer-verlet only); default the order's default family")
     p.add_argument("--solver", choices=("newton", "simplified", "fixed-point", "reuse", "auto"),
                    help="with --peers: nonlinear solver of methodgen's rows (default: the module's)")
     p.add_argument("--y0", metavar="V1,V2,...", help="initial state, q then p (default: the scene's)")

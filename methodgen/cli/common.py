@@ -303,9 +303,9 @@ def add_order_args(p, generate: bool = False) -> None:
             if generate else "order: 2 (the method itself) or 4, 6, 8, 10, a symmetric composition of it "
                              "(default: the scene's [run] order, else 2)")
     p.add_argument("--order", metavar="K", help=what)
-    from ..compositions import FAMILIES
+    from ..compositions import ALL_FAMILIES
     p.add_argument("--composition", metavar="FAMILY",
-                   help=f"composition family for order > 2: {', '.join(FAMILIES)} (default: the scene's, "
+                   help=f"composition family for order > 2: {', '.join(ALL_FAMILIES)} (default: the scene's, "
                         "else the default of the order; `methodgen methods` lists them)")
 
 

@@ -26,14 +26,14 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_methods(args) -> int:
-    from ..compositions import DEFAULT_FAMILY, FAMILIES, ORDERS
+    from ..compositions import DEFAULT_FAMILY, ALL_FAMILIES, ORDERS
 
     # "composable": symmetric of order 2 on every system it applies to, so --order K works;
     # the others only where the scheme is symmetric of order 2 for the system.
     rows = [{"name": name, "summary": mod.SUMMARY, "composable": name in SYMMETRIC_METHODS}
             for name, mod in METHODS.items()]
     high = [o for o in ORDERS if o > 2]
-    comp = {"orders": list(ORDERS), "families": {f: list(o) for f, o in FAMILIES.items()},
+    comp = {"orders": list(ORDERS), "families": {f: list(o) for f, o in ALL_FAMILIES.items()},
             "default_family": {str(o): DEFAULT_FAMILY[o] for o in high},
             "composable": [r["name"] for r in rows if r["composable"]]}
     if args.json:
@@ -48,8 +48,11 @@ def cmd_methods(args) -> int:
         print(f"  composable: {', '.join(comp['composable'])}"
               + (f"; {', '.join(others)} only where symmetric of order 2 for the system" if others else ""))
         print("  families (--composition, [run] composition): "
-              + ", ".join(f"{f} ({', '.join(map(str, o))})" for f, o in FAMILIES.items()))
+              + ", ".join(f"{f} ({', '.join(map(str, o))})" for f, o in ALL_FAMILIES.items()))
         print("  default: " + ", ".join(f"order {o} {DEFAULT_FAMILY[o]}" for o in high))
+        from ..splittings import RKN_FAMILIES, SPLITTING_FAMILIES
+        print(f"  splittings of T + U (stormer-verlet only): {', '.join(SPLITTING_FAMILIES)}; "
+              f"{', '.join(RKN_FAMILIES)}: order 6 for T quadratic with a constant mass only (RKN)")
     return 0
 
 

@@ -112,6 +112,8 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         raise MethodNotApplicable(f"{reason}. Methods that apply to this system: "
                                   f"{', '.join(ok) if ok else '(none)'}")
     comp = composition_for(order, composition)
+    if getattr(comp, "kind", None) == "splitting":
+        _check_splitting(comp, method, system)   # before deriving the base step
     try:
         scheme = mod.build(system, **options)
     except TypeError as exc:
@@ -126,6 +128,8 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         scheme = dataclasses.replace(scheme, resolution=None)
     if comp is None:
         return scheme
+    if getattr(comp, "kind", None) == "splitting":
+        return scheme.compose(comp)
     t = scheme.traits
     if not (t.symmetric and t.order == 2):
         ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
@@ -134,6 +138,24 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
             f"order 2; {method} is {'not symmetric' if not t.symmetric else f'of order {t.order}'} "
             f"for this system. Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
     return scheme.compose(comp)
+
+
+def _check_splitting(comp, method: str, system):
+    """``comp`` (a :class:`methodgen.splittings.Splitting`) if it applies to ``method`` on
+    ``system``, else InputError / MethodNotApplicable saying why."""
+    from ..derive import separable_split
+
+    if method != "stormer-verlet":
+        raise InputError(f"composition={comp.family!r} is a splitting of H = T + U: it is run with "
+                         f"method 'stormer-verlet' only, not {method!r} (valid families for "
+                         f"{method}: triple-jump, suzuki, kahan-li, sofroniou-spaletta)")
+    sep = separable_split(system)
+    if comp.rkn and (sep is None or sep.Minv is None):
+        raise MethodNotApplicable(
+            f"the {comp.family} splitting has order {comp.order} for T = p^T M^-1 p / 2 with a constant "
+            f"mass matrix only (Runge-Kutta-Nystrom); this T is not of that form. Use "
+            f"composition='blanes-moan' or 'mclachlan' (order 4 for every splitting)")
+    return comp
 
 
 #: Methods that are symmetric of order 2 on every system they apply to (Itoh–Abe is not).
@@ -164,7 +186,7 @@ def composition_for(order, family: str | None = None):
         For an order not in :data:`~methodgen.compositions.ORDERS`, an unknown family,
         or a family without that order (the message lists what is valid).
     """
-    from ..compositions import DEFAULT_FAMILY, FAMILIES, ORDERS, composition as _composition
+    from ..compositions import DEFAULT_FAMILY, ALL_FAMILIES, ORDERS, composition as _composition
 
     if isinstance(order, bool) or not isinstance(order, int) or order not in ORDERS:
         raise InputError(f"order must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
@@ -172,11 +194,11 @@ def composition_for(order, family: str | None = None):
         if family not in (None, "base"):
             raise InputError(f"composition={family!r} needs order > 2 (order 2 is the base method)")
         return None
-    if family is not None and family not in FAMILIES:
-        raise InputError(f"unknown composition family {family!r}; families: {', '.join(FAMILIES)} "
+    if family is not None and family not in ALL_FAMILIES:
+        raise InputError(f"unknown composition family {family!r}; families: {', '.join(ALL_FAMILIES)} "
                          f"(default for order {order}: {DEFAULT_FAMILY[order]})")
-    if family is not None and order not in FAMILIES[family]:
-        have = [f for f, orders in FAMILIES.items() if order in orders]
-        raise InputError(f"the {family} family has orders {', '.join(map(str, FAMILIES[family]))}, not "
+    if family is not None and order not in ALL_FAMILIES[family]:
+        have = [f for f, orders in ALL_FAMILIES.items() if order in orders]
+        raise InputError(f"the {family} family has orders {', '.join(map(str, ALL_FAMILIES[family]))}, not "
                          f"{order}; families with order {order}: {', '.join(have)}")
     return _composition(order, family)

@@ -284,8 +284,13 @@ class Scheme:
         if composition is None or composition.order == 2:
             return self
         t = self.traits
-        note = (f"order {composition.order}: symmetric composition, {composition.family} family "
-                f"({composition.stages} stages; {composition.source})")
+        if getattr(composition, "kind", None) == "splitting":
+            note = (f"order {composition.order}{' (RKN: T quadratic, M constant)' if composition.rkn else ''}: "
+                    f"symmetric splitting of T + U, {composition.family} family "
+                    f"({composition.stages} stages; {composition.source})")
+        else:
+            note = (f"order {composition.order}: symmetric composition, {composition.family} family "
+                    f"({composition.stages} stages; {composition.source})")
         traits = Traits(**{**t.__dict__, "order": composition.order, "notes": t.notes + (note,)})
         return dataclasses.replace(self, traits=traits, composition=composition)
 

@@ -214,7 +214,14 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         return lambda: [(tag, c) for c in _as_certificates(run())]
 
     # Claim 10 (first the coefficients: they do not depend on the base step).
-    if comp is not None:
+    split = comp is not None and getattr(comp, "kind", None) == "splitting"
+    if split:
+        from .splittings import (REF_SPLIT, splitting_float_certificate, splitting_order_certificate)
+        add(f"splitting coefficients: order {comp.order}{' (RKN)' if comp.rkn else ''} "
+            f"({comp.family}, {scheme.key})", REF_SPLIT, lambda: splitting_order_certificate(comp))
+        add(f"float64 stage fractions of the generated module ({scheme.key})", REF_SPLIT,
+            lambda: splitting_float_certificate(comp, key=scheme.key))
+    elif comp is not None:
         add(f"composition coefficients: order {comp.order} ({comp.family}, {scheme.key})", REF_HLW,
             lambda: order_certificate(comp))
         add(f"float64 coefficients of the generated module ({scheme.key})", REF_HLW,
@@ -321,7 +328,13 @@ def _plan(scheme, conjugacy_dim: int | None) -> list[_Claim]:
         add_step(f"the step is symmetric ({step})", "symmetry (claim 9)",
                  tagged("symmetry", lambda: _symmetry(scheme)))
     # Claim 10, derived from the base step's certificates above (so it runs after them).
-    if comp is not None:
+    if split:
+        from .splittings import splitting_inherited_certificates, splitting_symmetry_certificate
+        add(f"the splitting is symmetric ({scheme.key})", REF_SPLIT,
+            lambda: splitting_symmetry_certificate(comp, scheme.key))
+        add(f"invariants and symplecticity kept by the splitting ({scheme.key})", REF_SPLIT,
+            lambda: splitting_inherited_certificates(scheme, base))
+    elif comp is not None:
         if traits.symmetric:
             add(f"the composition is symmetric ({scheme.key})", REF_HLW,
                 lambda: symmetry_certificate(scheme, base))
@@ -531,7 +544,10 @@ def _composition_summary(scheme) -> dict | None:
     try:
         out = {"family": comp.family, "order": comp.order, "stages": comp.stages, "exact": comp.exact,
                "source": comp.source, "base_method": scheme.method}
-        if comp.stages <= _LIST_STAGES:   # Suzuki's 625 nested radicals would swamp the report
+        if getattr(comp, "kind", None) == "splitting":
+            out.update(kicks=[str(g) for g in comp.kicks], drifts=[str(g) for g in comp.drifts],
+                       rkn=comp.rkn)
+        elif comp.stages <= _LIST_STAGES:   # Suzuki's 625 nested radicals would swamp the report
             out.update(gammas=[str(g) for g in comp.gammas], floats=[repr(x) for x in comp.floats()])
         return out
     except Exception as exc:          # the report must never fail on its header

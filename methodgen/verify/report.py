@@ -194,6 +194,10 @@ class Report:
         c = self.composition
         if not c or "family" not in c:
             return ""
+        if "kicks" in c:
+            return (f"{self.method}: symmetric splitting of T + U, order {c['order']}"
+                    f"{' for RKN problems' if c.get('rkn') else ''} ({c['family']}, {c['stages']} "
+                    "stages); certificates prefixed 'base step Φ_h' concern the Störmer–Verlet step")
         return (f"{self.method}: {c['base_method']} composed symmetrically to order {c['order']} "
                 f"({c['family']}, {c['stages']} stages); certificates prefixed 'base step Φ_h' concern "
                 "the base step")
