@@ -347,7 +347,7 @@ def check_g_positive(system: Hamiltonian, y0, params: dict | None = None, *, err
             u = f"{float(sp.N(U.xreplace(subs))):g}"
         except (TypeError, ValueError, ZeroDivisionError):
             u = "not finite"
-        raise error(f"{name} the log form integrates log(-U) and needs U(q) < 0 along the motion; at y0 "
+        raise error(f"{name.rstrip(':')}: the log form integrates log(-U) and needs U(q) < 0 along the motion; at y0 "
                     f"U = {u} (U = {U}); use a g(q) > 0 (Poincaré form) instead")
     if shown != f"{v.real:g}" or v.real <= 0:
         raise error(f"{name} g = {tt.g_source} is {shown} at y0; it must be positive along the motion "
