@@ -282,3 +282,25 @@ def test_cli_refuses_where_the_log_form_does_not_apply(capsys, scene, fragment):
     code, out, err = _main(capsys, "run", scene, "--time-transform", "log", "--method", "stormer-verlet")
     assert code == cli.EXIT_INPUT, (code, out, err)
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1 and fragment in err, err
+
+
+# --- exact certificates --------------------------------------------------------------------------
+
+def test_log_form_certificates_are_proved(logh):
+    from methodgen.verify.report import PROVED
+    from methodgen.verify.timetransform import time_transform_certificates
+
+    certs = time_transform_certificates(logh)
+    assert len(certs) == 3 and all(c.status == PROVED for c in certs), [(c.claim, c.status) for c in certs]
+
+
+def test_control_certificates_refute_the_sign_flipped_lambda(logh):
+    # Λ itself (not −Λ) on the exchanged state runs the flow backwards: 1L and 3L are refuted.
+    from methodgen.verify.report import PROVED, REFUTED
+    from methodgen.verify.timetransform import time_transform_certificates
+
+    wrong = mg.Hamiltonian(-logh.H, q=[s.name for s in logh.q], p=[s.name for s in logh.p],
+                           params=logh.param_values, name="wrong")
+    object.__setattr__(wrong, "time_transform", logh.time_transform)
+    status = [c.status for c in time_transform_certificates(wrong)]
+    assert status == [REFUTED, PROVED, REFUTED], status
