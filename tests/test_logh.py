@@ -319,3 +319,9 @@ def test_numba_order_10_reaches_T_to_1e10_with_energy_to_round_off(logh, tmp_pat
     assert t == pytest.approx(200.0, abs=2 * np.spacing(200.0))
     assert np.max(np.abs(y - kepler_exact(0.6, 200.0))) < 1e-10
     assert abs(energy(y) + 0.5) / 0.5 < 1e-14
+
+
+def test_cli_method_not_applicable_to_the_log_form_says_so(capsys):
+    code, out, err = _main(capsys, "run", "kepler-logh", "--method", "energy-momentum")
+    assert code == cli.EXIT_INPUT, (code, out, err)
+    assert "logarithmic Hamiltonian" in err and "stormer-verlet" in err and "Traceback" not in err, err
