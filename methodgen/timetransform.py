@@ -259,9 +259,8 @@ def _log_form(system: Hamiltonian, name: str | None) -> Hamiltonian:
                       invariants={inv.name: inv.expr for inv in system.declared_invariants} or None)
     g = -1 / U
     object.__setattr__(out, "time_transform",
-                       TimeTransform(g, f"-1/({sp.sstr(U)})", system, out.symbol(t_name),
-                                     out.symbol(e_name), form="log"))
-    object.__setattr__(out, "source", f"log(-({sp.sstr(U)})) - log({sp.sstr(T)} + {e_name})")
+                       TimeTransform(g, sp.sstr(g), system, out.symbol(t_name), out.symbol(e_name), form="log"))
+    object.__setattr__(out, "source", f"log({sp.sstr(-U)}) - log({sp.sstr(T)} + {e_name})")
     return out
 
 
