@@ -25,7 +25,7 @@ gradient keeps it exactly: ``H = −e`` along the run from ``e0 = −H(q0, p0, t
 A time-dependent system may also be time-transformed: ``K = g(q)(H(q, p, t) + e)``
 [HLW06, §VIII.2].
 
-The *logarithmic Hamiltonian* (``form="log"``, :func:`log_transform`) keeps a separable
+The *logarithmic Hamiltonian* (``time_transform(system, form="log")``) keeps a separable
 ``H = T(p) + U(q)`` with ``U < 0`` separable: on the same extended phase space
 
     Λ(q, t, p, e) = log(T(p) + e) − log(−U(q))  =  A(p, e) + B(q)
@@ -36,13 +36,18 @@ set Λ = 0 (``e = −H(q0, p0)``, where ``T + e = −U``) this is the original f
 ``Λ = log(1 + g (H + e))``.  Λ is a sum of a function of the momenta and a function of the
 coordinates, so Störmer–Verlet, its first-same-as-last form and its compositions to order 10
 apply unchanged and stay explicit (the time-transformed leapfrog).  For Kepler
-(``U = −k/r``) the leapfrog on Λ follows the exact Kepler ellipse at any step size, with an
-error in the phase only [MT99, PT99]; [BI12] analyse these and other explicit adaptive
-symplectic schemes built on Sundman and Poincaré transformations.  It applies where U < 0
-along the motion: where U ≥ 0, ``log(−U)`` is not defined (the runtimes check ``−U > 0`` and
-``T + e > 0`` at every step and stop with the step and state).  The time-transformed leapfrog
-with an arbitrary ``Ω(q)`` and an auxiliary variable W (TTL, Mikkola & Aarseth 2002) is not a
-Hamiltonian splitting of a fixed extended system and is not offered.
+(``U = −k/r``) the drift–kick–drift leapfrog on Λ follows the exact Kepler ellipse at any step
+size, with an error in the phase only [MT99, PT99]; the kick–drift–kick one does not.  So the
+system is ``−Λ`` on the *exchanged* state ``(p…, e; q…, t)`` (coordinates first): there
+Störmer–Verlet (kick–drift–kick) is the drift–kick–drift leapfrog of Λ
+(:attr:`TimeTransform.exchanged`; generated ``initial_state``/``physical_state`` follow this
+layout).  [BI12] analyse explicit adaptive symplectic schemes built on Sundman and Poincaré
+transformations, of which this is one.  It applies where U < 0 along the motion: where
+U ≥ 0, ``log(−U)`` is not defined (the runtimes check ``−U > 0`` and ``T + e > 0`` at every
+step and stop with the step and state); a bound motion (H < 0) never gets there (U ≤ H).
+The time-transformed leapfrog with an arbitrary ``Ω(q)`` and an auxiliary variable W (TTL,
+Mikkola & Aarseth 2002) is not a Hamiltonian splitting of a fixed extended system and is not
+offered.  :func:`methodgen.physical_time.run_to_time` runs a module to a physical time.
 
 References
 ----------
