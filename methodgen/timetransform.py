@@ -163,6 +163,15 @@ def time_transform(system: Hamiltonian, g=None, *, form: str = "poincare",
         State ``(q…, t, p…, e)``: the physical time ``t`` is the last coordinate,
         its conjugate ``e`` the last momentum.  ``K.time_transform`` records g and
         the original system; generated modules offer ``initial_state(y0, t0)``.
+        With ``form="log"``: ``K = log(−U) − log(T + e)`` (= −Λ) on the exchanged state
+        ``(p…, e, q…, t)``, named ``<name>-log``, ``K.time_transform.g = −1/U``.
+
+    Examples
+    --------
+    >>> import methodgen as mg
+    >>> kepler = mg.Hamiltonian("(px**2 + py**2)/2 - 1/sqrt(x**2 + y**2)", q=["x", "y"], p=["px", "py"])
+    >>> mg.time_transform(kepler, form="log").state_names
+    ('px', 'py', 'e', 'x', 'y', 't')
 
     Raises
     ------
