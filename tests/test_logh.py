@@ -339,3 +339,15 @@ def test_cli_method_not_applicable_to_the_log_form_says_so(capsys):
     code, out, err = _main(capsys, "run", "kepler-logh", "--method", "energy-momentum")
     assert code == cli.EXIT_INPUT, (code, out, err)
     assert "logarithmic Hamiltonian" in err and "stormer-verlet" in err and "Traceback" not in err, err
+
+
+def test_bench_peers_has_log_form_rows_at_the_physical_T():
+    from methodgen import bench
+
+    out = bench.work_precision(mg.load_scene("kepler-logh"), peers=True, quick=True, orders=(2,), T=2 * math.pi)
+    log = [r for r in out["rows"] if r["method"].endswith("[log]")]
+    plain = [r for r in out["rows"] if r["method"] == "stormer-verlet"]
+    assert len(log) == 2 and all(r["errors_at_T_only"] and abs(r["t_error"]) <= 1e-14 for r in log), log
+    assert all(r["energy_rel_error"] < 1e-13 for r in log), log
+    # control: the same method on H in physical time at the same h does not resolve e = 0.99
+    assert min(r["error"] for r in plain if "error" in r) > 100 * max(r["error"] for r in log), (plain, log)
