@@ -185,6 +185,23 @@ def test_run_to_time_reports_and_refuses(build):
         run_to_time(build(system=kepler_system()), pericentre(0.6), 1.0, 0.1)
 
 
+def test_run_to_time_in_calls_is_the_run_in_one_piece(build, monkeypatch):
+    # T = t after n whole steps of one integrate() call: run_to_time reaches it in its calls
+    # (chunks, discarded crossings, halvings) bitwise; control: without handing the
+    # compensation (and force) from call to call the states differ
+    import methodgen.physical_time as pt
+
+    mod = build(4)
+    Y0, h, n = mod.initial_state(pericentre(0.6)), 2 * math.pi / 40, 3000
+    Yn = mod.integrate(Y0, h, n, save_every=n)[-1]
+    info = {}
+    Y = run_to_time(mod, Y0, float(Yn[7]), h, info=info)
+    assert info["steps"] == n and info["sigma"] == 0.0 and info["calls"] > 3
+    assert np.array_equal(Y, Yn)
+    monkeypatch.setattr(pt, "_CARRIED", ())
+    assert not np.array_equal(run_to_time(mod, Y0, float(Yn[7]), h), Yn)
+
+
 def test_run_to_time_lands_a_poincare_module_too(tmp_path):
     # the Poincaré form with g = r and AVF (implicit): t = T exactly, second order in h
     # (measured: 4.3e-5 and 1.1e-5 at h = 0.01, 0.005)
