@@ -748,6 +748,8 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                 notes.append(f"{label}: step sizes below h = {T / steps:.4g} skipped "
                              f"(that run took {sec:.0f} s CPU)")
                 break
+    if scene.transformed is not None and scene.transformed.time_transform.form == "log":
+        rows += _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress)
     for name, fn in (("heyoka", pe.heyoka_rows), ("rebound", pe.rebound_rows)):
         if pe.import_peer(name) is None:
             notes.append(f"{name} is not installed: no {name} rows ({pe.INSTALL_HINT})")
@@ -760,6 +762,60 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
             "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "estimated_steps": estimate,
             "targets": targets(rows), "frontier": frontier(rows)}
+
+
+def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress) -> list[dict]:
+    """``--peers`` rows of a scene with ``time_transform = "log"``: each method and order on the
+    logarithmic Hamiltonian (its run system), fictive steps from :func:`composed_steps`, run to
+    the physical time T by :func:`methodgen.physical_time.run_to_time` (whole fictive steps,
+    then one step solved for t = T).  The error is at T; the energy and invariant errors are
+    those of the final state (``errors_at_T_only``), not maxima along the run."""
+    from . import peers as pe
+    from .physical_time import run_to_time
+
+    system = scene.run_system
+    rows = []
+    notes.append("rows marked [log] integrate the logarithmic Hamiltonian in fictive time to the physical T "
+                 "(h is a fictive step); their energy and invariant errors are at T only")
+    for method, order in _progress(jobs, progress, "methodgen [log]"):
+        comp = composition_for(order)
+        family = comp.family if comp is not None else None
+        stages = comp.stages if comp is not None else 1
+        label = row_label(method, order, family) + " [log]"
+        try:
+            module = build(system, method, path=scene_module_path(scene, method_key(method, comp), used,
+                                                                   system=system),
+                           backend=used, order=order, composition=family)
+            Y0 = module.initial_state(np.array(scene.y0), 0.0)
+        except (MethodgenError, ValueError) as exc:
+            notes.append(f"{label}: not built ({' '.join(str(exc).split())})")
+            continue
+        try:  # numba: compile outside the timed region
+            module.integrate(Y0, abs(scene.h), 1, check_resolution=False)
+        except (RuntimeError, FloatingPointError):
+            pass
+        for h in composed_steps(scene.h, order, stages, quick=quick):
+            info = {}
+
+            def run():
+                return run_to_time(module, Y0, T, h, info=info, check_resolution=False)
+
+            try:
+                sec, Y = pe.min_cpu(run)
+            except (RuntimeError, FloatingPointError, MethodgenError) as exc:
+                notes.append(f"{label}, h = {h:.4g}: {type(exc).__name__}: {' '.join(str(exc).split())[:160]}")
+                continue
+            y, _ = module.physical_state(Y)
+            traj = np.array([np.array(scene.y0, dtype=float), y])
+            row = {"method": label, "kind": "methodgen", "base_method": method, "order": order,
+                   "composition": family, "stages": stages, "backend": used, "h": h, "steps": info["steps"] + 1,
+                   "seconds": sec, "us_per_step": sec / (info["steps"] + 1) * 1e6, "time_transform": "log",
+                   "errors_at_T_only": True, "t_error": info["t_error"],
+                   **_errors(base, traj, ref.y, monitors)}
+            rows.append(row)
+            if row["error"] <= PEER_ERROR_FLOOR:
+                break
+    return rows
 
 
 def _solver_kw(solver):

@@ -868,7 +868,9 @@ def _time_transform_fields(system, invs) -> dict | None:
             "hamiltonian": " ".join(tt.original.source.split()),
             # per-step guard of g > 0 and of the level set (timetransform.time_scale_guard)
             "guard": bool(time_scale_guard(system)),
-            "h_index": [inv.name for inv in invs].index(PHYSICAL_ENERGY)}
+            "h_index": [inv.name for inv in invs].index(PHYSICAL_ENERGY),
+            # the log form: Λ = log(T + e) − log(−U) on the exchanged state (p…, e, q…, t)
+            "form": tt.form, "exchanged": tt.exchanged}
 
 
 def _stage_fields(scheme) -> dict:

@@ -23,7 +23,8 @@ Format (see the README, "Your own scene file", and the built-in scenes in ``meth
                                  #   that take it; a scene without one of them is an error)
     time_transform = "sqrt(x**2 + y**2 + z**2)"   # optional: integrate K = g(q)(H + e) instead
                                  #   (methodgen.time_transform); y0 stays in the original variables,
-                                 #   h and steps are in fictive time
+                                 #   h and steps are in fictive time; "log": the logarithmic
+                                 #   Hamiltonian log(T + e) - log(-U) (explicit leapfrog, U < 0)
     t0 = 0.0                     # optional: the initial time (with [system] time or a time_transform)
     [invariants]                 # optional: quantities to monitor as first integrals
     P = "p1 + p2 + p3"           #   NAME = "expression" (whitelist parser; verify proves or
@@ -294,7 +295,9 @@ def with_time_transform(scene: Scene, g: str | None, *, error=InputError, name: 
 
     ``g`` is parsed with the whitelist parser (:func:`methodgen.time_transform`), never
     evaluated; a bad g is ``error`` naming ``name``.  The transformed system is named
-    ``<scene>-tt`` (its own module files and fingerprint).
+    ``<scene>-tt`` (its own module files and fingerprint).  ``"log"`` selects the
+    logarithmic Hamiltonian ``log(T + e) − log(−U)`` instead (``time_transform(system,
+    form="log")``, named ``<scene>-log``).
     """
     import dataclasses
 
@@ -306,7 +309,11 @@ def with_time_transform(scene: Scene, g: str | None, *, error=InputError, name: 
         raise error(f"{name} must be a function g(q) of the coordinates "
                     f"({', '.join(s.name for s in scene.system.q)}), got {g!r}")
     try:
-        K = time_transform(scene.system, g, name=f"{scene.name}-tt")
+        if g.strip().lower() == "log":
+            # the logarithmic Hamiltonian (explicit leapfrog; methodgen.timetransform, form="log")
+            K = time_transform(scene.system, form="log", name=f"{scene.name}-log")
+        else:
+            K = time_transform(scene.system, g, name=f"{scene.name}-tt")
     except InputError as exc:
         raise error(f"{name}: {exc}") from None
     return dataclasses.replace(scene, time_transform=g.strip(), transformed=K)
@@ -333,6 +340,16 @@ def check_g_positive(system: Hamiltonian, y0, params: dict | None = None, *, err
         shown = "not real"
     else:
         shown = f"{v.real:g}"
+    if (shown != f"{v.real:g}" or v.real <= 0) and tt.form == "log":
+        from .derive import separable_split
+
+        U = separable_split(tt.original).U     # the log form exists only for a separable H
+        try:
+            u = f"{float(sp.N(U.xreplace(subs))):g}"
+        except (TypeError, ValueError, ZeroDivisionError):
+            u = "not finite"
+        raise error(f"{name.rstrip(':')}: the log form integrates log(-U) and needs U(q) < 0 along the motion; at y0 "
+                    f"U = {u} (U = {U}); use a g(q) > 0 (Poincaré form) instead")
     if shown != f"{v.real:g}" or v.real <= 0:
         raise error(f"{name} g = {tt.g_source} is {shown} at y0; it must be positive along the motion "
                     "(dt/dτ = g)")

@@ -25,8 +25,38 @@ gradient keeps it exactly: ``H = −e`` along the run from ``e0 = −H(q0, p0, t
 A time-dependent system may also be time-transformed: ``K = g(q)(H(q, p, t) + e)``
 [HLW06, §VIII.2].
 
+The *logarithmic Hamiltonian* (``time_transform(system, form="log")``) keeps a separable
+``H = T(p) + U(q)`` with ``U < 0`` separable: on the same extended phase space
+
+    Λ(q, t, p, e) = log(T(p) + e) − log(−U(q))  =  A(p, e) + B(q)
+
+has ``q' = ∇T/(T + e)``, ``t' = 1/(T + e)``, ``p' = −∇U/(−U)``, ``e' = 0``; on the level
+set Λ = 0 (``e = −H(q0, p0)``, where ``T + e = −U``) this is the original flow with
+``dt/dτ = 1/(−U)`` — the Poincaré transformation with ``g = −1/U``, since
+``Λ = log(1 + g (H + e))``.  Λ is a sum of a function of the momenta and a function of the
+coordinates, so Störmer–Verlet, its first-same-as-last form and its compositions to order 10
+apply unchanged and stay explicit (the time-transformed leapfrog).  For Kepler
+(``U = −k/r``) the drift–kick–drift leapfrog on Λ follows the exact Kepler ellipse at any step
+size, with an error in the phase only [MT99, PT99]; the kick–drift–kick one does not.  So the
+system is ``−Λ`` on the *exchanged* state ``(p…, e; q…, t)`` (coordinates first): there
+Störmer–Verlet (kick–drift–kick) is the drift–kick–drift leapfrog of Λ
+(:attr:`TimeTransform.exchanged`; generated ``initial_state``/``physical_state`` follow this
+layout).  [BI12] analyse explicit adaptive symplectic schemes built on Sundman and Poincaré
+transformations, of which this is one.  It applies where U < 0 along the motion: where
+U ≥ 0, ``log(−U)`` is not defined (the runtimes check ``−U > 0`` and ``T + e > 0`` at every
+step and stop with the step and state); a bound motion (H < 0) never gets there (U ≤ H).
+The time-transformed leapfrog with an arbitrary ``Ω(q)`` and an auxiliary variable W (TTL,
+Mikkola & Aarseth 2002) is not a Hamiltonian splitting of a fixed extended system and is not
+offered.  :func:`methodgen.physical_time.run_to_time` runs a module to a physical time.
+
 References
 ----------
+.. [MT99] S. Mikkola, K. Tanikawa, Explicit symplectic algorithms for time-transformed
+   Hamiltonians, Celest. Mech. Dyn. Astron. 74 (1999) 287–295.
+.. [PT99] M. Preto, S. Tremaine, A class of symplectic integrators with adaptive time step
+   for separable Hamiltonian systems, Astron. J. 118 (1999) 2532–2541.
+.. [BI12] S. Blanes, A. Iserles, Explicit adaptive symplectic integrators for solving
+   Hamiltonian systems, Celest. Mech. Dyn. Astron. 114 (2012) 297–317.
 .. [HLW06] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
    Springer 2006, §VIII.2 (Poincaré transformation).
 .. [Hai97] E. Hairer, Variable time step integration with symplectic methods,
@@ -45,7 +75,10 @@ from .parse import check_smooth, parse_expr
 from .special import fold_removable_quotients
 from .problem import Hamiltonian
 
-__all__ = ["TimeTransform", "time_transform", "autonomise"]
+__all__ = ["TimeTransform", "time_transform", "autonomise", "FORMS"]
+
+#: The forms of :func:`time_transform`.
+FORMS = ("poincare", "log")
 
 _TIME_NAMES = ("t", "time", "t_")
 _ENERGY_NAMES = ("e", "energy", "e_")
@@ -71,9 +104,20 @@ class TimeTransform:
     original: Hamiltonian
     time: sp.Symbol
     energy: sp.Symbol
+    #: ``"poincare"``: ``K = g(q)(H + e)``; ``"log"``: the logarithmic Hamiltonian
+    #: ``Λ = log(T(p) + e) − log(−U(q))`` (``g = −1/U`` is its dt/dτ on Λ = 0).
+    form: str = "poincare"
+
+    @property
+    def exchanged(self) -> bool:
+        """The state is ``(p…, e, q…, t)`` (the log form), not ``(q…, t, p…, e)``."""
+        return self.form == "log"
 
     def fingerprint(self) -> str:
-        text = "\n".join([sp.srepr(self.g), self.original.fingerprint(), self.time.name, self.energy.name])
+        parts = [sp.srepr(self.g), self.original.fingerprint(), self.time.name, self.energy.name]
+        if self.form != "poincare":       # the Poincaré fingerprints stay what they were
+            parts.append("form=" + self.form)
+        text = "\n".join(parts)
         return hashlib.sha256(text.encode()).hexdigest()
 
     @property
@@ -90,8 +134,10 @@ def _free_name(candidates, taken, what):
     raise InputError(f"no free name for the {what}: {', '.join(candidates)} are all taken")
 
 
-def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamiltonian:
-    """The Poincaré time-transformed system ``K = g(q) (H(q, p) + e)`` (module docstring).
+def time_transform(system: Hamiltonian, g=None, *, form: str = "poincare",
+                   name: str | None = None) -> Hamiltonian:
+    """The Poincaré time-transformed system ``K = g(q) (H(q, p) + e)``, or with ``form="log"``
+    the logarithmic Hamiltonian ``Λ = log(T(p) + e) − log(−U(q))`` (module docstring).
 
     Parameters
     ----------
@@ -103,6 +149,11 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
         A smooth function of the coordinates (and parameters), positive along the
         motion, e.g. ``"sqrt(x**2 + y**2 + z**2)"``.  Text is parsed with the
         whitelist parser (never evaluated).
+    form : {"poincare", "log"}
+        ``"poincare"`` (default) needs ``g``.  ``"log"`` takes no g (it is ``−1/U``): it
+        needs an autonomous separable ``H = T(p) + U(q)`` without constraints and
+        ``U < 0`` along the motion, and gives a separable Λ on which Störmer–Verlet and its
+        compositions are explicit [MT99, PT99, BI12].
     name : str, optional
         Name of the new system (default ``<name>-tt``).
 
@@ -112,13 +163,26 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
         State ``(q…, t, p…, e)``: the physical time ``t`` is the last coordinate,
         its conjugate ``e`` the last momentum.  ``K.time_transform`` records g and
         the original system; generated modules offer ``initial_state(y0, t0)``.
+        With ``form="log"``: ``K = log(−U) − log(T + e)`` (= −Λ) on the exchanged state
+        ``(p…, e, q…, t)``, named ``<name>-log``, ``K.time_transform.g = −1/U``.
+
+    Examples
+    --------
+    >>> import methodgen as mg
+    >>> kepler = mg.Hamiltonian("(px**2 + py**2)/2 - 1/sqrt(x**2 + y**2)", q=["x", "y"], p=["px", "py"])
+    >>> mg.time_transform(kepler, form="log").state_names
+    ('px', 'py', 'e', 'x', 'y', 't')
 
     Raises
     ------
     InputError
         g is not a smooth expression of the declared names, depends on a momentum,
         or is constant (then there is nothing to transform; use the original system).
+        An unknown form; for ``form="log"``: a g was given, H is not separable, time-dependent
+        or constrained, or U is never negative (e.g. ``U ≥ 0`` everywhere, shown by SymPy).
     """
+    if form not in FORMS:
+        raise InputError(f"unknown time transformation form {form!r}; valid forms: {', '.join(FORMS)}")
     if getattr(system, "kind", None) == "poisson":
         raise InputError("time_transform needs a canonical system (methodgen.Hamiltonian with q and p): "
                          "the Poincaré transformation adds the time t and its conjugate momentum e to "
@@ -128,6 +192,13 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
     if system.time_transform is not None:
         raise InputError("this system is already time-transformed (or the autonomous extension of a "
                          "time-dependent H); transform the original once")
+    if form == "log":
+        if g is not None:
+            raise InputError("form='log' takes no g: its time scaling is fixed, dt/dτ = −1/U(q) "
+                             "(leave g out, or use form='poincare' with your g)")
+        return _log_form(system, name)
+    if g is None:
+        raise InputError("time_transform needs g(q), e.g. g='sqrt(x**2 + y**2)', or form='log'")
     symbols = {s.name: s for s in (*system.y, *system.params)}
     if isinstance(g, str):
         g_expr, g_source = parse_expr(g, symbols, what="the time transformation g(q)"), g.strip()
@@ -159,6 +230,51 @@ def time_transform(system: Hamiltonian, g, *, name: str | None = None) -> Hamilt
                        TimeTransform(g_expr, g_source, system, out.symbol(t_name), out.symbol(e_name)))
     # the source text a user reads in generated modules and reports
     object.__setattr__(out, "source", f"({g_source})*({system.source} + {e_name})")
+    return out
+
+
+def _log_form(system: Hamiltonian, name: str | None) -> Hamiltonian:
+    """``Λ = log(T(p) + e) − log(−U(q))`` on ``(q, t; p, e)`` (module docstring)."""
+    from .derive import separable_split
+
+    if system.time is not None:
+        raise InputError("form='log' needs an autonomous H = T(p) + U(q); this H depends on the time "
+                         f"{system.time.name!r} (use form='poincare' with a g(q))")
+    if system.constraints:
+        raise InputError("form='log' is for the explicit leapfrog on H = T(p) + U(q), which does not "
+                         "enforce constraints; use form='poincare' with a g(q) and rattle/shake or an "
+                         "implicit method")
+    sep = separable_split(system)
+    if sep is None:
+        raise InputError(f"form='log' needs a separable H = T(p) + U(q) (no term mixing q and p), got "
+                         f"H = {system.source}; use form='poincare' with a g(q)")
+    T, U = sep.T, sep.U
+    if not U.free_symbols & set(system.q):
+        raise InputError(f"form='log' needs a potential U(q) that depends on q, got U = {U}: "
+                         "log(T + e) − log(−U) would have no time scaling")
+    values = {s: sp.Float(system.param_values[s.name]) for s in system.params}
+    if U.xreplace(values).is_nonnegative:
+        raise InputError(f"form='log' needs U(q) < 0 along the motion (it integrates log(−U)); U = {U} is "
+                         "≥ 0 everywhere for the parameter values given; use form='poincare' with a "
+                         "g(q) > 0")
+    taken = {s.name for s in (*system.y, *system.params)} | {inv.name for inv in system.declared_invariants}
+    t_name = _free_name(_TIME_NAMES, taken, "physical time coordinate")
+    e_name = _free_name(_ENERGY_NAMES, taken | {t_name}, "energy momentum")
+    e = sp.Symbol(e_name, real=True)
+    # −Λ with the roles of coordinates and momenta exchanged, (Q; P) = (p, e; q, t): the
+    # exchange reverses the sign of the Poisson bracket and −Λ restores it, so the flow is
+    # Λ's.  Störmer–Verlet (kick–drift–kick) of this system is the drift–kick–drift leapfrog
+    # of Λ, the one that follows a Kepler ellipse exactly [MT99, PT99]; the kick–drift–kick
+    # leapfrog of Λ does not (measured: e = 0.99, 50 steps per orbit, 10 orbits, relative
+    # energy error 0.2 against 5e-13).
+    K = sp.log(-U) - sp.log(T + e)
+    out = Hamiltonian(K, q=[*system.p, e_name], p=[*system.q, t_name], params=system.param_values,
+                      name=name or f"{system.name or 'system'}-log",
+                      invariants={inv.name: inv.expr for inv in system.declared_invariants} or None)
+    g = -1 / U
+    object.__setattr__(out, "time_transform",
+                       TimeTransform(g, sp.sstr(g), system, out.symbol(t_name), out.symbol(e_name), form="log"))
+    object.__setattr__(out, "source", f"log({sp.sstr(-U)}) - log({sp.sstr(T)} + {e_name})")
     return out
 
 

@@ -276,6 +276,9 @@ def transformed_context(scene):
     except MethodNotApplicable as exc:
         if scene.transformed is None:
             raise
+        if getattr(scene.transformed.time_transform, "form", "poincare") == "log":
+            raise MethodNotApplicable(f"with the logarithmic Hamiltonian (time transformation \"log\") the system "
+                                      f"is K = log(-U(q)) - log(T(p) + e) on (p, e; q, t): {exc}") from None
         raise MethodNotApplicable(f"with the time transformation g = {scene.time_transform} the system is "
                                   f"K = g(q)(H + e): {exc}") from None
 

@@ -72,6 +72,9 @@ def _time_transform_report(scene, module, h, y_final, steps_done, report_inv) ->
         return None
     t_end = float(y_final[list(module.STATE_NAMES).index(tt["time"])])
     h_phys = report_inv.get("H_phys") or {}
+    if tt.get("form") == "log":
+        return {"g": tt["g"], "form": "log", "t0": getattr(scene, "t0", 0.0), "t_final": t_end,
+                "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
     return {"g": getattr(scene, "time_transform", None) or tt["g"], "t0": getattr(scene, "t0", 0.0),
             "t_final": t_end, "tau_final": h * steps_done, "H_phys_max_abs_error": h_phys.get("max_abs_error")}
 
@@ -482,7 +485,11 @@ def _print_run(rep: dict) -> None:
             f"(fictive τ = 0 .. {tt['tau_final']:g}, physical t = {t0:g} .. {_num(tt['t_final'], 'g', 1)})")
     print(f"scene {rep['scene']}  method {method}  {_order_text(rep)}  h = {rep['h']:g}  "
           f"steps = {rep['steps']}  {span}")
-    if tt is not None:
+    if tt is not None and tt.get("form") == "log":
+        print(f"time transformation on: logarithmic Hamiltonian; integrates Λ = log(T + e) - log(-U) (the H "
+              f"row below is -Λ), h and steps in fictive time τ, dt = g dτ with g = {tt['g']}; physical time "
+              f"reached t = {_num(tt['t_final'], '.10g', 1)}")
+    elif tt is not None:
         print(f"time transformation on: g = {tt['g']}; integrates K = g(q)(H + e) (the H row below), "
               f"h and steps in fictive time τ, dt = g dτ; physical time reached t = "
               f"{_num(tt['t_final'], '.10g', 1)}")

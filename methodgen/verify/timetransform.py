@@ -23,6 +23,18 @@ With g = 1 the rows say: ``dq/dτ = ∂H/∂p``, ``dp/dτ = −∂H/∂q``, ``dt
 the flow of K is the flow of H(q, p, t) with ``t = t0 + τ``, and K = H + e is a first
 integral (so ``H = −e`` along the motion from ``e0 = −H(q0, p0, t0)``).
 
+For the logarithmic Hamiltonian (``form="log"``: ``K = log(−U) − log(T + e)`` = −Λ on the
+exchanged state ``(p, e; q, t)``, :mod:`methodgen.timetransform`) the three are
+
+1L. ``K − (log(−U) − log(T + e)) ≡ 0``, ``T + U − H ≡ 0`` and
+    ``(T + e)/(−U) − (1 + g(H + e)) ≡ 0`` with ``g = −1/U``: K = 0 exactly where H + e = 0
+    (K = −log(1 + g(H + e)) where −U > 0 and T + e > 0);
+2. ``∂K/∂t ≡ 0``;
+3L. on ``e = −H``, the flow of K on the exchanged state (``dp/dτ = ∂K/∂q``,
+    ``dq/dτ = −∂K/∂p``, ``dt/dτ = −∂K/∂e``) equals g times the original field:
+    ``−∂K/∂p − g ∂H/∂p``, ``∂K/∂q + g ∂H/∂q`` and ``−∂K/∂e − g`` reduce to 0 there
+    [Mikkola & Tanikawa 1999; Preto & Tremaine 1999].
+
 References
 ----------
 .. [HLW06] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
@@ -69,6 +81,8 @@ def time_transform_certificates(system) -> list[Certificate]:
     tt = system.time_transform
     if tt is None:
         return []
+    if tt.form == "log":
+        return _log_certificates(system)
     g, H, t, e = tt.g, tt.original.H, tt.time, tt.energy
     K = system.H
     timed = tt.original.time is not None
@@ -117,3 +131,32 @@ def _autonomous(system, t0) -> Certificate:
                        f"free symbols of K ⊆ {{{', '.join(s.name for s in (*system.y, *system.params))}}}",
                        "", "free symbols", time.perf_counter() - t0, REF,
                        {"nonzero": extra} if extra else {})
+
+
+def _log_certificates(system) -> list[Certificate]:
+    """Certificates 1L, 2 and 3L of the module docstring (the log form)."""
+    from ..derive import separable_split
+
+    tt = system.time_transform
+    g, H, t, e = tt.g, tt.original.H, tt.time, tt.energy
+    sep = separable_split(tt.original)
+    T, U = sep.T, sep.U
+    K = system.H
+    out = []
+    t0 = time.perf_counter()
+    out.append(_cert(f"K = log(−U) − log(T + {e}) (= −Λ) with H = T + U, and (T + {e})/(−U) = 1 + g(H + {e}), "
+                     f"g = {tt.g_source}: K = 0 exactly where H + {e} = 0",
+                     [K - (sp.log(-U) - sp.log(T + e)), T + U - H, (T + e) / (-U) - (1 + g * (H + e))], t0))
+    t0 = time.perf_counter()
+    out.append(_cert(f"∂K/∂{t} = 0, so {e} is constant along the flow of K", [sp.diff(K, t)], t0))
+    t0 = time.perf_counter()
+    on = {e: -H}
+    rows = []
+    for qi, pi in zip(tt.original.q, tt.original.p):
+        rows.append((-sp.diff(K, pi) - g * sp.diff(H, pi)).xreplace(on))
+        rows.append((sp.diff(K, qi) + g * sp.diff(H, qi)).xreplace(on))
+    rows.append((-sp.diff(K, e) - g).xreplace(on))
+    out.append(_cert(f"on K = 0 ({e} = −H): dq/dτ = g ∂H/∂p, dp/dτ = −g ∂H/∂q, d{t}/dτ = g (the flow of K on the "
+                     f"exchanged state (p, {e}; q, {t}) is the original flow re-timed by g = {tt.g_source})",
+                     rows, t0))
+    return out
