@@ -493,6 +493,12 @@ def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErro
                     return LocalErrorPlan("direct", q, q, (squares(E), M[0, 0] ** 2 * squares(inc[:d])),
                                           sp.Integer(1), _FSAL_PARTNER, tuple(E))
                 D = list(M * sp.Matrix(inc[:d]))
+            elif not is_splitting(scheme.composition):
+                # A Störmer–Verlet stage (ha = hb = hd/2) with a T that is not quadratic (e.g. the
+                # logarithmic Hamiltonian): the trapezoidal defect of the positions itself, in the
+                # stage's step hd, as without first-same-as-last.
+                E = [inc[i] - hd / 2 * (f[i] + f[i].xreplace(at1)) for i in q]
+                D = inc[:d]
             else:
                 Tpp = sp.hessian(sep.T, system.p)
                 E = list(w * Tpp * sp.Matrix([G1[i] - G0[i] for i in q]))
