@@ -270,6 +270,10 @@ class ModuleIR:
     #: force ∇U(q0) that the post kernel takes as input ``_g`` and returns, as the end
     #: force, right after Δy; empty for every other method.
     fsal_vars: tuple[str, ...] = ()
+    #: An s-stage implicit method lowered by structure (:func:`stage_tables`): the tables
+    #: its residual and Newton-matrix loops read (float reprs); None where the residual and
+    #: the Newton matrix are straight-line kernels.
+    stage: dict | None = None
 
     @property
     def stages(self) -> int:
@@ -562,7 +566,8 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
     return bool(loops)
 
 
-def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -> ModuleIR:
+def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *,
+          expanded: bool = False) -> ModuleIR:
     """Lower ``scheme`` to a :class:`ModuleIR` (deterministic).
 
     Parameters
@@ -575,6 +580,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     loops : bool or None
         Loop over families of like terms instead of unrolling every term
         (:func:`uses_loops`; default: where a family has ≥ 3 instances).
+    expanded : bool
+        Internal (tests and benchmarks): emit the residual and the Newton matrix of an
+        s-stage method (``scheme.stage_system``) as the expanded straight-line kernels of
+        ``scheme.residual`` and its ``(s·n)²`` symbolic Jacobian, instead of the loops over
+        the stages (:mod:`methodgen.stages`, the default).
     """
     system = scheme.system
     user = [s.name for s in system.y] + list(system.param_names)
@@ -598,6 +608,10 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
             else compensate)
     looped = uses_loops(scheme, loops) and n > 0
     plan = scheme.loops if looped else None
+    # An s-stage method: f and f' derived once, the stage system assembled by loops in the
+    # module (methodgen.stages) -- neither the residual's s copies of f per stage nor the
+    # (s·n)² Jacobian are lowered.
+    stage = getattr(scheme, "stage_system", None) if (n and not looped and not expanded) else None
     if looped:
         # The sums stay sums: the kernels below get loops over the families ahead of their
         # straight-line code (methodgen.lower_loops), and the Newton matrix comes from the
@@ -609,6 +623,14 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         jac = cmp_(rows if rows is not None else jac_acc, comp)
         inc = cmp_(list(plan.increment), comp)
         guess = list(plan.guess)
+    elif stage is not None:
+        if cmp_ is compensate:   # pragma: no cover - stage increments are never compensated
+            raise ValueError("a stage system's unknowns are stage increments (uncompensated)")
+        field = list(stage.field)
+        fjac = [stage.field_jacobian[a, b] for a, b in stage.pattern]
+        res, jac = field, fjac   # what the kernels evaluate (helpers are found in them)
+        inc = list(scheme.increment)
+        guess = list(scheme.guess)
     else:
         res = cmp_(list(scheme.residual), comp)
         jac = cmp_(list(scheme.jacobian), comp) if n else []
@@ -632,11 +654,22 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         # with row scales (looped modules): R then s, and J = I + diag(s) _sB in the module
         scaled = looped and rows is not None
         nj = n if scaled else n * n
-        scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
-        vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
-        band = _newton_band(n, scalar["resjac"], plan, scaled)
-        scalar["res"] = kern(res, (n,), sp_)
-        vector["res"] = kern(res, (n,), vp)
+        if stage is not None:
+            # f at a point (the kernel's state), and f with the nonzeros of f'; the residual
+            # and Newton-matrix kernels are the templates' loops over the stages
+            m = len(field)
+            for flavour, printer in ((scalar, sp_), (vector, vp)):
+                flavour["field"] = kern(field, (m,), printer)
+                flavour["fieldjac"] = kern(field + fjac, (m + len(fjac),), printer)
+                flavour["res"] = Kernel((), (), (n,))
+                flavour["resjac"] = Kernel((), (), (n + nj,))
+            band = jacobian_band(n, stage.newton_pattern())
+        else:
+            scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
+            vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
+            band = _newton_band(n, scalar["resjac"], plan, scaled)
+            scalar["res"] = kern(res, (n,), sp_)
+            vector["res"] = kern(res, (n,), vp)
         if scheme.unknown_scale is not None:
             scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
             vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
@@ -755,7 +788,28 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         loop_tables=_loop_tables(plan),
         band=band if n else (0, 0),
         fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
+        stage=stage_tables(stage) if stage is not None else None,
     )
+
+
+def stage_tables(stage) -> dict:
+    """The constants of a stage system's loops (:class:`methodgen.stages.StageSystem`),
+    floats as their reprs: ``s``, ``m``, ``nnz``; ``Q`` (s × m), ``P`` (m × s, None for
+    ``u_k = y + Z_k``), ``sigma`` (s); ``rows``, ``cols``: f''s nonzeros in the order the
+    ``fieldjac`` kernel returns them; ``W``: ``(j, i, k, Q_jk P_ki)`` for every nonzero
+    coupling (only with ``P``: without it the block (j, i) is ``Q_ji f'(u_i)``)."""
+    s, m = stage.stages, stage.m
+    W = ()
+    if stage.points is not None:
+        W = tuple((j, i, k, repr(stage.coupling(j, i, k))) for j in range(s) for i in range(s)
+                  for k in range(m) if stage.coupling(j, i, k) != 0.0)
+    return {"s": s, "m": m, "nnz": len(stage.pattern),
+            "Q": tuple(tuple(repr(float(x)) for x in row) for row in stage.weights),
+            "P": None if stage.points is None else tuple(tuple(repr(float(x)) for x in row)
+                                                           for row in stage.points),
+            "sigma": tuple(repr(float(x)) for x in stage.scale),
+            "rows": tuple(a for a, _ in stage.pattern), "cols": tuple(b for _, b in stage.pattern),
+            "W": W}
 
 
 def jacobian_band(n: int, entries) -> tuple[int, int]:

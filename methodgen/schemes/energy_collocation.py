@@ -52,6 +52,7 @@ from ..compensate import grouped
 from ..derive import invariants, vector_field
 from ..errors import InputError
 from ..problem import Hamiltonian
+from ..stages import StageSystem
 from .base import STEP, Scheme, Traits
 from .gauss import _f64
 from .quadrature import DPS, MAX_NODES, gauss_legendre, gauss_legendre_f64
@@ -294,4 +295,10 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES, *, consistent: bool
                   options=(() if stages == DEFAULT_STAGES else (("stages", stages),)),
                   structure={"kind": "energy-collocation", "stages": stages, "exact": exact,
                              "degree": degree, "nodes": m, "tables": tab, "ell": ell, "Lam": Lam, "b": b,
-                             "sigma": SIGMA, "Z": Z})
+                             "sigma": SIGMA, "Z": Z},
+                  # the module's stage loops (the same tables, the same evaluation order:
+                  # u_k = y0 + (Σ_i Λ_i(x_k) Z_i), R_j = Z_j − h (1/b_j) Σ_k w_k ℓ_j(x_k) f(u_k))
+                  stage_system=StageSystem(field=tuple(f), state=tuple(y0), stages=stages,
+                                           weights=tuple(tuple(float(x) for x in row) for row in tab["quad"]),
+                                           points=tuple(tuple(float(x) for x in row) for row in tab["path"]),
+                                           scale=tuple(float(x) for x in tab["inv_b"])))

@@ -42,6 +42,7 @@ import sympy as sp
 from ..derive import invariants, vector_field
 from ..errors import InputError
 from ..problem import Hamiltonian
+from ..stages import StageSystem
 from .base import STEP, Scheme, Traits, quadratic_invariants
 
 NAME = "gauss"
@@ -134,4 +135,8 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
                   # (E = Δy minus the trapezoidal rule on the chord) guards every step.
                   resolution=None, fixed_point=True,
                   options=(() if stages == DEFAULT_STAGES else (("stages", stages),)),
-                  structure={"kind": "collocation", "nodes": "gauss", "stages": stages})
+                  structure={"kind": "collocation", "nodes": "gauss", "stages": stages},
+                  # the module's stage loops: u_k = y0 + Z_k, R_i = Z_i − h Σ_j a_ij f(u_j)
+                  stage_system=StageSystem(field=tuple(f), state=tuple(y0), stages=stages,
+                                           weights=tuple(tuple(float(a) for a in row) for row in A),
+                                           points=None, scale=(1.0,) * stages))
