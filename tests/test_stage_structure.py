@@ -1,0 +1,159 @@
+"""Issue 25, item 1: the stage systems of Gauss and energy collocation by structure.
+
+The modules derive f = J∇H and its Jacobian f' once and assemble the s-stage residual and
+Newton matrix with loops over the stages (:mod:`methodgen.stages`).  Checked here: the
+structured modules agree with the expanded ones (``expanded=True``, the former route) to
+round-off, kernel by kernel and along trajectories; the generated source grows linearly in
+s (the expanded one quadratically: negative control); a perturbed table is seen (negative
+control of the agreement).  The exact-energy certificates of energy collocation read the
+scheme, not the module: tests/test_energy_collocation.py keeps them and their controls.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from conftest import HH_Y0
+from methodgen.emit import emit_source, load_module, write_module
+
+KEPLER_Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
+
+#: A planar three-body problem (unit masses, G = 1) near the figure-eight choreography.
+THREE_BODY = mg.Hamiltonian(
+    "(p1**2 + r1**2 + p2**2 + r2**2 + p3**2 + r3**2)/2"
+    " - 1/sqrt((x1 - x2)**2 + (y1 - y2)**2) - 1/sqrt((x1 - x3)**2 + (y1 - y3)**2)"
+    " - 1/sqrt((x2 - x3)**2 + (y2 - y3)**2)",
+    q=["x1", "y1", "x2", "y2", "x3", "y3"], p=["p1", "r1", "p2", "r2", "p3", "r3"], name="three_body")
+_V = (0.466203685, 0.43236573)
+THREE_BODY_Y0 = np.array([0.97000436, -0.24308753, -0.97000436, 0.24308753, 0.0, 0.0,
+                          _V[0], _V[1], _V[0], _V[1], -2 * _V[0], -2 * _V[1]])
+
+CASES = {
+    "kepler": (lambda: mg.load_scene("kepler").system, KEPLER_Y0, 0.05),
+    "henon-heiles": (lambda: mg.load_scene("henon-heiles-2d").system, np.asarray(HH_Y0, float), 0.2),
+    "three-body": (lambda: THREE_BODY, THREE_BODY_Y0, 0.02),
+}
+
+
+def _module(tmp_path, case, method, stages, expanded, backend="numpy"):
+    system = CASES[case][0]()
+    scheme = mg.discretize(system, method, stages=stages)
+    name = f"{case}_{method}_{stages}_{'expanded' if expanded else 'structured'}_{backend}".replace("-", "_")
+    path = tmp_path / f"{name}.py"
+    write_module(path, emit_source(scheme, module_name=name, backend=backend, expanded=expanded))
+    return load_module(path)
+
+
+@pytest.fixture(scope="module")
+def modules(tmp_path_factory):
+    root = tmp_path_factory.mktemp("stages")
+    cache = {}
+
+    def get(case, method, stages, expanded, backend="numpy"):
+        key = (case, method, stages, expanded, backend)
+        if key not in cache:
+            cache[key] = _module(root, *key)
+        return cache[key]
+
+    return get
+
+
+def _kernels(mod, case, seed=0):
+    """Residual and Newton matrix at a random point near the start (scalar and batch kernels)."""
+    _, y0, h = CASES[case]
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=mod._N) * 1e-2
+    c = np.zeros_like(y0)
+    p = list(mod.DEFAULT_PARAMS.values()) if hasattr(mod, "DEFAULT_PARAMS") else []
+    r, J = mod._s_resjac(list(z), list(y0), list(c), h, p)
+    R, JJ = mod._v_resjac(z[None], y0[None], c[None], h, p)
+    return (np.array(r), np.array(J), np.asarray(mod._s_res(list(z), list(y0), list(c), h, p)),
+            R[0], JJ[0], mod._v_res(z[None], y0[None], c[None], h, p)[0])
+
+
+CASE_IDS = [("kepler", "gauss", 2), ("kepler", "gauss", 3), ("kepler", "energy-collocation", 2),
+            ("henon-heiles", "gauss", 3), ("henon-heiles", "energy-collocation", 3),
+            ("three-body", "gauss", 2), ("three-body", "energy-collocation", 1)]
+
+
+@pytest.mark.parametrize("case, method, stages", CASE_IDS)
+def test_kernels_agree_with_expanded(modules, case, method, stages):
+    """Residual and Newton matrix equal the expanded kernels' to round-off (scalar and batch)."""
+    a = _kernels(modules(case, method, stages, False), case)
+    b = _kernels(modules(case, method, stages, True), case)
+    for x, y in zip(a, b):
+        scale = max(1.0, np.abs(y).max())
+        assert np.abs(x - y).max() <= 1e-14 * scale, (np.abs(x - y).max(), scale)
+
+
+@pytest.mark.parametrize("case, method, stages", CASE_IDS)
+def test_trajectories_agree_with_expanded(modules, case, method, stages):
+    _, y0, h = CASES[case]
+    a = modules(case, method, stages, False).integrate(y0, h, 100)
+    b = modules(case, method, stages, True).integrate(y0, h, 100)
+    assert np.isfinite(a).all()
+    assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max(), np.abs(a - b).max()
+
+
+def test_perturbed_table_is_seen(modules):
+    """Negative control of the agreement: one Butcher entry off by 1e-10 (the structured
+    module's table ``_SQ``, read at call time) shows in the residual far above round-off."""
+    mod = modules("kepler", "gauss", 3, False)
+    ref = _kernels(modules("kepler", "gauss", 3, True), "kepler")
+    saved = mod._SQ
+    try:
+        mod._SQ = tuple(tuple(q + (1e-10 if (j, k) == (0, 1) else 0.0) for k, q in enumerate(row))
+                        for j, row in enumerate(saved))
+        bad = _kernels(mod, "kepler")
+    finally:
+        mod._SQ = saved
+    assert np.abs(bad[2] - ref[2]).max() > 1e-13
+
+
+def _size_growth(sizes) -> float:
+    """Quadratic over linear coefficient of the least-squares fit of size against s."""
+    s = np.arange(1, len(sizes) + 1)
+    c2, c1, _ = np.polyfit(s, np.asarray(sizes, float), 2)
+    return c2 / c1
+
+
+def test_source_grows_linearly_in_stages():
+    """Gauss s = 1..6 on Kepler: the module grows by about the same amount per stage (measured
+    ~1.2-1.7 kB: the guess, the increment and the table's row and column); the expanded stage
+    system (negative control, s = 1..4) adds (s·n)² Jacobian entries: quadratic."""
+    system = mg.load_scene("kepler").system
+    structured = [len(emit_source(mg.discretize(system, "gauss", stages=s))) for s in range(1, 7)]
+    expanded = [len(emit_source(mg.discretize(system, "gauss", stages=s), expanded=True)) for s in range(1, 5)]
+    print("structured", structured, "expanded", expanded)
+    assert abs(_size_growth(structured)) < 0.05, structured
+    assert _size_growth(expanded) > 0.2, expanded
+
+
+def test_no_expanded_jacobian_is_derived(monkeypatch):
+    """The lowering of a stage method never builds the scheme's (s·n)² symbolic Jacobian."""
+    from methodgen.schemes.base import Scheme
+
+    scheme = mg.discretize(mg.load_scene("kepler").system, "gauss", stages=3)
+    touched = []
+    real = Scheme.jacobian.func
+    monkeypatch.setattr(Scheme, "jacobian", property(lambda self: touched.append(1) or real(self)))
+    emit_source(scheme)
+    assert not touched
+    emit_source(scheme, expanded=True)      # control: the expanded route does read it
+    assert touched
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case, method, stages", [("kepler", "gauss", 2), ("henon-heiles", "energy-collocation", 2),
+                                                  ("three-body", "gauss", 2)])
+def test_numba_agrees_with_expanded(modules, case, method, stages):
+    """The compiled stage loops: numba structured vs numba expanded vs numpy structured."""
+    pytest.importorskip("numba")
+    _, y0, h = CASES[case]
+    a = modules(case, method, stages, False, "numba").integrate(y0, h, 100)
+    b = modules(case, method, stages, True, "numba").integrate(y0, h, 100)
+    c = modules(case, method, stages, False).integrate(y0, h, 100)
+    scale = np.abs(b).max()
+    assert np.abs(a - b).max() <= 1e-12 * scale and np.abs(a - c).max() <= 1e-12 * scale
