@@ -365,6 +365,15 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
     return Kernel(tuple(temps), tuple(outputs), (len(links) + len(later),))
 
 
+def _program_kernel(dag, printer, rename) -> Kernel:
+    """Kernel of a straight-line program already reduced (:class:`methodgen.stages.FieldDerivative`:
+    f and the nonzeros of f'), printed as it is -- no second CSE over the derivative."""
+    temps = tuple((str(s), printer.doprint(sp.sympify(e).xreplace(rename))) for s, e in dag.assignments)
+    outs = list(dag.field) + list(dag.jacobian)
+    outputs = tuple(((i,), printer.doprint(sp.sympify(e).xreplace(rename))) for i, e in enumerate(outs) if e != 0)
+    return Kernel(temps, outputs, (len(outs),))
+
+
 def _helpers(exprs) -> tuple[str, ...]:
     used = set()
     for e in exprs:
@@ -627,8 +636,9 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         if cmp_ is compensate:   # pragma: no cover - stage increments are never compensated
             raise ValueError("a stage system's unknowns are stage increments (uncompensated)")
         field = list(stage.field)
-        fjac = [stage.field_jacobian[a, b] for a, b in stage.pattern]
-        res, jac = field, fjac   # what the kernels evaluate (helpers are found in them)
+        dag = stage.derivative
+        fjac = list(dag.jacobian)
+        res, jac = field, [e for _, e in dag.assignments] + fjac   # (helpers are found in them)
         inc = list(scheme.increment)
         guess = list(scheme.guess)
     else:
@@ -660,7 +670,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
             m = len(field)
             for flavour, printer in ((scalar, sp_), (vector, vp)):
                 flavour["field"] = kern(field, (m,), printer)
-                flavour["fieldjac"] = kern(field + fjac, (m + len(fjac),), printer)
+                flavour["fieldjac"] = _program_kernel(dag, printer, rename)
                 flavour["res"] = Kernel((), (), (n,))
                 flavour["resjac"] = Kernel((), (), (n + nj,))
             band = jacobian_band(n, stage.newton_pattern())
