@@ -195,3 +195,20 @@ def test_field_derivative_is_exact(case):
         bad = list(jv)
         bad[-1] = -bad[-1]
         assert not all(sp.simplify(a - b) == 0 for a, b in zip(bad, ref))
+
+
+def test_module_tables_are_the_certified_ones(modules):
+    """The loops read exactly the float64 tables that verify certifies (the scheme's
+    ``structure['tables']`` for energy collocation, the rounded A for Gauss).  Control: the
+    entry-by-entry rounded tables (``consistent=False``) are not the module's."""
+    from methodgen.schemes.energy_collocation import build
+    from methodgen.schemes.gauss import coefficients
+
+    system = CASES["henon-heiles"][0]()
+    mod = modules("henon-heiles", "energy-collocation", 3, False)
+    tab = build(system, 3).structure["tables"]
+    assert mod._SQ == tab["quad"] and mod._SP == tab["path"] and mod._SG == tab["inv_b"]
+    bad = build(system, 3, consistent=False).structure["tables"]
+    assert (mod._SQ, mod._SP) != (bad["quad"], bad["path"])
+    g = modules("kepler", "gauss", 3, False)
+    assert g._SQ == tuple(tuple(float(a) for a in row) for row in coefficients(3)["A"])
