@@ -806,20 +806,15 @@ def stage_tables(stage) -> dict:
     """The constants of a stage system's loops (:class:`methodgen.stages.StageSystem`),
     floats as their reprs: ``s``, ``m``, ``nnz``; ``Q`` (s × m), ``P`` (m × s, None for
     ``u_k = y + Z_k``), ``sigma`` (s); ``rows``, ``cols``: f''s nonzeros in the order the
-    ``fieldjac`` kernel returns them; ``W``: ``(j, i, k, Q_jk P_ki)`` for every nonzero
-    coupling (only with ``P``: without it the block (j, i) is ``Q_ji f'(u_i)``)."""
+    ``fieldjac`` kernel returns them.  (The Newton matrix's weights ``Q_jk P_ki`` are
+    multiplied in the loops, not tabled: a table of them would grow like s²m.)"""
     s, m = stage.stages, stage.m
-    W = ()
-    if stage.points is not None:
-        W = tuple((j, i, k, repr(stage.coupling(j, i, k))) for j in range(s) for i in range(s)
-                  for k in range(m) if stage.coupling(j, i, k) != 0.0)
     return {"s": s, "m": m, "nnz": len(stage.pattern),
             "Q": tuple(tuple(repr(float(x)) for x in row) for row in stage.weights),
             "P": None if stage.points is None else tuple(tuple(repr(float(x)) for x in row)
                                                            for row in stage.points),
             "sigma": tuple(repr(float(x)) for x in stage.scale),
-            "rows": tuple(a for a, _ in stage.pattern), "cols": tuple(b for _, b in stage.pattern),
-            "W": W}
+            "rows": tuple(a for a, _ in stage.pattern), "cols": tuple(b for _, b in stage.pattern)}
 
 
 def jacobian_band(n: int, entries) -> tuple[int, int]:
