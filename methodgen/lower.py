@@ -809,12 +809,32 @@ def stage_tables(stage) -> dict:
     ``fieldjac`` kernel returns them.  (The Newton matrix's weights ``Q_jk P_ki`` are
     multiplied in the loops, not tabled: a table of them would grow like s²m.)"""
     s, m = stage.stages, stage.m
-    return {"s": s, "m": m, "nnz": len(stage.pattern),
+    return {"s": s, "m": m, "nnz": len(stage.pattern), **_stage_sums(s, m),
             "Q": tuple(tuple(repr(float(x)) for x in row) for row in stage.weights),
             "P": None if stage.points is None else tuple(tuple(repr(float(x)) for x in row)
                                                            for row in stage.points),
             "sigma": tuple(repr(float(x)) for x in stage.scale),
             "rows": tuple(a for a, _ in stage.pattern), "cols": tuple(b for _, b in stage.pattern)}
+
+
+def _stage_sums(s: int, m: int) -> dict:
+    """The sums the numpy scalar kernels spell out (Python source, added left to right, as
+    the loops of the other flavours add them): ``qsum`` Σ_k Q_jk f_k over mirror pairs of
+    points ``(k, m−1−k)`` from the outside in, then the middle point; ``psum`` Σ_i P_ki Z_i;
+    ``gsum`` Σ_k c_k f'_k; with the comprehension targets ``fvars``, ``xvars``, ``gvars``."""
+    def chain(terms):
+        return " + ".join(terms)
+
+    pairs = [f"(_q[{k}] * _f{k} + _q[{m - 1 - k}] * _f{m - 1 - k})" for k in range(m // 2)]
+    mid = [f"_q[{m // 2}] * _f{m // 2}"] if m % 2 else []
+
+    def targets(prefix, count):
+        names = ", ".join(f"{prefix}{k}" for k in range(count))
+        return names + ("," if count == 1 else "")
+
+    return {"qsum": chain(pairs + mid), "fvars": targets("_f", m),
+            "psum": chain([f"_w[{i}] * _x{i}" for i in range(s)]), "xvars": targets("_x", s),
+            "gsum": chain([f"_c[{k}] * _g{k}" for k in range(m)]), "gvars": targets("_g", m)}
 
 
 def jacobian_band(n: int, entries) -> tuple[int, int]:
