@@ -289,6 +289,11 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
             vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_J", (n, n))], "_R, _J")
         if "scale" in ir.vector:
             vector["scale"] = _vector_view(ir.vector["scale"], [("_out", (1,))], "_out[..., 0]")
+        if ir.stage:   # an s-stage method by structure: f, and f with f''s nonzeros
+            d, nnz = ir.n_state, ir.stage["nnz"]
+            vector["field"] = _vector_view(ir.vector["field"], [("_out", (d,))], "_out")
+            vector["fieldjac"] = _vector_view(ir.vector["fieldjac"], [("_out", (d,)), ("_g", (nnz,))],
+                                              "_out, _g")
     defaults = "{" + ", ".join(f"{k!r}: {v}" for k, v in zip(ir.param_names, ir.param_defaults)) + "}"
     clean = ir.__class__(**{**ir.__dict__, "source": _docsafe(ir.source),
                             "constraints": tuple(_docsafe(c) for c in ir.constraints)})
@@ -737,16 +742,18 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
 
 
 def emit_source(scheme, sig: str | None = None, module_name: str | None = None,
-                backend: str = "numpy", *, progress=None) -> str:
+                backend: str = "numpy", *, progress=None, expanded: bool = False) -> str:
     """The full source text of the generated module for ``scheme`` (no fallback: any backend renders).
 
     ``progress``: reporter of the phases lower and render (:mod:`methodgen.progress`).
+    ``expanded``: internal (tests, benchmarks) -- an s-stage method's expanded stage system
+    instead of its loops over the stages (:func:`methodgen.lower.lower`).
     """
     from .lower import lower
 
     sig = sig or signature(scheme.system, scheme.key, backend)
     name = module_name or module_filename(scheme.system.name or "system", scheme.key, backend)[:-3]
     with phase("lower", progress):
-        ir = lower(scheme, sig, name)
+        ir = lower(scheme, sig, name, expanded=expanded)
     with phase("render", progress):
         return render(ir, backend)

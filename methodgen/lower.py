@@ -280,6 +280,10 @@ class ModuleIR:
     stage_kick_b: tuple[str, ...] = ("0.5",)
     #: True for a splitting family (stages that are not Störmer–Verlet steps).
     splitting: bool = False
+    #: An s-stage implicit method lowered by structure (:func:`stage_tables`): the tables
+    #: its residual and Newton-matrix loops read (float reprs); None where the residual and
+    #: the Newton matrix are straight-line kernels.
+    stage: dict | None = None
 
     @property
     def stages(self) -> int:
@@ -369,6 +373,15 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
     outputs = [((i,), str(s)) for i, s in enumerate(links)]
     outputs += [((len(links) + j,), lp.doprint(e)) for j, e in enumerate(r2) if e != 0]
     return Kernel(tuple(temps), tuple(outputs), (len(links) + len(later),))
+
+
+def _program_kernel(dag, printer, rename) -> Kernel:
+    """Kernel of a straight-line program already reduced (:class:`methodgen.stages.FieldDerivative`:
+    f and the nonzeros of f'), printed as it is -- no second CSE over the derivative."""
+    temps = tuple((str(s), printer.doprint(sp.sympify(e).xreplace(rename))) for s, e in dag.assignments)
+    outs = list(dag.field) + list(dag.jacobian)
+    outputs = tuple(((i,), printer.doprint(sp.sympify(e).xreplace(rename))) for i, e in enumerate(outs) if e != 0)
+    return Kernel(temps, outputs, (len(outs),))
 
 
 def _helpers(exprs) -> tuple[str, ...]:
@@ -609,7 +622,8 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
     return bool(loops)
 
 
-def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -> ModuleIR:
+def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *,
+          expanded: bool = False) -> ModuleIR:
     """Lower ``scheme`` to a :class:`ModuleIR` (deterministic).
 
     Parameters
@@ -622,6 +636,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
     loops : bool or None
         Loop over families of like terms instead of unrolling every term
         (:func:`uses_loops`; default: where a family has ≥ 3 instances).
+    expanded : bool
+        Internal (tests and benchmarks): emit the residual and the Newton matrix of an
+        s-stage method (``scheme.stage_system``) as the expanded straight-line kernels of
+        ``scheme.residual`` and its ``(s·n)²`` symbolic Jacobian, instead of the loops over
+        the stages (:mod:`methodgen.stages`, the default).
     """
     system = scheme.system
     user = [s.name for s in system.y] + list(system.param_names)
@@ -645,6 +664,10 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
             else compensate)
     looped = uses_loops(scheme, loops) and n > 0
     plan = scheme.loops if looped else None
+    # An s-stage method: f and f' derived once, the stage system assembled by loops in the
+    # module (methodgen.stages) -- neither the residual's s copies of f per stage nor the
+    # (s·n)² Jacobian are lowered.
+    stage = getattr(scheme, "stage_system", None) if (n and not looped and not expanded) else None
     if looped:
         # The sums stay sums: the kernels below get loops over the families ahead of their
         # straight-line code (methodgen.lower_loops), and the Newton matrix comes from the
@@ -656,6 +679,15 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         jac = cmp_(rows if rows is not None else jac_acc, comp)
         inc = cmp_(list(plan.increment), comp)
         guess = list(plan.guess)
+    elif stage is not None:
+        if cmp_ is compensate:   # pragma: no cover - stage increments are never compensated
+            raise ValueError("a stage system's unknowns are stage increments (uncompensated)")
+        field = list(stage.field)
+        dag = stage.derivative
+        fjac = list(dag.jacobian)
+        res, jac = field, [e for _, e in dag.assignments] + fjac   # (helpers are found in them)
+        inc = list(scheme.increment)
+        guess = list(scheme.guess)
     else:
         res = cmp_(list(scheme.residual), comp)
         jac = cmp_(list(scheme.jacobian), comp) if n else []
@@ -679,11 +711,22 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         # with row scales (looped modules): R then s, and J = I + diag(s) _sB in the module
         scaled = looped and rows is not None
         nj = n if scaled else n * n
-        scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
-        vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
-        band = _newton_band(n, scalar["resjac"], plan, scaled)
-        scalar["res"] = kern(res, (n,), sp_)
-        vector["res"] = kern(res, (n,), vp)
+        if stage is not None:
+            # f at a point (the kernel's state), and f with the nonzeros of f'; the residual
+            # and Newton-matrix kernels are the templates' loops over the stages
+            m = len(field)
+            for flavour, printer in ((scalar, sp_), (vector, vp)):
+                flavour["field"] = kern(field, (m,), printer)
+                flavour["fieldjac"] = _program_kernel(dag, printer, rename)
+                flavour["res"] = Kernel((), (), (n,))
+                flavour["resjac"] = Kernel((), (), (n + nj,))
+            band = jacobian_band(n, stage.newton_pattern())
+        else:
+            scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
+            vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
+            band = _newton_band(n, scalar["resjac"], plan, scaled)
+            scalar["res"] = kern(res, (n,), sp_)
+            vector["res"] = kern(res, (n,), vp)
         if scheme.unknown_scale is not None:
             scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
             vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
@@ -812,7 +855,43 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         band=band if n else (0, 0),
         fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
         **(_stage_fields(scheme) if fplan is not None else {}),
+        stage=stage_tables(stage) if stage is not None else None,
     )
+
+
+def stage_tables(stage) -> dict:
+    """The constants of a stage system's loops (:class:`methodgen.stages.StageSystem`),
+    floats as their reprs: ``s``, ``m``, ``nnz``; ``Q`` (s × m), ``P`` (m × s, None for
+    ``u_k = y + Z_k``), ``sigma`` (s); ``rows``, ``cols``: f''s nonzeros in the order the
+    ``fieldjac`` kernel returns them.  (The Newton matrix's weights ``Q_jk P_ki`` are
+    multiplied in the loops, not tabled: a table of them would grow like s²m.)"""
+    s, m = stage.stages, stage.m
+    return {"s": s, "m": m, "nnz": len(stage.pattern), **_stage_sums(s, m),
+            "Q": tuple(tuple(repr(float(x)) for x in row) for row in stage.weights),
+            "P": None if stage.points is None else tuple(tuple(repr(float(x)) for x in row)
+                                                           for row in stage.points),
+            "sigma": tuple(repr(float(x)) for x in stage.scale),
+            "rows": tuple(a for a, _ in stage.pattern), "cols": tuple(b for _, b in stage.pattern)}
+
+
+def _stage_sums(s: int, m: int) -> dict:
+    """The sums the numpy scalar kernels spell out (Python source, added left to right, as
+    the loops of the other flavours add them): ``qsum`` Σ_k Q_jk f_k over mirror pairs of
+    points ``(k, m−1−k)`` from the outside in, then the middle point; ``psum`` Σ_i P_ki Z_i;
+    ``gsum`` Σ_k c_k f'_k; with the comprehension targets ``fvars``, ``xvars``, ``gvars``."""
+    def chain(terms):
+        return " + ".join(terms)
+
+    pairs = [f"(_q[{k}] * _f{k} + _q[{m - 1 - k}] * _f{m - 1 - k})" for k in range(m // 2)]
+    mid = [f"_q[{m // 2}] * _f{m // 2}"] if m % 2 else []
+
+    def targets(prefix, count):
+        names = ", ".join(f"{prefix}{k}" for k in range(count))
+        return names + ("," if count == 1 else "")
+
+    return {"qsum": chain(pairs + mid), "fvars": targets("_f", m),
+            "psum": chain([f"_w[{i}] * _x{i}" for i in range(s)]), "xvars": targets("_x", s),
+            "gsum": chain([f"_c[{k}] * _g{k}" for k in range(m)]), "gvars": targets("_g", m)}
 
 
 def jacobian_band(n: int, entries) -> tuple[int, int]:

@@ -252,6 +252,11 @@ class Scheme:
     #: The step's equations with the potential's sums of like terms kept as sums
     #: (:class:`LoopPlan`), for modules that loop over them; None where not built.
     loops: LoopPlan | None = None
+    #: An s-stage implicit method's stage system as structure (f, the tables;
+    #: :class:`methodgen.stages.StageSystem`): the module's residual and Newton matrix
+    #: loop over the stages instead of expanding ``residual`` and its ``(s·n)²`` Jacobian.
+    #: None for every other method.
+    stage_system: object | None = None
 
     h = STEP
 
