@@ -372,15 +372,24 @@ def _angular_name(system: Hamiltonian, i: int, j: int) -> str:
 
 
 @_cache
+def _gradient_function(system: Hamiltonian):
+    """∇H lambdified (``math``; removable-singularity helpers as their quotients), arguments
+    ``(*y, *params)``: one translation shared by the numerical screens (it is as large as
+    the unrolled gradient)."""
+    from .special import to_elementary
+
+    return sp.lambdify(list(system.y) + list(system.params), [to_elementary(e) for e in gradient(system)],
+                       modules="math")
+
+
+@_cache
 def _gradient_samples(system: Hamiltonian):
     """``[(y, ∇H(y))]`` in float64 at two fixed points (None where H cannot be evaluated
     there): a cheap screen that rejects candidate first integrals before any exact test.
     Only rejection uses floats; what is kept is proved exactly."""
-    args = list(system.y) + list(system.params)
     pv = [system.param_values[s.name] for s in system.params]
     try:
-        from .special import to_elementary
-        fn = sp.lambdify(args, [to_elementary(e) for e in gradient(system)], modules="math")
+        fn = _gradient_function(system)
         out = []
         for y in sample_points(len(system.y)):
             out.append((y, [float(v) for v in fn(*(y + pv))]))
@@ -520,7 +529,9 @@ def _linear_candidates(system: Hamiltonian) -> list[list[sp.Rational]]:
     from .special import to_elementary   # sampled away from removable points
 
     try:
-        fns = [sp.lambdify(args, [to_elementary(e) for e in r], modules="math") for r in rows]
+        full = _gradient_function(system)     # ∂H/∂q is its first d entries
+        fns = [lambda *a: full(*a)[:d]] + [sp.lambdify(args, [to_elementary(e) for e in r], modules="math")
+                                           for r in rows[1:]]
     except Exception:   # pragma: no cover - lambdify of whitelisted functions
         return []
     rng = random.Random(20240515)
