@@ -203,3 +203,29 @@ def test_negative_control_anisotropic_pair_breaks_L():
         w = [sp.diff(L, pk) for pk in system.p]
         results.append(em._forms_commute_by_families(w, list(system.q), em.decompose_families(system)))
     assert results == [False, True]
+
+
+# --- degree tests read off plain terms ------------------------------------------------------------
+
+def test_plain_monomials_agree_with_poly():
+    """Exact: the degree tests read off a plain sum of monomials give Poly's answers; a form
+    whose terms could cancel ((a + b) q - a q - b q) is not plain and goes to Poly."""
+    a, b = sp.symbols("a b", real=True)
+    system = mg.Hamiltonian("(px**2 + py**2)/2 + x**2*y", q=["x", "y"], p=["px", "py"])
+    x, y = system.q
+    px, py = system.p
+    cases = [x * py - y * px, px + py, 3 * x + a * px, x * px + 2, x ** 2 * px, a * b * x * py - x * py,
+             sp.S(5), sp.S.Zero, x * px * py, px ** 2]
+    for e in cases:
+        assert base._plain_monomials(e, system.y) is not None, e
+        for k in (0, 1, 2):
+            poly, _ = base._poly(e, system.y)
+            expect = poly is None or poly.total_degree() <= k
+            assert base._degree_at_most(e, system.y, k) == expect, (e, k)
+    assert base._plain_monomials((a + b) * x - a * x - b * x, system.y) is None
+    assert base._plain_monomials(sp.exp(x) * px, system.y) is None
+    assert base._plain_monomials(px / x, system.y) is None
+    # bilinear: qᵀDp only (a constant or a pure p term is not)
+    assert base._qp_degrees_within(x * py - y * px, system, lambda dq, dp: dq == 1 and dp == 1, constant=False)
+    assert not base._qp_degrees_within(x * py + 1, system, lambda dq, dp: dq == 1 and dp == 1, constant=False)
+    assert not base._qp_degrees_within(px + py, system, lambda dq, dp: dq == 1 and dp == 1, constant=False)

@@ -371,8 +371,38 @@ def _poly(expr: sp.Expr, syms):
     return poly, gens
 
 
+def _plain_monomials(expr: sp.Expr, syms) -> list[dict] | None:
+    """The exponents in ``syms`` of the monomials of ``expr``, read off its terms without a
+    :class:`sympy.Poly`, or None where ``expr`` is not in that plain form.
+
+    Plain: a sum of products of numbers, symbols and symbols to positive integer powers
+    (``p1 + p2 + …``, ``x0*py0 - y0*px0``).  SymPy's ``Add`` merges equal products, so its
+    terms are distinct monomials in all their symbols with nonzero rational coefficients,
+    and grouped by their exponents in ``syms`` (the others are the coefficients' symbols) no
+    group sums to 0: the list is the polynomial's, exactly.  Linear in the number of terms,
+    where a ``Poly`` of a total momentum over 400 generators took a second.
+    """
+    sset = set(syms)
+    out = []
+    for term in sp.Add.make_args(expr):
+        mono: dict = {}
+        for f in sp.Mul.make_args(term):
+            if f.is_Rational:
+                continue
+            base, e = (f.base, f.exp) if f.is_Pow else (f, sp.S.One)
+            if not (base.is_Symbol and e.is_Integer and e > 0):
+                return None
+            if base in sset:
+                mono[base] = mono.get(base, 0) + int(e)
+        out.append(mono)
+    return out
+
+
 def _degree_at_most(expr: sp.Expr, syms, k: int) -> bool:
     """``expr`` is a polynomial of total degree ≤ k in ``syms`` with coefficients free of them."""
+    plain = _plain_monomials(expr, syms)
+    if plain is not None:
+        return all(sum(m.values()) <= k for m in plain)
     try:
         poly, _ = _poly(expr, syms)
     except sp.PolynomialError:
@@ -697,7 +727,14 @@ def _qp_degrees_within(expr: sp.Expr, system: Hamiltonian, ok, constant: bool = 
     """``expr`` is a polynomial in y with coefficients free of y, and ``ok(deg_q, deg_p)``
     holds for each of its monomials (degree in q, degree in p); ``constant`` is the answer
     for an expression free of y.  The polynomial is taken in the symbols it contains
-    (:func:`_present`)."""
+    (:func:`_present`), or read off the terms where they are plain (:func:`_plain_monomials`)."""
+    plain = _plain_monomials(expr, system.y)
+    if plain is not None:
+        qs = set(system.q)
+        if not any(plain):
+            return constant
+        return all(ok(sum(e for s, e in m.items() if s in qs), sum(e for s, e in m.items() if s not in qs))
+                   for m in plain)
     try:
         poly, gens = _poly(expr, system.y)
     except sp.PolynomialError:
