@@ -229,3 +229,17 @@ def test_plain_monomials_agree_with_poly():
     assert base._qp_degrees_within(x * py - y * px, system, lambda dq, dp: dq == 1 and dp == 1, constant=False)
     assert not base._qp_degrees_within(x * py + 1, system, lambda dq, dp: dq == 1 and dp == 1, constant=False)
     assert not base._qp_degrees_within(px + py, system, lambda dq, dp: dq == 1 and dp == 1, constant=False)
+
+
+def test_mass_inverse_read_off_plain_terms_is_the_hessian():
+    """Exact: M⁻¹ = ∂²T/∂p² read off T's plain terms equals SymPy's Hessian, with equal
+    exponents of different coefficients added (a p1² + b p1²); a coefficient depending on
+    the state refuses (None), as does a non-quadratic T."""
+    from methodgen.derive import _mass_inverse
+    p1, p2, p3, a, b, x = sp.symbols("p1 p2 p3 a b x", real=True)
+    p = [p1, p2, p3]
+    for T in (p1 ** 2 / 2 + p1 * p2 + 3 * p2 ** 2 + p3 ** 2, a * p1 ** 2 + b * p1 ** 2 + p2 * p3,
+              p1 ** 2 / (2 * a) + p2 ** 2 + p3 ** 2):
+        assert _mass_inverse(T, p, {x}) == sp.hessian(T, p), T
+    assert _mass_inverse(x * p1 ** 2 + p2 ** 2 + p3 ** 2, p, {x}) is None
+    assert _mass_inverse(p1 ** 2 + p2 ** 2 + p3 ** 4, p, {x}) is None

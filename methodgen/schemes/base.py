@@ -31,7 +31,8 @@ from typing import Callable
 
 import sympy as sp
 
-from ..derive import (Invariant, _zero_status, first_integrals, gradient, invariants, separable_split,
+from ..derive import (Invariant, _partials, _zero_status, first_integrals, gradient, invariants, plain_terms,
+                      separable_split,
                       vector_field)
 from ..poisson import is_poisson
 from ..problem import Hamiltonian
@@ -372,30 +373,10 @@ def _poly(expr: sp.Expr, syms):
 
 
 def _plain_monomials(expr: sp.Expr, syms) -> list[dict] | None:
-    """The exponents in ``syms`` of the monomials of ``expr``, read off its terms without a
-    :class:`sympy.Poly`, or None where ``expr`` is not in that plain form.
-
-    Plain: a sum of products of numbers, symbols and symbols to positive integer powers
-    (``p1 + p2 + …``, ``x0*py0 - y0*px0``).  SymPy's ``Add`` merges equal products, so its
-    terms are distinct monomials in all their symbols with nonzero rational coefficients,
-    and grouped by their exponents in ``syms`` (the others are the coefficients' symbols) no
-    group sums to 0: the list is the polynomial's, exactly.  Linear in the number of terms,
-    where a ``Poly`` of a total momentum over 400 generators took a second.
-    """
-    sset = set(syms)
-    out = []
-    for term in sp.Add.make_args(expr):
-        mono: dict = {}
-        for f in sp.Mul.make_args(term):
-            if f.is_Rational:
-                continue
-            base, e = (f.base, f.exp) if f.is_Pow else (f, sp.S.One)
-            if not (base.is_Symbol and e.is_Integer and e > 0):
-                return None
-            if base in sset:
-                mono[base] = mono.get(base, 0) + int(e)
-        out.append(mono)
-    return out
+    """The exponents in ``syms`` of the monomials of ``expr`` (:func:`methodgen.derive.plain_terms`:
+    exact where ``expr`` is a plain sum of monomials), or None where it is not plain."""
+    terms = plain_terms(expr, syms)
+    return None if terms is None else [m for _, m in terms]
 
 
 def _degree_at_most(expr: sp.Expr, syms, k: int) -> bool:
@@ -536,7 +517,7 @@ def dg_linear_invariants(system: Hamiltonian, grad_bar: sp.Matrix, exclude=(), l
     for inv in first_integrals(system):
         if inv.name in exclude or not _is_linear(inv.expr, system.y):
             continue
-        c = [sp.diff(inv.expr, s) for s in system.y]
+        c = _partials(inv.expr, system.y)     # one pass over I's terms, not 2d diffs of the sum
         if loops and _dg_linear_by_families(system, c, grad_bar, loops):
             out.append(inv.name)
             continue
@@ -607,9 +588,10 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     reducible = (
         reduce and sep is not None and sep.Minv is not None
         and not any(e.free_symbols & p1s for e in grad_bar[:d])
-        and all(_shown_zero(grad_bar[d + i] - (sep.Minv * (p0 + sp.Matrix(y1[d:])))[i] / 2)
-                for i in range(d))
     )
+    if reducible:
+        vbar = _matvec(sep.Minv, p0 + sp.Matrix(y1[d:]))     # once, not once per component
+        reducible = all(_shown_zero(grad_bar[d + i] - vbar[i] / 2) for i in range(d))
     if reducible:
         z = tuple(increment_symbol(s) for s in system.q)
         zq = sp.Matrix(z)
@@ -755,6 +737,10 @@ def _field_degree(system: Hamiltonian) -> float:
     """Total polynomial degree of ``f = J∇H`` in y, with coefficients free of y (inf otherwise)."""
     deg = 0
     for fi in vector_field(system):
+        plain = _plain_monomials(fi, system.y)
+        if plain is not None:
+            deg = max([deg] + [sum(m.values()) for m in plain])
+            continue
         gens = _present(fi, system.y)
         if not gens:
             continue
