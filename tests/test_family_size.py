@@ -243,3 +243,28 @@ def test_mass_inverse_read_off_plain_terms_is_the_hessian():
         assert _mass_inverse(T, p, {x}) == sp.hessian(T, p), T
     assert _mass_inverse(x * p1 ** 2 + p2 ** 2 + p3 ** 2, p, {x}) is None
     assert _mass_inverse(p1 ** 2 + p2 ** 2 + p3 ** 4, p, {x}) is None
+
+
+def test_poisson_bracket_by_partials_is_the_diff_formula():
+    """Exact: {F, H} from one pass over the terms and the cached (per-family) ∇H equals the
+    textbook Σ ∂F/∂q ∂H/∂p - ∂F/∂p ∂H/∂q; {L, H} of a Toda ring is not 0 (refuted, control)."""
+    from methodgen.derive import poisson_bracket
+    system = _ring(5, TODA_SUM.format(n=5))
+    q, p = system.q, system.p
+    for F in (sp.Add(*p), q[0] * p[1] - q[1] * p[0], q[2] ** 2 * p[3] + sp.exp(q[0]) * p[0]):
+        ref = sp.Add(*[sp.diff(F, a) * sp.diff(system.H, b) - sp.diff(F, b) * sp.diff(system.H, a)
+                       for a, b in zip(q, p)])
+        assert sp.expand(poisson_bracket(system, F, system.H) - ref) == 0
+    assert sp.expand(poisson_bracket(system, sp.Add(*p), system.H)) == 0
+    assert sp.expand(poisson_bracket(system, q[0] * p[1] - q[1] * p[0], system.H)) != 0
+
+
+def test_radial_profile_numerical_rejection_keeps_radial_potentials():
+    from methodgen.derive import radial_profile
+    kepler = mg.Hamiltonian("(px**2 + py**2 + pz**2)/2 - 1/sqrt(x**2 + y**2 + z**2)",
+                            q=["x", "y", "z"], p=["px", "py", "pz"])
+    assert radial_profile(kepler) is not None
+    aniso = mg.Hamiltonian("(px**2 + py**2 + pz**2)/2 - 1/sqrt(x**2 + 2*y**2 + z**2)",
+                           q=["x", "y", "z"], p=["px", "py", "pz"])
+    assert radial_profile(aniso) is None
+    assert radial_profile(_ring(200, TODA_SUM.format(n=200))) is None

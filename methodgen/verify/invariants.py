@@ -119,11 +119,9 @@ def splitting_invariant(scheme, name: str, expr: sp.Expr) -> Certificate | None:
 
 
 def _is_quadratic(expr, syms) -> bool:
-    try:
-        poly = sp.Poly(expr, *syms)
-    except sp.PolynomialError:
-        return False
-    return poly.total_degree() <= 2 and not (poly.free_symbols_in_domain & set(syms))
+    from ..schemes.base import _degree_at_most   # plain terms read off, else a Poly in the symbols used
+
+    return _degree_at_most(expr, syms, 2)
 
 
 def invariant_preserved(scheme, name: str, expr: sp.Expr, dg: sp.Matrix | None = None) -> Certificate | None:
