@@ -164,12 +164,12 @@ def test_planar_gravity_keeps_L_and_P_per_family():
 
 
 def test_negative_control_symmetry_breaking_family():
-    """A pinning family Σ q_i⁴ breaks translation invariance: P = Σ p_i is not kept.  The
-    per-family test says so (a pattern of the pin family is nonzero), and a broken test that
-    looked at the first family only (the chain springs, which are translation invariant)
-    would claim P."""
+    """One pinned particle (q1⁴, a family of one instance) breaks translation invariance:
+    P = Σ p_i is not kept.  The per-family test says so (the pin's pattern is nonzero), and a
+    broken test that looked only at the families of several instances (the chain springs,
+    translation invariant) would claim P."""
     n = 6
-    system = _ring(n, "Sum(p[i]**2/2, i, 1, 6) + Sum((q[i+1] - q[i])**2, i, 1, 5) + Sum(q[i]**4, i, 1, 6)")
+    system = _ring(n, "Sum(p[i]**2/2, i, 1, 6) + Sum((q[i+1] - q[i])**2, i, 1, 5) + q[1]**4")
     scheme = mg.discretize(system, "energy-momentum")
     fams = scheme.loops.families
     c = [sp.S.Zero] * n + [sp.S.One] * n
