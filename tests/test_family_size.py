@@ -268,3 +268,28 @@ def test_radial_profile_numerical_rejection_keeps_radial_potentials():
                            q=["x", "y", "z"], p=["px", "py", "pz"])
     assert radial_profile(aniso) is None
     assert radial_profile(_ring(200, TODA_SUM.format(n=200))) is None
+
+
+def test_cli_bad_index_is_exit_2_and_one_line(tmp_path, capsys):
+    """A scene whose Sum runs past the declared coordinates: exit 2, one line, no traceback;
+    the same scene with the periodic wrap runs (control)."""
+    from helpers import cli_main
+    scene = '''name = "ring3"
+[system]
+H = "Sum(p[i]**2/2, i, 1, 3) + Sum(exp(q[i] - q[{nxt}]), i, 1, 3)"
+q = ["q1", "q2", "q3"]
+p = ["p1", "p2", "p3"]
+[run]
+method = "energy-momentum"
+h = 0.05
+steps = 10
+y0 = [0.0, 0.5, -0.3, 0.8, -0.2, -0.6]
+'''
+    bad, good = tmp_path / "bad.toml", tmp_path / "good.toml"
+    bad.write_text(scene.format(nxt="i+1"))
+    good.write_text(scene.format(nxt="i % 3 + 1"))
+    code, out, err = cli_main(capsys, "run", bad)
+    assert code == 2 and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and "gives 'q4', which is not a declared symbol" in err
+    code, out, err = cli_main(capsys, "run", good)
+    assert code == 0, err
