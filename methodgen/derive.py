@@ -274,7 +274,7 @@ def radial_profile(system: Hamiltonian) -> tuple[sp.Symbol, sp.Expr] | None:
         return None
     if V.has(sp.zoo, sp.nan, sp.oo):
         return None
-    r2 = sum(qi**2 for qi in system.q)
+    r2 = sp.Add(*[qi**2 for qi in system.q])
     rest = U - V.xreplace({s: r2})
     # a numerical rejection first: simplify of a non-radial U of 200 coordinates ran past
     # verify's budget (the radial test is a guard of two claim groups)
