@@ -11,6 +11,17 @@ user text.
 
 Float literals are converted to exact rationals (``0.1`` becomes ``1/10``) so
 that the symbolic proofs of :mod:`methodgen.verify` stay exact.
+
+Indexed sums.  ``Sum(body, i, lo, hi)`` is ``body`` summed over the integers
+``lo ≤ i ≤ hi``, and ``q[e]`` inside it names the declared symbol ``q<e>`` (``q[i+1]``
+with ``i = 3`` is ``q4``): a chain is one line, ``Sum(exp(q[i] - q[i+1]), i, 1, N-1)``
+written with the number, and a periodic wrap is index arithmetic, ``q[i % 200 + 1]``.
+Sums nest (``Sum(Sum(..., j, i + 1, 8), i, 1, 7)`` over pairs).  Index expressions are
+integers, the bound indices and ``+ - * // %`` on them, evaluated here as Python
+integers; anything else, an unbound index, or a subscript that names no declared
+symbol is refused with one line.  The sum is expanded into its terms at parsing (at most
+:data:`MAX_SUM_TERMS`); the derivations group the terms back into families of like
+terms (:mod:`methodgen.families`) and derive each family once.
 """
 
 from __future__ import annotations
@@ -90,11 +101,15 @@ _GRAMMAR = ("numbers, symbols, pi, E, + - * / **, sqrt and the functions "
             "exp, log, sin, cos, tan, sinh, cosh, tanh, atan")
 
 #: Names a user symbol may not take (the grammar's own words).
-RESERVED = frozenset(FUNCTIONS) | frozenset(CONSTANTS)
+RESERVED = frozenset(FUNCTIONS) | frozenset(CONSTANTS) | {"Sum"}
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 MAX_TEXT = 20_000
+#: Largest number of terms the indexed sums of one expression may expand to.
+MAX_SUM_TERMS = 100_000
+#: The indexed-sum construct (a word of the grammar, not a user symbol).
+SUM = "Sum"
 MAX_DEPTH = 60
 MAX_INT_EXPONENT = 64
 
@@ -271,6 +286,8 @@ class _Builder:
     def __init__(self, symbols: Mapping[str, sp.Symbol], what: str):
         self.symbols = symbols
         self.what = what
+        self.bound: dict[str, int] = {}     # the indices of the enclosing Sums, and their values
+        self.sum_terms = 0
 
     def fail(self, node: ast.AST, msg: str) -> ParseError:
         col = getattr(node, "col_offset", None)
@@ -323,7 +340,11 @@ class _Builder:
                 raise self.fail(node, "division by zero")
             return op(left, right)
         if isinstance(node, ast.Call):
+            if isinstance(node.func, ast.Name) and node.func.id == SUM:
+                return self.indexed_sum(node, depth)
             return self.call(node, depth)
+        if isinstance(node, ast.Subscript):
+            return self.subscript(node)
         raise self.fail(node, self.describe(node) + " is not allowed in an expression; allowed are "
                         "numbers, declared names, + - * / ** and the functions "
                         + ", ".join(sorted(FUNCTIONS)))
@@ -354,8 +375,88 @@ class _Builder:
         # repr gives the shortest decimal that round-trips: 0.1 -> 1/10 exactly.
         return sp.Rational(repr(value))
 
+    # --- indexed sums ------------------------------------------------------------------------
+
+    _INDEX_OPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b,
+                  ast.Mult: lambda a, b: a * b, ast.FloorDiv: lambda a, b: a // b,
+                  ast.Mod: lambda a, b: a % b}
+    _INDEX_GRAMMAR = "integers, the indices of the enclosing Sums and + - * // % on them"
+
+    def index_value(self, node: ast.AST, where: str) -> int:
+        """An index expression (a bound or subscript) as a Python int."""
+        if isinstance(node, ast.Constant) and isinstance(node.value, int) and not isinstance(node.value, bool):
+            return node.value
+        if isinstance(node, ast.Name):
+            if node.id in self.bound:
+                return self.bound[node.id]
+            hint = (f"{node.id!r} is a declared symbol, not an index" if node.id in self.symbols
+                    else f"{node.id!r} is not the index of an enclosing Sum")
+            raise self.fail(node, f"{where}: {hint}; an index expression uses {self._INDEX_GRAMMAR}")
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            v = self.index_value(node.operand, where)
+            return -v if isinstance(node.op, ast.USub) else v
+        if isinstance(node, ast.BinOp) and type(node.op) in self._INDEX_OPS:
+            a, b = self.index_value(node.left, where), self.index_value(node.right, where)
+            if isinstance(node.op, (ast.FloorDiv, ast.Mod)) and b == 0:
+                raise self.fail(node, f"{where}: integer division by zero")
+            if max(abs(a), abs(b)) > 10**9:
+                raise self.fail(node, f"{where}: index beyond ±10⁹")
+            return self._INDEX_OPS[type(node.op)](a, b)
+        raise self.fail(node, f"{where}: {ast.unparse(node)!r} is not an index expression; "
+                              f"allowed are {self._INDEX_GRAMMAR}")
+
+    def subscript(self, node: ast.Subscript) -> sp.Expr:
+        """``q[e]``: the declared symbol ``q<e>``."""
+        if not isinstance(node.value, ast.Name) or isinstance(node.slice, (ast.Slice, ast.Tuple)):
+            raise self.fail(node, f"subscripting {ast.unparse(node)!r} is not allowed: write name[index] with one "
+                                  f"index expression ({self._INDEX_GRAMMAR}), e.g. q[i + 1] for q<i+1>")
+        base = node.value.id
+        k = self.index_value(node.slice, f"subscripting {ast.unparse(node)}")
+        ident = f"{base}{k}"
+        if k < 0 or ident not in self.symbols:
+            known = sorted((n for n in self.symbols if n.startswith(base) and n[len(base):].isdigit()),
+                           key=lambda n: int(n[len(base):]))
+            have = (f"declared are {known[0]} … {known[-1]}" if len(known) > 1 else
+                    f"declared is {known[0]}" if known else f"no declared symbol is {base}<integer>")
+            raise self.fail(node, f"subscripting {ast.unparse(node)} gives {ident!r}, which is not a declared "
+                                  f"symbol ({have})")
+        return self.symbols[ident]
+
+    def indexed_sum(self, node: ast.Call, depth: int) -> sp.Expr:
+        """``Sum(body, i, lo, hi)``: body for i = lo, …, hi, expanded into terms."""
+        usage = "Sum(body, i, lo, hi) takes the summand, an index name and its integer bounds"
+        if node.keywords or len(node.args) != 4 or any(isinstance(a, ast.Starred) for a in node.args):
+            raise self.fail(node, f"{usage}, e.g. Sum(exp(q[i] - q[i+1]), i, 1, 7)")
+        body, var, lo_node, hi_node = node.args
+        if not isinstance(var, ast.Name):
+            raise self.fail(var, f"{usage}: the second argument must be a name, got {ast.unparse(var)!r}")
+        name = var.id
+        if not _NAME_RE.fullmatch(name) or name in RESERVED or keyword.iskeyword(name):
+            raise self.fail(var, f"Sum index {name!r} is not a valid name (a letter, then letters, digits, _)")
+        if name in self.symbols:
+            raise self.fail(var, f"Sum index {name!r} is a declared symbol; choose another index name")
+        if name in self.bound:
+            raise self.fail(var, f"Sum index {name!r} is already the index of an enclosing Sum")
+        lo = self.index_value(lo_node, f"the lower bound of Sum over {name}")
+        hi = self.index_value(hi_node, f"the upper bound of Sum over {name}")
+        if hi < lo:
+            raise self.fail(node, f"Sum over {name} from {lo} to {hi} is empty (the bounds are inclusive, lo ≤ hi)")
+        if self.sum_terms + (hi - lo + 1) > MAX_SUM_TERMS:
+            raise self.fail(node, f"the indexed sums expand to more than {MAX_SUM_TERMS} terms")
+        self.sum_terms += hi - lo + 1
+        terms = []
+        try:
+            for v in range(lo, hi + 1):
+                self.bound[name] = v
+                terms.append(self.build(body, depth + 1))
+        finally:
+            self.bound.pop(name, None)
+        return sp.Add(*terms)
+
     def name(self, node: ast.Name) -> sp.Expr:
         ident = node.id
+        if ident in self.bound:
+            return sp.Integer(self.bound[ident])
         if ident.startswith("_"):
             raise self.fail(node, f"name {ident!r} is not allowed (names may not start with '_')")
         if ident in self.symbols:

@@ -31,7 +31,8 @@ from typing import Callable
 
 import sympy as sp
 
-from ..derive import (Invariant, _zero_status, first_integrals, gradient, invariants, separable_split,
+from ..derive import (Invariant, _partials, _zero_status, first_integrals, gradient, invariants, plain_terms,
+                      separable_split,
                       vector_field)
 from ..poisson import is_poisson
 from ..problem import Hamiltonian
@@ -356,13 +357,48 @@ class Scheme:
 # Discrete-gradient–type methods: y1 = y0 + h J ∇̄H(y0, y1)
 # ---------------------------------------------------------------------------
 
+def _present(expr: sp.Expr, syms) -> list:
+    """The symbols of ``syms`` that occur in ``expr``, in their order.
+
+    A polynomial's monomials in these generators are its monomials in all of ``syms`` (the
+    others have exponent 0), but a :class:`sympy.Poly` costs with the number of generators,
+    not of the symbols used: ``Poly(p1, *y)`` over the 400 variables of a 200-particle chain
+    takes ~20 ms, so a degree test per component grew as d².  Size-independent instead.
+    """
+    fs = sp.sympify(expr).free_symbols
+    return [s for s in syms if s in fs]
+
+
+def _poly(expr: sp.Expr, syms):
+    """``Poly`` of ``expr`` in the symbols of ``syms`` it contains, or None if it is not a
+    polynomial in them with coefficients free of them; ``(poly, gens)``, poly None for a
+    constant (no generator)."""
+    gens = _present(expr, syms)
+    if not gens:
+        return None, []
+    poly = sp.Poly(expr, *gens)
+    if poly.free_symbols_in_domain & set(syms):
+        raise sp.PolynomialError("coefficients depend on the generators")
+    return poly, gens
+
+
+def _plain_monomials(expr: sp.Expr, syms) -> list[dict] | None:
+    """The exponents in ``syms`` of the monomials of ``expr`` (:func:`methodgen.derive.plain_terms`:
+    exact where ``expr`` is a plain sum of monomials), or None where it is not plain."""
+    terms = plain_terms(expr, syms)
+    return None if terms is None else [m for _, m in terms]
+
+
 def _degree_at_most(expr: sp.Expr, syms, k: int) -> bool:
     """``expr`` is a polynomial of total degree ≤ k in ``syms`` with coefficients free of them."""
+    plain = _plain_monomials(expr, syms)
+    if plain is not None:
+        return all(sum(m.values()) <= k for m in plain)
     try:
-        poly = sp.Poly(expr, *syms)
+        poly, _ = _poly(expr, syms)
     except sp.PolynomialError:
         return False
-    return poly.total_degree() <= k and not (poly.free_symbols_in_domain & set(syms))
+    return poly is None or poly.total_degree() <= k
 
 
 def _is_quadratic(expr: sp.Expr, syms) -> bool:
@@ -452,13 +488,7 @@ def splitting_invariants(system: Hamiltonian) -> tuple[str, ...]:
     gradU = [sp.diff(sep.U, s) for s in q]
     out = []
     for inv in first_integrals(system):
-        try:
-            poly = sp.Poly(inv.expr, *system.y)
-        except sp.PolynomialError:
-            continue
-        if poly.free_symbols_in_domain & set(system.y):
-            continue
-        if not all(sum(m[:d]) <= 1 and sum(m[d:]) <= 1 for m in poly.monoms()):
+        if not _qp_degrees_within(inv.expr, system, lambda dq, dp: dq <= 1 and dp <= 1):
             continue
         drift = sp.Add(*[sp.diff(inv.expr, s) * g for s, g in zip(q, gradT)])
         kick = sp.Add(*[sp.diff(inv.expr, s) * g for s, g in zip(p, gradU)])
@@ -467,21 +497,71 @@ def splitting_invariants(system: Hamiltonian) -> tuple[str, ...]:
     return tuple(out)
 
 
-def dg_linear_invariants(system: Hamiltonian, grad_bar: sp.Matrix, exclude=()) -> tuple[str, ...]:
+def _matvec(M: sp.Matrix, v: sp.Matrix) -> sp.Matrix:
+    """``M v``, skipping the zero entries of M: the product a Matrix ``*`` forms term by term
+    (``0 * v_j`` included) costs d² operations on v's (large) entries, the products of a
+    diagonal mass matrix d."""
+    n, m = M.shape
+    return sp.Matrix([sp.Add(*[M[i, j] * v[j] for j in range(m) if M[i, j] != 0]) for i in range(n)])
+
+
+def _shown_zero(expr: sp.Expr) -> bool:
+    """``expr ≡ 0`` shown exactly: as constructed, by ``expand``, else by ``simplify``
+    (the cheap reductions first: ``simplify`` of each of a 200-particle chain's momentum
+    components took seconds in all, where the difference is 0 as built)."""
+    return expr == 0 or sp.expand(expr) == 0 or sp.simplify(expr) == 0
+
+
+def dg_linear_invariants(system: Hamiltonian, grad_bar: sp.Matrix, exclude=(), loops=None) -> tuple[str, ...]:
     """Linear first integrals ``I = cᵀy`` kept by ``y1 = y0 + h J ∇̄H``: those with
     ``cᵀJ∇̄H(y0, y1) ≡ 0``, shown exactly on this discrete gradient (within
-    :data:`CLAIM_OPS_LIMIT` and :data:`CLAIM_SECONDS`; otherwise not claimed)."""
+    :data:`CLAIM_OPS_LIMIT` and :data:`CLAIM_SECONDS`; otherwise not claimed).
+
+    With ``loops`` (the q-part of ∇̄H as sums over families of like terms, :class:`LoopFamily`;
+    their sum is ∇̄H's q-part) the q-part's share is shown family by family first
+    (:func:`_dg_linear_by_families`), at a cost independent of the number of instances; where
+    that does not show it, the whole sum is reduced as without loops.
+    """
     d = system.dim
     out = []
     for inv in first_integrals(system):
         if inv.name in exclude or not _is_linear(inv.expr, system.y):
             continue
-        c = [sp.diff(inv.expr, s) for s in system.y]
+        c = _partials(inv.expr, system.y)     # one pass over I's terms, not 2d diffs of the sum
+        if loops and _dg_linear_by_families(system, c, grad_bar, loops):
+            out.append(inv.name)
+            continue
         # cᵀJ g = c_q · g_p − c_p · g_q
         e = sp.Add(*[c[i] * grad_bar[d + i] - c[d + i] * grad_bar[i] for i in range(d)])
         if _claim_zero(e, system):
             out.append(inv.name)
     return tuple(out)
+
+
+def _dg_linear_by_families(system: Hamiltonian, c, grad_bar: sp.Matrix, loops) -> bool:
+    """``cᵀJ∇̄H ≡ 0`` for constant ``c``, shown once per family and coefficient *pattern*.
+
+    ``cᵀJ∇̄H = c_q·∇̄H_p − c_p·Σ_f Σ_k ∇̄U_{f,k}``, and instance k of family f contributes
+    ``Σ_j c_{p, i_j} ∇̄T_j ∘ σ_k`` over its slots j (coordinate ``i_j``, template discrete
+    gradient ``∇̄T_j``): the renaming σ_k of ``E = Σ_j c_{p,i_j} ∇̄T_j``.  Instances with the
+    same coefficients ``(c_{p,i_j})_j`` share E, and E ≡ 0 (exact) gives 0 for all of them;
+    with ``c_q·∇̄H_p ≡ 0`` as well the whole is 0 (a sum of zeros).  True only when every
+    piece is shown 0; False means "not shown this way" (the pieces may still cancel).
+    """
+    d = system.dim
+    if any(not ci.is_Rational for ci in c):
+        return False
+    pieces = [sp.Add(*[c[i] * grad_bar[d + i] for i in range(d)])]
+    for lf in loops:
+        fam = lf.family
+        seen = set()
+        for idx in fam.index:
+            weights = tuple(c[d + i] for i in idx)
+            if weights in seen:
+                continue
+            seen.add(weights)
+            pieces.append(sp.Add(*[w * g for w, g in zip(weights, lf.dg)]))
+    return all(_claim_zero(e, system) for e in pieces)
 
 
 def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple], sp.Matrix],
@@ -518,18 +598,21 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     reducible = (
         reduce and sep is not None and sep.Minv is not None
         and not any(e.free_symbols & p1s for e in grad_bar[:d])
-        and all(sp.simplify(grad_bar[d + i] - (sep.Minv * (p0 + sp.Matrix(y1[d:])))[i] / 2) == 0
-                for i in range(d))
     )
+    if reducible:
+        vbar = _matvec(sep.Minv, p0 + sp.Matrix(y1[d:]))     # once, not once per component
+        reducible = all(_shown_zero(grad_bar[d + i] - vbar[i] / 2) for i in range(d))
     if reducible:
         z = tuple(increment_symbol(s) for s in system.q)
         zq = sp.Matrix(z)
         sub = {y1[i]: y0[i] + z[i] for i in range(d)}
         Gq = sp.Matrix([e.xreplace(sub) for e in grad_bar[:d]])
-        residual = zq - h * sep.Minv * (p0 - h / 2 * Gq)
+        residual = zq - h * _matvec(sep.Minv, p0 - h / 2 * Gq)
         increment = sp.Matrix(list(zq) + list(-h * Gq))
-        gradU0 = sp.Matrix([sp.diff(sep.U, s) for s in system.q])
-        guess = h * sep.Minv * (p0 - h / 2 * gradU0)
+        # ∂H/∂q = ∂U/∂q (separable): the cached gradient, derived family by family where U
+        # is a sum of like terms, instead of differentiating the whole sum d times
+        gradU0 = sp.Matrix(list(gradient(system)[:d]))
+        guess = h * _matvec(sep.Minv, p0 - h / 2 * gradU0)
         notes = ("momenta eliminated (separable H with quadratic kinetic energy): "
                  "Newton on Δq only",)
         resolution = "reduced"
@@ -560,7 +643,8 @@ def gradient_scheme(system: Hamiltonian, method: str, dg: Callable[[tuple, tuple
     if traits.discrete_gradient:
         # A discrete-gradient method keeps a linear first integral cᵀy exactly when its
         # ∇̄H respects it: cᵀ(y1 - y0) = h cᵀJ∇̄H ≡ 0 (checked on this ∇̄H).
-        preserved += dg_linear_invariants(system, grad_bar, exclude=preserved)
+        preserved += dg_linear_invariants(system, grad_bar, exclude=preserved,
+                                          loops=loops if reducible else None)
     traits = Traits(**{**traits.__dict__, "notes": traits.notes + notes, "preserved": preserved})
     return Scheme(system=system, method=method, traits=traits, unknowns=z, residual=residual,
                   guess=guess, increment=increment, discrete_gradient=grad_bar,
@@ -626,16 +710,32 @@ def bilinear_invariants(system: Hamiltonian) -> tuple[str, ...]:
     """
     out = []
     for inv in first_integrals(system):
-        try:
-            poly = sp.Poly(inv.expr, *system.y)
-        except sp.PolynomialError:
-            continue
-        if poly.free_symbols_in_domain & set(system.y):
-            continue
-        d = system.dim
-        if all(sum(m[:d]) == 1 and sum(m[d:]) == 1 for m in poly.monoms()):
+        if _qp_degrees_within(inv.expr, system, lambda dq, dp: dq == 1 and dp == 1, constant=False):
             out.append(inv.name)
     return tuple(out)
+
+
+def _qp_degrees_within(expr: sp.Expr, system: Hamiltonian, ok, constant: bool = True) -> bool:
+    """``expr`` is a polynomial in y with coefficients free of y, and ``ok(deg_q, deg_p)``
+    holds for each of its monomials (degree in q, degree in p); ``constant`` is the answer
+    for an expression free of y.  The polynomial is taken in the symbols it contains
+    (:func:`_present`), or read off the terms where they are plain (:func:`_plain_monomials`)."""
+    plain = _plain_monomials(expr, system.y)
+    if plain is not None:
+        qs = set(system.q)
+        if not any(plain):
+            return constant
+        return all(ok(sum(e for s, e in m.items() if s in qs), sum(e for s, e in m.items() if s not in qs))
+                   for m in plain)
+    try:
+        poly, gens = _poly(expr, system.y)
+    except sp.PolynomialError:
+        return False
+    if poly is None:
+        return constant
+    isq = [g in set(system.q) for g in gens]
+    return all(ok(sum(e for e, iq in zip(m, isq) if iq), sum(e for e, iq in zip(m, isq) if not iq))
+               for m in poly.monoms())
 
 
 def is_linear_field(system: Hamiltonian) -> bool:
@@ -647,10 +747,18 @@ def _field_degree(system: Hamiltonian) -> float:
     """Total polynomial degree of ``f = J∇H`` in y, with coefficients free of y (inf otherwise)."""
     deg = 0
     for fi in vector_field(system):
-        if not fi.is_polynomial(*system.y):
+        plain = _plain_monomials(fi, system.y)
+        if plain is not None:
+            deg = max([deg] + [sum(m.values()) for m in plain])
+            continue
+        gens = _present(fi, system.y)
+        if not gens:
+            continue
+        if not fi.is_polynomial(*gens):
             return float("inf")
-        poly = sp.Poly(fi, *system.y)
-        if poly.free_symbols_in_domain & set(system.y):
+        try:
+            poly, _ = _poly(fi, system.y)
+        except sp.PolynomialError:
             return float("inf")
         deg = max(deg, poly.total_degree())
     return deg

@@ -33,7 +33,7 @@ from dataclasses import replace
 
 import sympy as sp
 
-from ..derive import gradient, potential_families, separable_split
+from ..derive import _partials, gradient, plain_terms, potential_families, separable_split
 from ..divdiff import divided_difference
 from ..special import safe_div
 from ..problem import Hamiltonian
@@ -50,8 +50,17 @@ def _not_constrained(system: Hamiltonian, name: str) -> str | None:
 
 
 def _is_polynomial(expr: sp.Expr, syms) -> bool:
+    """``expr`` is a polynomial in ``syms`` with coefficients free of them: read off plain
+    terms (:func:`methodgen.derive.plain_terms`), else a ``Poly`` in the symbols it uses (a
+    ``Poly`` over all 2d symbols cost ~20 ms per term of a 200-particle chain)."""
+    if plain_terms(expr, syms) is not None:
+        return True
+    fs = expr.free_symbols
+    gens = [s for s in syms if s in fs]
+    if not gens:
+        return True
     try:
-        poly = sp.Poly(expr, *syms)
+        poly = sp.Poly(expr, *gens)
     except sp.PolynomialError:
         return False
     return not (poly.free_symbols_in_domain & set(syms))
@@ -136,7 +145,8 @@ def linear_form_gradient(lf: tuple[sp.Expr, sp.Symbol, sp.Expr], ys, y0, y1) -> 
     L, u, G = lf
     L0, L1 = L.xreplace(dict(zip(ys, y0))), L.xreplace(dict(zip(ys, y1)))
     dd = divided_difference(G, u, L0, L1)
-    return [sp.diff(L, s) * dd for s in ys]
+    used = L.free_symbols      # ∂L/∂s = 0 for the others: no diff of L per symbol of ys
+    return [sp.diff(L, s) * dd if s in used else sp.S.Zero for s in ys]
 
 
 class AVF:
@@ -176,7 +186,9 @@ class AVF:
         def dg(y0, y1):
             path = {a: a + sigma * (b - a) for a, b in zip(y0, y1)}
             poly = sp.Add(*[t for k, t, _ in plan if k == "symbolic"])
-            out = [sp.integrate(sp.expand(sp.diff(poly, s).xreplace(path)), (sigma, 0, 1)) for s in ys]
+            # ∂poly/∂s by one pass over its terms (_partials), and no integral of a zero
+            out = [sp.integrate(sp.expand(g.xreplace(path)), (sigma, 0, 1)) if g != 0 else sp.S.Zero
+                   for g in _partials(poly, ys)]
             parts.clear()
             parts.append({"expr": poly, "dg": list(out), "profile": None})
             for kind, t, lf in plan:
@@ -184,7 +196,8 @@ class AVF:
                     g_t = linear_form_gradient(lf, ys, y0, y1)
                     out = [o + g for o, g in zip(out, g_t)]
                     L, u, G = lf
-                    parts.append({"expr": t, "dg": g_t, "profile": (G, u, L, [sp.diff(L, s) for s in ys])})
+                    parts.append({"expr": t, "dg": g_t, "profile": (G, u, L, [sp.diff(L, s) if s in L.free_symbols
+                                                                              else sp.S.Zero for s in ys])})
                 elif kind == "quadrature":
                     gt = [sp.diff(t, s) for s in ys]
                     out = [o + sp.Add(*[wk * g.xreplace({a: a + ck * (b - a) for a, b in zip(y0, y1)})

@@ -63,7 +63,7 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
-from ..derive import _cache, first_integrals, separable_split
+from ..derive import _cache, _partials, first_integrals, separable_split
 from ..divdiff import divided_difference
 from ..families import term_families
 from ..problem import Hamiltonian
@@ -233,7 +233,7 @@ def applies(system: Hamiltonian) -> str | None:
     return None
 
 
-def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
+def kept_angular_momenta(system: Hamiltonian, terms, by_families: bool = True) -> tuple:
     """The first integrals ``L = qᵀDp`` (angular momenta — of one particle, total, or declared)
     that the term-wise discrete gradient keeps.
 
@@ -245,21 +245,65 @@ def kept_angular_momenta(system: Hamiltonian, terms) -> tuple:
     term (then ``{L, T} = {L, H} - Σ U_t'(F_t){L, F_t} = 0`` too).  A term V(E) whose form is
     not rotation-invariant (``4(x² + 2y²)²``) keeps no L, even if the sum U happens to be
     radial; a polynomial term (AVF integral, not of that form) keeps none either.
+
+    Where U is a sum of like terms the test is made once per template term and weight
+    pattern (:func:`_forms_commute_by_families`; ``by_families=False`` tests every instance,
+    the reference the tests compare with).
     """
     if not terms or any(t.form is None for t in terms):
         return ()
     q, p = list(system.q), list(system.p)
     out = []
     bilinear = set(bilinear_invariants(system))
+    fams = decompose_families(system) if by_families else None
     for inv in first_integrals(system):
         if inv.name not in bilinear:
             continue
         L = inv.expr
+        w = _partials(L, p)
+        by_families = _forms_commute_by_families(w, q, fams) if fams else None
+        if by_families is not None:
+            if by_families:
+                out.append(inv)
+            continue
         # {L, E(q)} = -Σ_k ∂L/∂p_k ∂E/∂q_k
-        if all(sp.expand(sum(sp.diff(L, pk) * sp.diff(t.form, qk) for qk, pk in zip(q, p))) == 0
+        if all(sp.expand(sum(wk * sp.diff(t.form, qk) for qk, wk in zip(q, w))) == 0
                for t in terms):
             out.append(inv)
     return tuple(out)
+
+
+def _forms_commute_by_families(w, q, fams) -> bool | None:
+    """``{L, F_t} = -Σ_k w_k ∂F_t/∂q_k ≡ 0`` for every instance's form, ``w = ∂L/∂p``, shown
+    once per template term and weight *pattern*; None where some weight reads a coordinate
+    outside an instance that uses it (the caller tests instance by instance).
+
+    An instance's form ``F_t = F∘σ`` depends on its own coordinates only, so
+    ``{L, F_t} = -Σ_j w_{i_j} ∂F/∂u_j ∘ σ`` over its slots j; where every ``w_{i_j}`` is a
+    function of the instance's coordinates it is ``σ(-Σ_j σ⁻¹(w_{i_j}) ∂F/∂u_j)``, and
+    instances with the same ``σ⁻¹(w_{i_j})`` share that expression: one ``expand`` per
+    pattern (the test the instances were put to one by one), whatever the number of
+    instances.  The answer is the per-instance test's: each instance's expression is the
+    renaming of its pattern's, and a renaming maps 0 to 0 and back.
+    """
+    qset = set(q)
+    for fam, tterms in fams:
+        grads = [[sp.diff(t.form, u) for u in fam.slots] for t in tterms]
+        seen = set()
+        for idx in fam.index:
+            back = {q[i]: u for u, i in zip(fam.slots, idx)}
+            weights = []
+            for i in idx:
+                if w[i].free_symbols & (qset - set(back)):
+                    return None
+                weights.append(w[i].xreplace(back))
+            weights = tuple(weights)
+            if weights in seen:
+                continue
+            seen.add(weights)
+            if any(sp.expand(sp.Add(*[wj * gj for wj, gj in zip(weights, g)])) != 0 for g in grads):
+                return False
+    return True
 
 
 def _term_dg(term: _Term, q, q0, q1) -> list[sp.Expr]:
