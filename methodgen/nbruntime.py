@@ -49,7 +49,7 @@ import numpy
 from numba import types as _t
 
 __all__ = ["run", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256",
-           "no_guess", "no_res", "no_resjac", "no_scale", "no_hs", "no_check"]
+           "no_kernel"]
 
 # --- cache stamp ---------------------------------------------------------------------
 
@@ -131,35 +131,48 @@ def _kernel(sig):
 
 
 # Stand-ins for the kernels a module does not have (an explicit method has no Newton
-# kernels, a method that keeps H no energy-jump kernel); never called.
-@_kernel(KERNEL_TYPES["guess"])
-def no_guess(y, h, p, out):
+# kernels, a method that keeps H no energy-jump kernel); never called.  Compiled (or loaded
+# from the cache) on first request, so a module loads only those it needs.
+def _no_guess(y, h, p, out):
     pass
 
 
-@_kernel(KERNEL_TYPES["res"])
-def no_res(z, y, c, h, p, r):
+def _no_res(z, y, c, h, p, r):
     pass
 
 
-@_kernel(KERNEL_TYPES["resjac"])
-def no_resjac(z, y, c, h, p, r, J):
+def _no_resjac(z, y, c, h, p, r, J):
     pass
 
 
-@_kernel(KERNEL_TYPES["scale"])
-def no_scale(y, h, p):
+def _no_scale(y, h, p):
     return 0.0
 
 
-@_kernel(KERNEL_TYPES["hs"])
-def no_hs(y, p, out):
+def _no_hs(y, p, out):
     pass
 
 
-@_kernel(KERNEL_TYPES["check"])
-def no_check(y, p, out):
+def _no_check(y, p, out):
     pass
+
+
+_NO = {"guess": _no_guess, "res": _no_res, "resjac": _no_resjac, "scale": _no_scale, "hs": _no_hs,
+       "check": _no_check}
+_compiled = {}
+
+
+def _once(key, sig, py_func):
+    """``py_func`` compiled for ``sig`` (cached on disk), the first time it is asked for."""
+    f = _compiled.get(key)
+    if f is None:
+        f = _compiled[key] = numba.njit(sig, **_OPTS)(py_func)
+    return f
+
+
+def no_kernel(kind: str):
+    """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one."""
+    return _once("no_" + kind, KERNEL_TYPES[kind], _NO[kind])
 
 
 # --- configuration -------------------------------------------------------------------------
@@ -724,20 +737,27 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
                 nxt += every
 
 
-@numba.njit(_t.void(_F["res"], _M, _M, _f8, _V, _M), **_OPTS)
-def res_rows(res, Z, Y, h, p, R):
-    """The residual at each row of Z, Y (no compensation)."""
+def _res_rows(res, Z, Y, h, p, R):
     c = numpy.zeros(Y.shape[1])
     for b in range(Z.shape[0]):
         res(Z[b], Y[b], c, h, p, R[b])
 
 
-@numba.njit(_t.void(_F["resjac"], _M, _M, _f8, _V, _M, _t.float64[:, :, ::1]), **_OPTS)
-def jac_rows(resjac, Z, Y, h, p, R, J):
-    """The residual and the Jacobian at each row of Z, Y (no compensation)."""
+def _jac_rows(resjac, Z, Y, h, p, R, J):
     c = numpy.zeros(Y.shape[1])
     for b in range(Z.shape[0]):
         resjac(Z[b], Y[b], c, h, p, R[b], J[b])
+
+
+def res_rows(res, Z, Y, h, p, R):
+    """The residual at each row of Z, Y (no compensation); compiled on first use."""
+    _once("res_rows", _t.void(_F["res"], _M, _M, _f8, _V, _M), _res_rows)(res, Z, Y, h, p, R)
+
+
+def jac_rows(resjac, Z, Y, h, p, R, J):
+    """The residual and the Jacobian at each row of Z, Y (no compensation); compiled on first use."""
+    _once("jac_rows", _t.void(_F["resjac"], _M, _M, _f8, _V, _M, _t.float64[:, :, ::1]), _jac_rows)(
+        resjac, Z, Y, h, p, R, J)
 
 
 # --- configuration arrays (Python) ----------------------------------------------------------
