@@ -79,9 +79,11 @@ def test_shared_runtime_and_template_route_agree_bitwise(tmp_path, monkeypatch):
 @pytest.mark.slow
 @pytest.mark.parametrize("scene_name,method,order", [
     ("kepler", "energy-momentum", 4), ("kepler", "stormer-verlet", 4), ("henon-heiles", "kahan", 2),
-    ("henon-heiles-2d", "energy-momentum", 2), ("kepler-eccentric", "gauss", 2)])
+    ("henon-heiles-2d", "energy-momentum", 2), ("kepler-eccentric", "gauss", 2),
+    ("spherical-pendulum", "shake", 2), ("rigid-body", "avf", 2)])
 def test_routes_agree_bitwise_on_every_kind(tmp_path, monkeypatch, scene_name, method, order):
-    """Compositions, first-same-as-last, linearly implicit, domain conditions (slow: the
+    """Compositions, first-same-as-last, linearly implicit, domain conditions, constraints
+    (banded elimination), a Poisson system (slow: the
     template route compiles a loop per module; the pendulum test above is the fast sibling)."""
     scene = mg.load_scene(scene_name)
     scheme = mg.discretize(scene.system, method, order=order)
