@@ -251,6 +251,19 @@ def _docsafe(text: str) -> str:
     return " ".join(text.replace("\\", " ").replace('"""', "'''").split())
 
 
+def shared_runtime_supports(ir: ModuleIR) -> bool:
+    """True when a numba module of ``ir`` runs on the shared compiled runtime
+    (:mod:`methodgen.nbruntime`: only its kernels are compiled per system), False when it
+    takes the template route (one compiled loop per module, ``templates/numba_runtime.py.j2``).
+
+    The runtime knows the step structures below: explicit stages (compositions, with or
+    without first-same-as-last), Newton-solved and linearly implicit stages, with every
+    check and solver variant.  A new structure must be added here and to the runtime, or
+    it falls back to the template route.
+    """
+    return ir.kind in ("explicit", "newton", "linear")
+
+
 def render(ir: ModuleIR, backend: str = "numpy") -> str:
     """Render the module source for ``ir`` with the templates of ``backend`` (deterministic)."""
     import sympy
@@ -310,7 +323,7 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     body_env = _environment()
     text = body_env.get_template(template).render(
         ir=clean, vector=vector, header=header, defaults_text=defaults,
-        traits_text=repr(ir.traits))
+        traits_text=repr(ir.traits), shared=backend == "numba" and shared_runtime_supports(ir))
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     digest = hashlib.sha256(text.encode()).hexdigest()
     return HEADER_CONTENT + digest + "\n" + text

@@ -1,0 +1,227 @@
+"""The shared compiled runtime of the numba backend (methodgen.nbruntime).
+
+A numba module compiles only its kernels and runs on the runtime compiled once per
+machine; the template route (one compiled loop per module) is the fallback.  These
+tests check that the two routes give the same trajectories, that the runtime reads
+its per-stage coefficients from the module, and that a stale cached runtime is
+rebuilt, never loaded.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from methodgen import emit
+from methodgen.emit import emit_source, module_filename
+
+pytest.importorskip("numba")
+
+from methodgen import nbruntime  # noqa: E402
+
+
+def _module(tmp_path, scene_name, method, order=2, **options):
+    scene = mg.load_scene(scene_name)
+    scheme = mg.discretize(scene.system, method, order=order, **options)
+    path = tmp_path / module_filename(scene.name, f"{method}_o{order}", "numba")
+    return scene, mg.generate(scheme, path, backend="numba")
+
+
+# --- route ---------------------------------------------------------------------------
+
+def test_every_step_structure_of_today_takes_the_shared_runtime(kepler):
+    """Explicit, Newton-solved and linearly implicit stages all run on the shared runtime;
+    the module then holds kernels only (no compiled loop of its own)."""
+    for method in ("energy-momentum", "stormer-verlet", "kahan"):
+        src = emit_source(mg.discretize(kepler if method != "kahan" else mg.load_scene("henon-heiles").system,
+                                        method), backend="numba")
+        assert "_rt.run(" in src and "def _nb_run(" not in src, method
+        assert "def _nb_solve_step(" not in src
+    # control: the predicate decides -- refused, the template route is emitted
+    ir_kinds = {"explicit", "newton", "linear"}
+    assert all(emit.shared_runtime_supports(type("IR", (), {"kind": k})()) for k in ir_kinds)
+    assert not emit.shared_runtime_supports(type("IR", (), {"kind": "projection"})())
+
+
+def test_fallback_route_is_selected_by_the_predicate(kepler, monkeypatch):
+    monkeypatch.setattr(emit, "shared_runtime_supports", lambda ir: False)
+    src = emit_source(mg.discretize(kepler, "energy-momentum"), backend="numba")
+    assert "def _nb_run(" in src and "_rt.run(" not in src and "nbruntime" not in src
+
+
+def test_shared_runtime_and_template_route_agree_bitwise(tmp_path, monkeypatch):
+    """One trajectory through both routes (Newton, local error carried, compensated sums):
+    the same arithmetic, so the same bits.  Control: a perturbed step size differs."""
+    scene = mg.load_scene("simple-pendulum")
+    scheme = mg.discretize(scene.system, "midpoint")
+    shared = mg.generate(scheme, tmp_path / "shared_numba.py", backend="numba")
+    monkeypatch.setattr(emit, "shared_runtime_supports", lambda ir: False)
+    old = mg.generate(scheme, tmp_path / "template_numba.py", backend="numba")
+    assert hasattr(old, "_nb_run") and not hasattr(shared, "_nb_run")
+    y0 = np.array(scene.y0)
+    i_new, i_old = {}, {}
+    a = shared.integrate(y0, scene.h, 500, info=i_new)
+    b = old.integrate(y0, scene.h, 500, info=i_old)
+    assert np.array_equal(a, b)
+    assert np.array_equal(i_new["newton_iterations"], i_old["newton_iterations"])
+    assert np.array_equal(i_new["compensation"], i_old["compensation"])
+    # control: the comparison sees a difference of one ulp in h
+    c = shared.integrate(y0, np.nextafter(scene.h, 1.0), 500)
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene_name,method,order", [
+    ("kepler", "energy-momentum", 4), ("kepler", "stormer-verlet", 4), ("henon-heiles", "kahan", 2),
+    ("henon-heiles-2d", "energy-momentum", 2), ("kepler-eccentric", "gauss", 2),
+    ("spherical-pendulum", "shake", 2), ("rigid-body", "avf", 2)])
+def test_routes_agree_bitwise_on_every_kind(tmp_path, monkeypatch, scene_name, method, order):
+    """Compositions, first-same-as-last, linearly implicit, domain conditions, constraints
+    (banded elimination), a Poisson system (slow: the
+    template route compiles a loop per module; the pendulum test above is the fast sibling)."""
+    scene = mg.load_scene(scene_name)
+    scheme = mg.discretize(scene.system, method, order=order)
+    shared = mg.generate(scheme, tmp_path / "shared_numba.py", backend="numba")
+    monkeypatch.setattr(emit, "shared_runtime_supports", lambda ir: False)
+    old = mg.generate(scheme, tmp_path / "template_numba.py", backend="numba")
+    y0 = np.array(scene.y0)
+    if shared.TIME_TRANSFORM:
+        y0 = shared.initial_state(y0)
+    new, old_ = _outcome(shared, y0, scene.h), _outcome(old, y0, scene.h)
+    assert new[0] == old_[0] and new[1] == old_[1]          # same exception (or none), same message
+    assert np.array_equal(new[2], old_[2]) and np.array_equal(new[3], old_[3])
+
+
+def _outcome(mod, y0, h, steps=300):
+    """(exception type, its message without the module name, trajectory, iterations)."""
+    info = {}
+    try:
+        traj = mod.integrate(y0, h, steps, info=info)
+        return None, "", traj, info["newton_iterations"]
+    except (mod.ResolutionError, mod.ConvergenceError, mod.NonFiniteError) as exc:
+        return type(exc).__name__, str(exc), exc.trajectory, info.get("newton_iterations")
+
+
+# --- per-stage coefficients ----------------------------------------------------------
+
+def test_explicit_stage_reads_its_step_from_the_drift_coefficients(tmp_path):
+    """The runtime hands the post kernel h·KICK_A[k], h·DRIFT[k], h·KICK_B[k]; today's kernels
+    take their step from DRIFT.  Doubling DRIFT is then one step of 2h; control: restored,
+    the step of h again (and the two differ)."""
+    scene, mod = _module(tmp_path, "simple-pendulum", "stormer-verlet")
+    y0 = np.array(scene.y0)
+    h = scene.h
+    np.testing.assert_array_equal(mod._KICK_A, 0.5 * np.array(mod.GAMMAS))
+    np.testing.assert_array_equal(mod._DRIFT, np.array(mod.GAMMAS))
+    ref_h = mod.integrate(y0, h, 1)
+    ref_2h = mod.integrate(y0, 2 * h, 1)
+    saved = mod._DRIFT.copy()
+    try:
+        mod._DRIFT[:] = 2 * saved
+        doubled = mod.integrate(y0, h, 1)
+    finally:
+        mod._DRIFT[:] = saved
+    np.testing.assert_array_equal(doubled, ref_2h)
+    np.testing.assert_array_equal(mod.integrate(y0, h, 1), ref_h)
+    assert not np.array_equal(ref_h, ref_2h)
+
+
+def test_configuration_is_checked_by_name():
+    with pytest.raises(ValueError, match="missing .*'N'"):
+        nbruntime.int_config(**{k: 0 for k in nbruntime.CFG if k != "N"})
+    with pytest.raises(ValueError, match="unknown .*'BOGUS'"):
+        nbruntime.float_config(**{k: 0.0 for k in nbruntime.FCFG}, BOGUS=1.0)
+    cfg = nbruntime.int_config(**{k: i for k, i in nbruntime.CFG.items()})
+    assert cfg.tolist() == list(range(len(nbruntime.CFG)))
+
+
+def test_status_codes_match_the_modules(tmp_path):
+    _, mod = _module(tmp_path, "simple-pendulum", "midpoint")
+    for name, code in nbruntime.STATUS.items():
+        assert getattr(mod, "_" + name) == code, name
+
+
+# --- cache stamp -------------------------------------------------------------------------
+
+def test_the_runtime_is_stamped_with_its_content_hash():
+    locator = nbruntime.run._cache._impl.locator
+    assert locator.get_source_stamp() == ("methodgen.nbruntime", nbruntime.SOURCE_SHA256)
+    import hashlib
+    with open(nbruntime.__file__, "rb") as f:
+        assert hashlib.sha256(f.read()).hexdigest() == nbruntime.SOURCE_SHA256
+
+
+_TINY = '''
+import os, sys
+from methodgen.nbruntime import _install_stamp_guard, _source_digest
+P = os.path.abspath(__file__)
+_install_stamp_guard(P, {stamp})
+import numba
+
+@numba.njit("int64()", cache=True)
+def f():
+    return 1111
+
+print(f(), sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))
+'''
+
+
+def _stale_roundtrip(tmp_path, stamp):
+    """Compile, load, then edit the source keeping its size and mtime: what runs?"""
+    src = tmp_path / "tiny_rt.py"
+    src.write_text(_TINY.format(stamp=stamp))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "nbcache"),
+           "PYTHONPATH": os.pathsep.join([str(tmp_path)] + sys.path)}
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", "import tiny_rt"], cwd=tmp_path, env=env,
+                             capture_output=True, text=True, check=True).stdout.split()
+        return tuple(int(x) for x in out)
+
+    first = run()
+    second = run()
+    st = os.stat(src)
+    text = src.read_text()
+    src.write_text(text.replace("return 1111", "return 2222"))   # same size
+    os.utime(src, ns=(st.st_atime_ns, st.st_mtime_ns))            # same mtime
+    assert os.stat(src).st_size == st.st_size
+    return first, second, run()
+
+
+def test_a_stale_cached_runtime_is_rebuilt_never_loaded(tmp_path):
+    first, second, edited = _stale_roundtrip(tmp_path, "_source_digest(P)")
+    assert first == (1111, 0, 1)     # compiled
+    assert second == (1111, 1, 0)    # loaded from the cache
+    assert edited == (2222, 0, 1)    # the edit is compiled, not the stale code loaded
+
+
+def test_stale_runtime_negative_control(tmp_path):
+    """A stamp that does not see the edit (as (mtime, size) would not) loads stale code:
+    the test above can fail."""
+    first, second, edited = _stale_roundtrip(tmp_path, "'fixed'")
+    assert second == (1111, 1, 0)
+    assert edited == (1111, 1, 0)
+
+
+def test_a_cached_runtime_serves_a_new_system_without_recompiling(tmp_path):
+    """In a fresh process with the runtime cached, a new module compiles its kernels only."""
+    scene = mg.load_scene("double-well")
+    path = tmp_path / module_filename("dw", "midpoint", "numba")
+    mg.generate(mg.discretize(scene.system, "midpoint"), path, backend="numba")
+    code = textwrap.dedent(f"""
+        import numpy as np
+        from methodgen import nbruntime as rt
+        from methodgen.emit import load_module
+        m = load_module({str(path)!r})
+        m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
+        print(sum(rt.run.stats.cache_misses.values()), sum(rt.run.stats.cache_hits.values()))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=os.environ.copy())
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split() == ["0", "1"]
