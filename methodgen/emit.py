@@ -275,6 +275,8 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
         vector["hs"] = _vector_view(ir.vector["hs"], [("_out", (2,))], "_out")
     if "force" in ir.vector:   # first-same-as-last Störmer–Verlet: ∇U at a run's start
         vector["force"] = _vector_view(ir.vector["force"], [("_out", ir.vector["force"].shape)], "_out")
+    if "proj" in ir.vector:   # symmetric projection: g, then G row by row (methodgen.projection)
+        vector["proj"] = _vector_view(ir.vector["proj"], [("_out", ir.vector["proj"].shape)], "_out")
     if ir.n_constraints:
         m, d = ir.n_constraints, ir.dim
         vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")

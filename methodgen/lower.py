@@ -270,6 +270,10 @@ class ModuleIR:
     #: force ∇U(q0) that the post kernel takes as input ``_g`` and returns, as the end
     #: force, right after Δy; empty for every other method.
     fsal_vars: tuple[str, ...] = ()
+    #: Symmetric projection (:mod:`methodgen.projection`): the projected invariants' names,
+    #: H first (kernel ``proj``: their values, then their gradients row by row); empty
+    #: without projection.
+    projection: tuple[str, ...] = ()
 
     @property
     def stages(self) -> int:
@@ -454,7 +458,7 @@ def local_error_plan(scheme, dy=None, field_at_end=None) -> LocalErrorPlan | Non
     def squares(exprs):
         return sp.Add(*[e**2 for e in exprs])
 
-    if system.constraints or scheme.traits.solve == "explicit":
+    if system.constraints or scheme.traits.solve in ("explicit", "projection"):
         d = system.dim
         q = tuple(range(d))
         sep = separable_split(system)
@@ -710,6 +714,13 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         vector["constraints"] = _kernel(list(system.constraints) + list(G), (n_cons + n_cons * system.dim,),
                                         vp, rename)
         vector["minv"] = _kernel(list(Minv), (system.dim * system.dim,), vp, rename)
+    if scheme.projection:
+        # Symmetric projection (methodgen.projection): the projected invariants g and their
+        # gradients G (row by row), at one state.
+        from .projection import gradients
+        g, G = gradients(scheme)
+        scalar["proj"] = _kernel(g + G, (len(g) + len(G),), sp_, rename)
+        vector["proj"] = _kernel(g + G, (len(g) + len(G),), vp, rename)
 
     all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
     if plan is not None:   # the helpers the loops' template terms call (Jacobian terms too:
@@ -721,7 +732,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         system_name=system.name or "system",
         method=scheme.method,
         description=scheme.description,
-        kind=scheme.traits.solve,
+        # a projected method runs its base explicit step (the projection is its own loop)
+        kind="explicit" if scheme.projection else scheme.traits.solve,
         order=scheme.traits.order,
         traits=scheme.traits.as_dict(),
         source=system.source,
@@ -755,6 +767,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         loop_tables=_loop_tables(plan),
         band=band if n else (0, 0),
         fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
+        projection=tuple(scheme.projection),
     )
 
 

@@ -112,6 +112,8 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         raise MethodNotApplicable(f"{reason}. Methods that apply to this system: "
                                   f"{', '.join(ok) if ok else '(none)'}")
     comp = composition_for(order, composition)
+    # ``project=``: symmetric projection of the (composed) step, applied last (methodgen.projection)
+    project = options.pop("project", None)
     try:
         scheme = mod.build(system, **options)
     except TypeError as exc:
@@ -125,7 +127,7 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         # local error estimate, which is relative to the step, guards every step instead.
         scheme = dataclasses.replace(scheme, resolution=None)
     if comp is None:
-        return scheme
+        return _projected(scheme, project)
     t = scheme.traits
     if not (t.symmetric and t.order == 2):
         ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
@@ -133,7 +135,15 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
             f"order {order} is built by symmetric composition, which needs a symmetric method of "
             f"order 2; {method} is {'not symmetric' if not t.symmetric else f'of order {t.order}'} "
             f"for this system. Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
-    return scheme.compose(comp)
+    return _projected(scheme.compose(comp), project)
+
+
+def _projected(scheme: Scheme, project) -> Scheme:
+    if project is None:
+        return scheme
+    from ..projection import project_scheme
+
+    return project_scheme(scheme, project)
 
 
 #: Methods that are symmetric of order 2 on every system they apply to (Itoh–Abe is not).

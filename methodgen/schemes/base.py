@@ -252,6 +252,9 @@ class Scheme:
     #: The step's equations with the potential's sums of like terms kept as sums
     #: (:class:`LoopPlan`), for modules that loop over them; None where not built.
     loops: LoopPlan | None = None
+    #: Names of the invariants a symmetric projection keeps (``H`` first,
+    #: :mod:`methodgen.projection`); empty for the method itself.
+    projection: tuple[str, ...] = ()
 
     h = STEP
 

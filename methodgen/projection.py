@@ -1,0 +1,116 @@
+"""Symmetric projection of a symmetric explicit method onto H = H0 (and declared invariants).
+
+The projected step [Hairer 2000; HLW06, §V.4.1] of a base step Φ_h (Störmer–Verlet or one of
+its symmetric compositions) onto the level set ``g(y) = g(y_start)`` of the invariants
+``g = (H, I_2, …)``, with ``G = ∂g/∂y`` their stacked gradients, is
+
+    ỹ0 = y0 + G(y0)ᵀ λ,    ŷ1 = Φ_h(ỹ0),    y1 = ŷ1 + G(y1)ᵀ λ,    g(y1) = g(y_start),
+
+one unknown λ per invariant.  It keeps what the construction gives and nothing else:
+
+* the invariants projected on, to the solve's round-off at every step (``g`` is the
+  level of the *run's* initial state, so the error does not accumulate);
+* symmetry, when Φ_h is symmetric: the step with ``-h`` from y1 is solved by ``-λ`` and
+  returns to y0 (proved below from the structure, :func:`symmetry_argument`);
+* the order of Φ_h (λ = O(h^{p+1}), so the projection moves the step by O(h^{p+1}));
+* NOT symplecticity (the projection is not a symplectic map), and NOT an invariant
+  the base method kept exactly but that is not projected on (energy-only projection
+  of Störmer–Verlet loses its exact angular momentum on Kepler: ∇H is not tangent to
+  the level set of L).
+
+The solve (in the generated module, ``templates/_projection.py.j2`` and
+``templates/numba_projection.py.j2``) is a simplified Newton iteration on λ alone:
+Φ_h is re-evaluated at each iterate (no first-order expansion of Φ_h, which would
+leave the symmetry defect at O(h·|λ|) instead of round-off), the matrix is
+``G(y1)(G(y0) + G(y1))ᵀ`` (exact up to ``Φ_h' = I + O(h)``), and λ starts from the
+previous step's value.  It stops by the same round-off rule as every Newton loop of
+the generator, and raises ConvergenceError with the step and the residual otherwise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import sympy as sp
+
+from .errors import InputError, MethodNotApplicable
+
+__all__ = ["PROJECTIONS", "MAX_PROJECTED", "project_scheme", "projected_names", "symmetry_argument"]
+
+#: ``project=`` values: "energy" (H alone) or "invariants" (H and every declared or
+#: detected first integral the module monitors).
+PROJECTIONS = ("energy", "invariants")
+#: At most this many invariants (the m×m matrix is solved in closed form).
+MAX_PROJECTED = 3
+
+
+def projected_names(scheme, project: str) -> tuple[str, ...]:
+    """The names of the invariants ``project`` selects for ``scheme`` (H first)."""
+    names = tuple(inv.name for inv in scheme.invariants)
+    if not names or names[0] != "H":
+        raise MethodNotApplicable("symmetric projection needs H among the monitored invariants")
+    if project == "energy":
+        return ("H",)
+    exact = tuple(inv.name for inv in scheme.invariants[1:] if inv.exact)
+    return ("H",) + exact
+
+
+def project_scheme(scheme, project):
+    """``scheme`` (symmetric, explicit, possibly composed) with symmetric projection.
+
+    Parameters
+    ----------
+    scheme : Scheme
+    project : {"energy", "invariants"}
+
+    Raises
+    ------
+    InputError
+        ``project`` is not one of :data:`PROJECTIONS`.
+    MethodNotApplicable
+        The base method is not symmetric and explicit, the system has constraints or is a
+        Poisson system, or more than :data:`MAX_PROJECTED` invariants would be projected.
+    """
+    if not isinstance(project, str) or project not in PROJECTIONS:
+        raise InputError(f"project must be one of {', '.join(PROJECTIONS)}, got {project!r}")
+    t = scheme.traits
+    if t.solve != "explicit" or not t.symmetric:
+        raise MethodNotApplicable(
+            f"symmetric projection wraps a symmetric explicit method (stormer-verlet and its "
+            f"compositions); {scheme.method} is {'not symmetric' if not t.symmetric else t.solve}")
+    if scheme.system.constraints or scheme.structure_matrix is not None:
+        raise MethodNotApplicable("symmetric projection is for unconstrained canonical systems here")
+    names = projected_names(scheme, project)
+    if len(names) > MAX_PROJECTED:
+        raise MethodNotApplicable(f"symmetric projection onto {len(names)} invariants ({', '.join(names)}): "
+                                  f"at most {MAX_PROJECTED} (use project='energy')")
+    kept_base = [n for n in t.preserved if n not in names]
+    note = (f"symmetric projection onto {', '.join(names)} (one simplified-Newton solve for "
+            f"{len(names)} multiplier(s) per step, Φ_h re-evaluated per iteration); symmetric because "
+            f"the base step is; order {t.order} kept; not symplectic"
+            + (f"; the base method's exact {', '.join(kept_base)} is not kept" if kept_base else ""))
+    traits = dataclasses.replace(t, symplectic=False, energy_preserving=True, preserved=names,
+                                 solve="projection", notes=t.notes + (note,))
+    return dataclasses.replace(scheme, traits=traits, projection=names,
+                               options=tuple(scheme.options) + (("project", project),))
+
+
+def gradients(scheme) -> tuple[list[sp.Expr], list[sp.Expr]]:
+    """``g`` (the projected invariants) and ``G`` row by row (flattened), in y0 symbols."""
+    by_name = {inv.name: inv.expr for inv in scheme.invariants}
+    g = [by_name[n] for n in scheme.projection]
+    G = [sp.diff(e, s) for e in g for s in scheme.system.y]
+    return g, G
+
+
+def symmetry_argument(scheme) -> dict:
+    """Why the projected step is symmetric, checked on the base step's structure.
+
+    The projected map with ``-h`` from y1 is solved by ``-λ``: ``ỹ1 = y1 - G(y1)ᵀλ = ŷ1``,
+    ``Φ_{-h}(ŷ1) = ỹ0`` (Φ symmetric), ``ỹ0 - G(y0)ᵀλ = y0`` -- the equations of the reverse
+    step hold at y0 exactly, so symmetry holds whenever Φ_h is symmetric.  This is an
+    argument from the structure; what it rests on is the base step's symmetry, which
+    :mod:`methodgen.verify` proves for the base method (``base``).
+    """
+    return {"holds": bool(scheme.traits.symmetric), "rests_on": "symmetry of the base step Φ_h",
+            "how": "the reverse step from y1 with -h is solved by -λ and ends at y0"}
