@@ -1,0 +1,173 @@
+"""Symmetric projection (methodgen.projection): energy to round-off, symmetry, order kept.
+
+Every property has a negative control: the unprojected base step (``_base_integrate``)
+drifts in H; the standard (non-symmetric) projection, built here from the same module's
+kernels, does not return under ``-h``; the energy-only projection loses the angular
+momentum that the base method (and the projection onto H and L) keeps.  numpy backend
+(the numba loop is the same iteration; ``test_numba_agrees`` checks it when numba is there).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from conftest import HH_T, HH_Y0
+from methodgen.errors import InputError, MethodNotApplicable
+
+H = 0.1
+
+
+@pytest.fixture(scope="module")
+def hh():
+    return mg.load_scene("henon-heiles-2d").run_system
+
+
+@pytest.fixture(scope="module")
+def proj2(hh):
+    return mg.build(hh, "stormer-verlet", project="energy")
+
+
+@pytest.fixture(scope="module")
+def proj4(hh):
+    return mg.build(hh, "stormer-verlet", order=4, project="energy")
+
+
+def _energy_error(mod, traj):
+    Hs = mod.hamiltonian(traj)
+    return float(np.max(np.abs(Hs - Hs[0])))
+
+
+def test_energy_to_roundoff_and_control(proj2):
+    traj = proj2.integrate(HH_Y0, H, 2000)
+    # H = 1/8: a few ulps of H (its terms are of its size) at every step, no drift
+    assert _energy_error(proj2, traj) <= 32 * np.finfo(float).eps * 0.125
+    # control: the same base step without the projection has an O(h^2) energy error
+    base = proj2._base_integrate(HH_Y0, H, 2000)
+    assert _energy_error(proj2, base) > 1e-5
+
+
+def test_symmetric_to_roundoff(proj2, proj4):
+    for mod in (proj2, proj4):
+        y1 = mod.integrate(HH_Y0, H, 1)[-1]
+        back = mod.integrate(y1, -H, 1)[-1]
+        assert np.max(np.abs(back - HH_Y0)) <= 1e-15
+        # and over many steps
+        yN = mod.integrate(HH_Y0, H, 500)[-1]
+        assert np.max(np.abs(mod.integrate(yN, -H, 500)[-1] - HH_Y0)) <= 1e-12
+
+
+def _standard_projection_step(mod, y, h):
+    """Standard projection (HLW06 §IV.4): ŷ1 = Φ_h(y0), y1 = ŷ1 + G(ŷ1)ᵀμ with g(y1) = g(y0),
+    μ by Newton on the line -- the non-symmetric counterpart, from the module's kernels."""
+    tgt = mod._s_proj(list(y), ())[0]
+    yh = mod._base_flow(list(y), h, ())
+    G = mod._s_proj(yh, ())[1:]
+    mu = 0.0
+    for _ in range(50):
+        y1 = [a + g * mu for a, g in zip(yh, G)]
+        v = mod._s_proj(y1, ())
+        d = (tgt - v[0]) / sum(a * b for a, b in zip(v[1:], G))
+        mu += d
+        if abs(d) < 1e-18:
+            break
+    return np.array([a + g * mu for a, g in zip(yh, G)])
+
+
+def test_standard_projection_is_not_symmetric(proj2):
+    """Negative control of the symmetry test: the same check fails for standard projection."""
+    y1 = _standard_projection_step(proj2, HH_Y0, H)
+    back = _standard_projection_step(proj2, y1, -H)
+    assert np.max(np.abs(back - HH_Y0)) > 1e-8
+    # while it does keep H (so the difference is the symmetry, not the level set)
+    assert abs(proj2.hamiltonian(y1) - 0.125) < 1e-15
+
+
+@pytest.mark.parametrize("order,hs,expect", [(2, (0.1, 0.05), 4.0), (4, (0.2, 0.1), 16.0)])
+def test_order_kept(hh, hh_reference, order, hs, expect):
+    mod = mg.build(hh, "stormer-verlet", order=order, project="energy")
+    errs = [float(np.max(np.abs(mod.integrate(HH_Y0, h, int(round(HH_T / h)))[-1] - hh_reference)))
+            for h in hs]
+    ratio = errs[0] / errs[1]
+    # order K: halving h divides the error by 2^K (within 25 %)
+    assert 0.75 * expect < ratio < 1.25 * expect, (errs, ratio)
+
+
+def test_kepler_invariants_projection_keeps_L():
+    # planar Kepler, e = 0.6: H and the angular momentum (3-D Kepler has four invariants,
+    # more than the closed-form solve takes; see test_too_many_invariants)
+    kepler = mg.Hamiltonian("(px**2 + py**2)/2 - 1/sqrt(x**2 + y**2)", ["x", "y"], ["px", "py"],
+                            name="kepler_planar_projection")
+    both = mg.build(kepler, "stormer-verlet", project="invariants")
+    energy = mg.build(kepler, "stormer-verlet", project="energy")
+    assert both.PROJECTED[0] == "H" and len(both.PROJECTED) >= 2
+    assert both.TRAITS["symplectic"] is False and both.TRAITS["symmetric"] is True
+    y0 = np.array([0.4, 0.0, 0.0, 2.0])
+    t_both = both.integrate(y0, 0.05, 1000)
+    t_en = energy.integrate(y0, 0.05, 1000)
+    I_both = both.invariants(t_both)
+    I_en = energy.invariants(t_en)
+    for name in both.PROJECTED:
+        assert np.max(np.abs(I_both[name] - I_both[name][0])) <= 1e-13
+    # control: the energy-only projection keeps H but not the angular momentum
+    L = both.PROJECTED[1]
+    assert np.max(np.abs(I_en["H"] - I_en["H"][0])) <= 1e-13
+    assert np.max(np.abs(I_en[L] - I_en[L][0])) > 1e-8
+    assert "H" in energy.TRAITS["preserved"] and L not in energy.TRAITS["preserved"]
+
+
+def test_too_many_invariants(kepler):
+    with pytest.raises(MethodNotApplicable, match="at most 3"):
+        mg.discretize(kepler, "stormer-verlet", project="invariants")
+
+
+def test_chunks_equal_one_piece(proj4):
+    whole = proj4.integrate(HH_Y0, H, 300)
+    parts = np.concatenate(list(proj4.iterate(HH_Y0, H, 300, chunk=70)))
+    assert np.array_equal(whole, parts)
+
+
+def test_batch_equals_single(proj2):
+    Y0 = np.stack([HH_Y0, HH_Y0 * 0.9])
+    batch = proj2.integrate(Y0, H, 50)
+    for b in range(2):
+        assert np.array_equal(batch[:, b], proj2.integrate(Y0[b], H, 50))
+
+
+def test_not_converged_raises_with_step_and_residual(proj2):
+    with pytest.raises(proj2.ConvergenceError) as ei:
+        proj2.integrate(HH_Y0, H, 10, maxiter=1)
+    exc = ei.value
+    assert exc.step == 0 and "symmetric projection" in str(exc) and math.isfinite(exc.residual_norm)
+    assert exc.trajectory.shape[0] == 1
+
+
+def test_bad_input(hh):
+    with pytest.raises(InputError, match="project must be one of"):
+        mg.discretize(hh, "stormer-verlet", project="orbit")
+    with pytest.raises(MethodNotApplicable, match="symmetric explicit"):
+        mg.discretize(hh, "midpoint", project="energy")
+    mod = mg.build(hh, "stormer-verlet", project="energy")
+    with pytest.raises(ValueError, match="t_eval"):
+        mod.integrate(HH_Y0, H, t_eval=[0.0, 0.1])
+
+
+def test_key_and_traits(hh):
+    s = mg.discretize(hh, "stormer-verlet", order=4, project="energy")
+    assert s.key == "stormer-verlet-projectenergy-order4-suzuki"
+    t = s.traits
+    assert (t.order, t.symmetric, t.symplectic, t.energy_preserving, t.solve) == (4, True, False, True,
+                                                                                   "projection")
+
+
+def test_numba_agrees(hh):
+    pytest.importorskip("numba")
+    nb = mg.build(hh, "stormer-verlet", project="energy", backend="numba")
+    npy = mg.build(hh, "stormer-verlet", project="energy")
+    a = nb.integrate(HH_Y0, H, 200)
+    b = npy.integrate(HH_Y0, H, 200)
+    assert np.max(np.abs(a - b)) <= 1e-12
+    assert _energy_error(nb, a) <= 32 * np.finfo(float).eps * 0.125
