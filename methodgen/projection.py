@@ -19,12 +19,26 @@ one unknown λ per invariant.  It keeps what the construction gives and nothing 
   the level set of L).
 
 The solve (in the generated module, ``templates/_projection.py.j2`` and
-``templates/numba_projection.py.j2``) is a simplified Newton iteration on λ alone:
-Φ_h is re-evaluated at each iterate (no first-order expansion of Φ_h, which would
-leave the symmetry defect at O(h·|λ|) instead of round-off), the matrix is
-``G(y1)(G(y0) + G(y1))ᵀ`` (exact up to ``Φ_h' = I + O(h)``), and λ starts from the
-previous step's value.  It stops by the same round-off rule as every Newton loop of
-the generator, and raises ConvergenceError with the step and the residual otherwise.
+``templates/numba_projection.py.j2``) is a quasi-Newton iteration on λ alone, Φ_h
+re-evaluated at every iterate (its first-order expansion ``Φ_h(y0) + G(y0)ᵀλ`` would leave
+the symmetry defect at O(h·|λ|) instead of round-off):
+
+* λ starts from the previous step's value; the first y1 is built with G(ŷ1) (one extra
+  evaluation of g and G), so ``y1 = ŷ1 + G(y1)ᵀλ`` holds to O(|λ|²) from the start;
+* the residual is taken at the consistent ``y1 = ŷ1 + G(y1)ᵀλ`` to first order in the lag
+  of G, so that the iterates lie on one smooth function of λ;
+* the first matrix is ``G(y1)(G(y0) + G(y1))ᵀ`` (exact up to ``Φ_h' = I + O(h)``; relative
+  error 1.6e-3 measured on Hénon–Heiles at h = 0.1); for one invariant the secant slope
+  replaces it from the second iterate on (superlinear), for several the simplified matrix
+  is used at every iterate (Broyden's rank-one updates converged non-monotonically, which
+  trips the plateau rule early: 2.5e-9 in L on planar Kepler);
+* it stops by the round-off rule of every Newton loop of the generator (the update and
+  the lag move y1 by at most 4 eps |y1|, or stopped decreasing below sqrt(eps)), and
+  raises ConvergenceError with the step and the residual otherwise.
+
+Measured (Hénon–Heiles, H = 1/8, 400 steps, energy only): 7 iterations per step with the
+plain simplified matrix, 4.2 with the above at h = 0.1 (order 2), 3.7 at h = 0.2 (order 4),
+3.2 at h = 0.3 (order 6), 3.0 at h = 0.02 (order 2).
 """
 
 from __future__ import annotations
@@ -85,7 +99,7 @@ def project_scheme(scheme, project):
         raise MethodNotApplicable(f"symmetric projection onto {len(names)} invariants ({', '.join(names)}): "
                                   f"at most {MAX_PROJECTED} (use project='energy')")
     kept_base = [n for n in t.preserved if n not in names]
-    note = (f"symmetric projection onto {', '.join(names)} (one simplified-Newton solve for "
+    note = (f"symmetric projection onto {', '.join(names)} (one quasi-Newton solve for "
             f"{len(names)} multiplier(s) per step, Φ_h re-evaluated per iteration); symmetric because "
             f"the base step is; order {t.order} kept; not symplectic"
             + (f"; the base method's exact {', '.join(kept_base)} is not kept" if kept_base else ""))
