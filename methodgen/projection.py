@@ -69,13 +69,16 @@ def projected_names(scheme, project: str) -> tuple[str, ...]:
     return ("H",) + exact
 
 
-def project_scheme(scheme, project):
+def project_scheme(scheme, project, record: bool = True):
     """``scheme`` (symmetric, explicit, possibly composed) with symmetric projection.
 
     Parameters
     ----------
     scheme : Scheme
     project : {"energy", "invariants"}
+    record : bool
+        Add ``("project", project)`` to the scheme's options (its key names the variant);
+        False for a method name that stands for the projection itself.
 
     Raises
     ------
@@ -105,8 +108,8 @@ def project_scheme(scheme, project):
             + (f"; the base method's exact {', '.join(kept_base)} is not kept" if kept_base else ""))
     traits = dataclasses.replace(t, symplectic=False, energy_preserving=True, preserved=names,
                                  solve="projection", notes=t.notes + (note,))
-    return dataclasses.replace(scheme, traits=traits, projection=names,
-                               options=tuple(scheme.options) + (("project", project),))
+    return dataclasses.replace(scheme, traits=traits, projection=names, projected_from=scheme,
+                               options=tuple(scheme.options) + ((("project", project),) if record else ()))
 
 
 def gradients(scheme) -> tuple[list[sp.Expr], list[sp.Expr]]:

@@ -171,3 +171,30 @@ def test_numba_agrees(hh):
     b = npy.integrate(HH_Y0, H, 200)
     assert np.max(np.abs(a - b)) <= 1e-12
     assert _energy_error(nb, a) <= 32 * np.finfo(float).eps * 0.125
+
+
+def test_verify_certificates(hh):
+    from methodgen.verify.projection import projection_certificates
+    from methodgen.verify.report import PROVED, REFUTED, Certificate
+
+    s = mg.discretize(hh, "stormer-verlet-projected", order=4)
+    assert s.key == "stormer-verlet-projected-order4-suzuki" and s.projection == ("H",)
+    rep = mg.verify(s)
+    assert rep.ok
+    own = [c for c in rep.certificates if not c.claim.startswith("unprojected step:")]
+    assert {c.status for c in own} == {PROVED}
+    assert any("projected step is symmetric" in c.claim for c in own)
+    assert any("projected invariants kept: H" in c.claim and "by construction" in c.method for c in own)
+    # symplecticity is not claimed for the projected method (only for the unprojected step)
+    assert not any("symplectic" in c.claim for c in own)
+    # control: the projected symmetry follows the base step's certificate -- a refuted one refutes it
+    bad = [Certificate(claim="x: the composition is symmetric, Ψ_(-h) ∘ Ψ_h = id", status=REFUTED)]
+    sym = [c for c in projection_certificates(s, bad) if "symmetric" in c.claim]
+    assert sym and sym[0].status == REFUTED
+
+
+def test_method_name_runs_like_option(hh):
+    a = mg.build(hh, "stormer-verlet-projected", order=4)
+    b = mg.build(hh, "stormer-verlet", order=4, project="energy")
+    assert a.METHOD == "stormer-verlet-projected" and b.METHOD == "stormer-verlet"
+    assert np.array_equal(a.integrate(HH_Y0, H, 20), b.integrate(HH_Y0, H, 20))

@@ -255,6 +255,8 @@ class Scheme:
     #: Names of the invariants a symmetric projection keeps (``H`` first,
     #: :mod:`methodgen.projection`); empty for the method itself.
     projection: tuple[str, ...] = ()
+    #: The scheme before the projection (its base step's claims are verified on it).
+    projected_from: object | None = None
 
     h = STEP
 
