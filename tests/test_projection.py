@@ -64,7 +64,7 @@ def _standard_projection_step(mod, y, h):
     """Standard projection (HLW06 §IV.4): ŷ1 = Φ_h(y0), y1 = ŷ1 + G(ŷ1)ᵀμ with g(y1) = g(y0),
     μ by Newton on the line -- the non-symmetric counterpart, from the module's kernels."""
     tgt = mod._s_proj(list(y), ())[0]
-    yh = mod._base_flow(list(y), h, ())
+    yh = mod._base_flow(list(y), h, ())[0]
     G = mod._s_proj(yh, ())[1:]
     mu = 0.0
     for _ in range(50):
@@ -171,6 +171,10 @@ def test_numba_agrees(hh):
     b = npy.integrate(HH_Y0, H, 200)
     assert np.max(np.abs(a - b)) <= 1e-12
     assert _energy_error(nb, a) <= 32 * np.finfo(float).eps * 0.125
+    with pytest.raises(nb.ResolutionError):
+        nb.integrate(HH_Y0, 1.0, 5)
+    with pytest.raises(nb.ConvergenceError, match="symmetric projection"):
+        nb.integrate(HH_Y0, H, 5, maxiter=1)
 
 
 def test_verify_certificates(hh):
@@ -198,3 +202,15 @@ def test_method_name_runs_like_option(hh):
     b = mg.build(hh, "stormer-verlet", order=4, project="energy")
     assert a.METHOD == "stormer-verlet-projected" and b.METHOD == "stormer-verlet"
     assert np.array_equal(a.integrate(HH_Y0, H, 20), b.integrate(HH_Y0, H, 20))
+
+
+def test_unresolved_step_is_refused_and_control(hh):
+    """The base step's local error guard holds for the projected step too (h = 1 on
+    Hénon–Heiles is not resolved); control: without the guard the run is accepted, and wrong."""
+    mod = mg.build(hh, "stormer-verlet", project="energy")
+    with pytest.raises(mod.ResolutionError) as ei:
+        mod.integrate(HH_Y0, 1.0, 5)
+    assert ei.value.step == 0 and ei.value.trajectory.shape[0] == 1
+    coarse = mod.integrate(HH_Y0, 1.0, 5, check_resolution=False)[-1]
+    fine = mod.integrate(HH_Y0, 0.005, 1000)[-1]
+    assert np.max(np.abs(coarse - fine)) > 1e-2
