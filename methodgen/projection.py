@@ -54,8 +54,8 @@ __all__ = ["PROJECTIONS", "MAX_PROJECTED", "project_scheme", "projected_names", 
 #: ``project=`` values: "energy" (H alone) or "invariants" (H and every declared or
 #: detected first integral the module monitors).
 PROJECTIONS = ("energy", "invariants")
-#: At most this many invariants (the m×m matrix is solved in closed form).
-MAX_PROJECTED = 3
+#: At most this many invariants (the m×m matrix is solved by elimination per iterate).
+MAX_PROJECTED = 8
 
 
 def projected_names(scheme, project: str) -> tuple[str, ...]:

@@ -97,8 +97,7 @@ def test_order_kept(hh, hh_reference, order, hs, expect):
 
 
 def test_kepler_invariants_projection_keeps_L():
-    # planar Kepler, e = 0.6: H and the angular momentum (3-D Kepler has four invariants,
-    # more than the closed-form solve takes; see test_too_many_invariants)
+    # planar Kepler, e = 0.6: H and the angular momentum
     kepler = mg.Hamiltonian("(px**2 + py**2)/2 - 1/sqrt(x**2 + y**2)", ["x", "y"], ["px", "py"],
                             name="kepler_planar_projection")
     both = mg.build(kepler, "stormer-verlet", project="invariants")
@@ -119,9 +118,14 @@ def test_kepler_invariants_projection_keeps_L():
     assert "H" in energy.TRAITS["preserved"] and L not in energy.TRAITS["preserved"]
 
 
-def test_too_many_invariants(kepler):
-    with pytest.raises(MethodNotApplicable, match="at most 3"):
-        mg.discretize(kepler, "stormer-verlet", project="invariants")
+def test_kepler_3d_projection_onto_four_invariants(kepler):
+    """H and L_x, L_y, L_z (m = 4: the elimination path of the solve), e = 0.6."""
+    mod = mg.build(kepler, "stormer-verlet", project="invariants")
+    assert mod.PROJECTED == ("H", "Lx", "Ly", "Lz")
+    traj = mod.integrate(np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2]), 0.02, 2000)
+    inv = mod.invariants(traj)
+    for name in mod.PROJECTED:
+        assert np.max(np.abs(inv[name] - inv[name][0])) <= 1e-14, name
 
 
 def test_chunks_equal_one_piece(proj4):
