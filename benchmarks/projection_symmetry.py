@@ -7,7 +7,7 @@ Not a test: run it and read the table.
 (a) what the generated modules do: Φ_h re-evaluated at every iterate of λ;
 (b) the first-order expansion Φ_h(y0 + G(y0)ᵀλ) ≈ Φ_h(y0) + G(y0)ᵀλ: Φ_h once per step, the
     iteration on λ then costs only evaluations of g and G.
-For each: max |Φ_{-h}(Φ_h(y0)) - y0| over 200 start points along the Hénon–Heiles orbit
+(Hénon–Heiles has unit masses: the metric w is 1, D = Gᵀ.)  For each: max |Φ_{-h}(Φ_h(y0)) - y0| over 200 start points along the Hénon–Heiles orbit
 (H = 1/8), and Φ_h evaluations per step.  numpy backend, from the module's kernels.
 """
 
@@ -23,19 +23,19 @@ Y0 = np.array([0.0, 0.0, 0.4330127018922193, 0.25])
 def expanded_step(mod, y, h):
     """(b): Φ_h once; y1 = Φ_h(y0) + G(y0)ᵀλ + G(y1)ᵀλ, g(y1) = g(y0), λ by Newton."""
     v0 = mod._s_proj(list(y), ())
-    tgt, G0 = v0[0], np.array(v0[1:])
+    tgt, G0 = v0[0], np.array(v0[1:5])
     yh = np.array(mod._base_flow(list(y), h, ())[0])
     lam = 0.0
     y1 = yh
     for _ in range(50):
-        G1 = np.array(mod._s_proj(list(y1), ())[1:])
+        G1 = np.array(mod._s_proj(list(y1), ())[1:5])
         y1 = yh + (G0 + G1) * lam
         v = mod._s_proj(list(y1), ())
-        d = (tgt - v[0]) / (np.array(v[1:]) @ (G0 + np.array(v[1:])))
+        d = (tgt - v[0]) / (np.array(v[1:5]) @ (G0 + np.array(v[1:5])))
         lam += d
         if abs(d) < 1e-19:
             break
-    return yh + (G0 + np.array(mod._s_proj(list(y1), ())[1:])) * lam
+    return yh + (G0 + np.array(mod._s_proj(list(y1), ())[1:5])) * lam
 
 
 def main():

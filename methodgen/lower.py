@@ -271,8 +271,8 @@ class ModuleIR:
     #: force, right after Δy; empty for every other method.
     fsal_vars: tuple[str, ...] = ()
     #: Symmetric projection (:mod:`methodgen.projection`): the projected invariants' names,
-    #: H first (kernel ``proj``: their values, then their gradients row by row); empty
-    #: without projection.
+    #: H first (kernel ``proj``: their values, their gradients row by row, then the metric
+    #: w of the direction diag(w) Gᵀ); empty without projection.
     projection: tuple[str, ...] = ()
 
     @property
@@ -718,9 +718,9 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None) -
         # Symmetric projection (methodgen.projection): the projected invariants g and their
         # gradients G (row by row), at one state.
         from .projection import gradients
-        g, G = gradients(scheme)
-        scalar["proj"] = _kernel(g + G, (len(g) + len(G),), sp_, rename)
-        vector["proj"] = _kernel(g + G, (len(g) + len(G),), vp, rename)
+        g, G, w = gradients(scheme)
+        scalar["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), sp_, rename)
+        vector["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), vp, rename)
 
     all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
     if plan is not None:   # the helpers the loops' template terms call (Jacobian terms too:

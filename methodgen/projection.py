@@ -112,12 +112,37 @@ def project_scheme(scheme, project, record: bool = True):
                                options=tuple(scheme.options) + ((("project", project),) if record else ()))
 
 
-def gradients(scheme) -> tuple[list[sp.Expr], list[sp.Expr]]:
-    """``g`` (the projected invariants) and ``G`` row by row (flattened), in y0 symbols."""
+def gradients(scheme) -> tuple[list[sp.Expr], list[sp.Expr], list[sp.Expr]]:
+    """``g`` (the projected invariants), ``G`` row by row (flattened) and the metric ``w``,
+    in y0 symbols and parameters (see :func:`metric`)."""
     by_name = {inv.name: inv.expr for inv in scheme.invariants}
     g = [by_name[n] for n in scheme.projection]
     G = [sp.diff(e, s) for e in g for s in scheme.system.y]
-    return g, G
+    return g, G, metric(scheme.system)
+
+
+def metric(system) -> list[sp.Expr]:
+    """The diagonal ``w`` of the projection's direction ``D(y) = diag(w) G(y)ᵀ``.
+
+    For ``H = ½ pᵀ M⁻¹ p + U(q)`` with a diagonal mass matrix: ``w = (M⁻¹, M)``, so that
+    ``δp_i = λ m_i ∂H/∂p_i`` and ``δq_i = λ (1/m_i) ∂H/∂q_i`` -- the correction of each
+    body is the same fraction of its own momentum whatever its mass (in the Euclidean
+    metric ``w = 1`` it is λ/m_i of it: 1e8 times the Sun's for Pluto on the outer solar
+    system, whose trajectory it then spoils: final error 0.98 AU after 2e5 days where the
+    unprojected step has 5e-4).  Units: the frequency that makes q and p commensurable is
+    taken as 1 in the problem's units.  Else ``w = 1``.  Constant along the run, so the
+    step stays symmetric.
+    """
+    from .derive import separable_split
+
+    n = len(system.y)
+    sep = separable_split(system) if not system.constraints else None
+    Minv = None if sep is None else sep.Minv
+    if Minv is None or any(Minv[i, j] != 0 for i in range(Minv.shape[0]) for j in range(Minv.shape[1])
+                           if i != j):
+        return [sp.Integer(1)] * n
+    d = Minv.shape[0]
+    return [Minv[i, i] for i in range(d)] + [1 / Minv[i, i] for i in range(d)]
 
 
 def symmetry_argument(scheme) -> dict:

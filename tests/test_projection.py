@@ -65,12 +65,12 @@ def _standard_projection_step(mod, y, h):
     μ by Newton on the line -- the non-symmetric counterpart, from the module's kernels."""
     tgt = mod._s_proj(list(y), ())[0]
     yh = mod._base_flow(list(y), h, ())[0]
-    G = mod._s_proj(yh, ())[1:]
+    G = mod._s_proj(yh, ())[1:1 + mod._DIM]   # (then w, the metric: 1 here)
     mu = 0.0
     for _ in range(50):
         y1 = [a + g * mu for a, g in zip(yh, G)]
         v = mod._s_proj(y1, ())
-        d = (tgt - v[0]) / sum(a * b for a, b in zip(v[1:], G))
+        d = (tgt - v[0]) / sum(a * b for a, b in zip(v[1:1 + mod._DIM], G))
         mu += d
         if abs(d) < 1e-18:
             break
