@@ -2,9 +2,9 @@
 
 The projected step [Hairer 2000; HLW06, §V.4.1] of a base step Φ_h (Störmer–Verlet or one of
 its symmetric compositions) onto the level set ``g(y) = g(y_start)`` of the invariants
-``g = (H, I_2, …)``, with ``G = ∂g/∂y`` their stacked gradients, is
+``g = (H, I_2, …)``, with ``G = ∂g/∂y`` their stacked gradients and ``D = diag(w) Gᵀ``, is
 
-    ỹ0 = y0 + G(y0)ᵀ λ,    ŷ1 = Φ_h(ỹ0),    y1 = ŷ1 + G(y1)ᵀ λ,    g(y1) = g(y_start),
+    ỹ0 = y0 + D(y0) λ,    ŷ1 = Φ_h(ỹ0),    y1 = ŷ1 + D(y1) λ,    g(y1) = g(y_start),
 
 one unknown λ per invariant.  It keeps what the construction gives and nothing else:
 
@@ -18,27 +18,33 @@ one unknown λ per invariant.  It keeps what the construction gives and nothing 
   of Störmer–Verlet loses its exact angular momentum on Kepler: ∇H is not tangent to
   the level set of L).
 
-The solve (in the generated module, ``templates/_projection.py.j2`` and
+The direction of the correction is ``D(y) = diag(w) G(y)ᵀ`` rather than ``G(y)ᵀ``, with the
+constant mass metric of :func:`metric` (``w = 1`` for unit masses); symmetry holds for any
+constant w.  The solve (in the generated module, ``templates/_projection.py.j2`` and
 ``templates/numba_projection.py.j2``) is a quasi-Newton iteration on λ alone, Φ_h
-re-evaluated at every iterate (its first-order expansion ``Φ_h(y0) + G(y0)ᵀλ`` would leave
-the symmetry defect at O(h·|λ|) instead of round-off):
+re-evaluated at every iterate (its first-order expansion ``Φ_h(y0) + D(y0)λ`` would leave
+the symmetry defect at O(h·|λ|) instead of round-off: 1.3e-5, 5.4e-7, 4.7e-8 measured on
+Hénon–Heiles for orders 2, 4, 6 at h = 0.1, 0.2, 0.3, against 4e-16 to 6e-16;
+``benchmarks/projection_symmetry.py``):
 
-* λ starts from the previous step's value; the first y1 is built with G(ŷ1) (one extra
-  evaluation of g and G), so ``y1 = ŷ1 + G(y1)ᵀλ`` holds to O(|λ|²) from the start;
-* the residual is taken at the consistent ``y1 = ŷ1 + G(y1)ᵀλ`` to first order in the lag
-  of G, so that the iterates lie on one smooth function of λ;
-* the first matrix is ``G(y1)(G(y0) + G(y1))ᵀ`` (exact up to ``Φ_h' = I + O(h)``; relative
-  error 1.6e-3 measured on Hénon–Heiles at h = 0.1); for one invariant the secant slope
-  replaces it from the second iterate on (superlinear), for several the simplified matrix
-  is used at every iterate (Broyden's rank-one updates converged non-monotonically, which
-  trips the plateau rule early: 2.5e-9 in L on planar Kepler);
-* it stops by the round-off rule of every Newton loop of the generator (the update and
-  the lag move y1 by at most 4 eps |y1|, or stopped decreasing below sqrt(eps)), and
-  raises ConvergenceError with the step and the residual otherwise.
+* λ starts from the previous step's value; the first y1 is built with D(ŷ1) (one extra
+  evaluation of g and G), so ``y1 = ŷ1 + D(y1)λ`` holds to O(|λ|²) from the start;
+* the residual is taken at the consistent ``y1 = ŷ1 + D(y1)λ`` to first order in the lag
+  of D, so that the iterates lie on one smooth function of λ (the returned y1 is rebuilt
+  with D(y1));
+* the first matrix is ``G(y1)(D(y0) + D(y1))`` (exact up to ``Φ_h' = I + O(h)``; relative
+  error 1.6e-3 measured on Hénon–Heiles at h = 0.1); Broyden's update (the secant slope for
+  one invariant) improves it from the second iterate on;
+* it stops when every residual ``g_a(y1) - g_a(start)`` is within 4 eps of the size of
+  g_a's first-order terms (``Σ_i |∂g_a/∂y_i| max(|y0_i|, |y1_i|)``: scale-free, so the
+  outer solar system's 1e4 ratio between |q| and |p| does not matter), or stopped
+  decreasing at or below 64 eps of it; else it raises ConvergenceError with the step and
+  the residual.  (Newton's sqrt(eps) plateau would accept a stagnating iteration here.)
 
-Measured (Hénon–Heiles, H = 1/8, 400 steps, energy only): 7 iterations per step with the
-plain simplified matrix, 4.2 with the above at h = 0.1 (order 2), 3.7 at h = 0.2 (order 4),
-3.2 at h = 0.3 (order 6), 3.0 at h = 0.02 (order 2).
+Measured (Hénon–Heiles, H = 1/8, energy only): 7 iterations per step with the plain
+simplified matrix, 4.2 with the above at h = 0.1 (order 2), 3.6 at h = 0.2 (order 4), 3.2
+at h = 0.3 (order 6); at the step sizes of high-order runs 1.2-2 (the multiplier is then
+near round-off).
 """
 
 from __future__ import annotations
@@ -103,7 +109,7 @@ def project_scheme(scheme, project, record: bool = True):
                                   f"at most {MAX_PROJECTED} (use project='energy')")
     kept_base = [n for n in t.preserved if n not in names]
     note = (f"symmetric projection onto {', '.join(names)} (one quasi-Newton solve for "
-            f"{len(names)} multiplier(s) per step, Φ_h re-evaluated per iteration); symmetric because "
+            f"{len(names)} multiplier(s) per step, Φ_h re-evaluated per iterate); symmetric because "
             f"the base step is; order {t.order} kept; not symplectic"
             + (f"; the base method's exact {', '.join(kept_base)} is not kept" if kept_base else ""))
     traits = dataclasses.replace(t, symplectic=False, energy_preserving=True, preserved=names,
