@@ -218,3 +218,20 @@ def test_unresolved_step_is_refused_and_control(hh):
     coarse = mod.integrate(HH_Y0, 1.0, 5, check_resolution=False)[-1]
     fine = mod.integrate(HH_Y0, 0.005, 1000)[-1]
     assert np.max(np.abs(coarse - fine)) > 1e-2
+
+
+def test_bench_and_run_take_the_method():
+    """`methodgen bench` rows of the projected method: its own rows, no fsolve row (which would
+    be the unprojected step under its name: the failure seen before the fix), and the solver
+    table runs it; `run` labels its iterations as the projection's."""
+    from methodgen import bench
+    from methodgen.cli import main
+
+    sc = mg.load_scene("henon-heiles-2d")
+    rep = bench.work_precision(sc, ["stormer-verlet-projected"], quick=True)
+    rows = [r for r in rep["rows"] if r["method"].startswith("stormer-verlet-projected")]
+    assert rows and all(r["kind"] == "methodgen" for r in rows)
+    assert all(r["energy_error"] < 1e-14 for r in rows)
+    sv = bench.solver_variants(sc, ["stormer-verlet-projected"], steps=20)
+    assert sv
+    assert main(["run", "henon-heiles-2d", "--method", "stormer-verlet-projected", "--steps", "20"]) == 0
