@@ -24,7 +24,7 @@ def expanded_step(mod, y, h):
     """(b): Φ_h once; y1 = Φ_h(y0) + G(y0)ᵀλ + G(y1)ᵀλ, g(y1) = g(y0), λ by Newton."""
     v0 = mod._s_proj(list(y), ())
     tgt, G0 = v0[0], np.array(v0[1:5])
-    yh = np.array(mod._base_flow(list(y), h, ())[0])
+    yh = np.array(mod._base_flow(list(y), [0.0] * 4, h, ())[0])
     lam = 0.0
     y1 = yh
     for _ in range(50):

@@ -64,7 +64,7 @@ def _standard_projection_step(mod, y, h):
     """Standard projection (HLW06 §IV.4): ŷ1 = Φ_h(y0), y1 = ŷ1 + G(ŷ1)ᵀμ with g(y1) = g(y0),
     μ by Newton on the line -- the non-symmetric counterpart, from the module's kernels."""
     tgt = mod._s_proj(list(y), ())[0]
-    yh = mod._base_flow(list(y), h, ())[0]
+    yh = mod._base_flow(list(y), [0.0] * mod._DIM, h, ())[0]
     G = mod._s_proj(yh, ())[1:1 + mod._DIM]   # (then w, the metric: 1 here)
     mu = 0.0
     for _ in range(50):
@@ -235,3 +235,18 @@ def test_bench_and_run_take_the_method():
     sv = bench.solver_variants(sc, ["stormer-verlet-projected"], steps=20)
     assert sv
     assert main(["run", "henon-heiles-2d", "--method", "stormer-verlet-projected", "--steps", "20"]) == 0
+
+
+@pytest.mark.slow
+def test_numba_several_invariants(kepler):
+    """The numba loop with m = 4 (elimination, Broyden over 4 multipliers); fast sibling:
+    test_kepler_3d_projection_onto_four_invariants (numpy)."""
+    pytest.importorskip("numba")
+    y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
+    nb = mg.build(kepler, "stormer-verlet", project="invariants", backend="numba")
+    npy = mg.build(kepler, "stormer-verlet", project="invariants")
+    a = nb.integrate(y0, 0.02, 2000)
+    assert np.max(np.abs(a - npy.integrate(y0, 0.02, 2000))) <= 1e-11
+    inv = nb.invariants(a)
+    for name in nb.PROJECTED:
+        assert np.max(np.abs(inv[name] - inv[name][0])) <= 1e-14, name
