@@ -259,9 +259,10 @@ def shared_runtime_supports(ir: ModuleIR) -> bool:
     The runtime knows the step structures below: explicit stages (compositions, with or
     without first-same-as-last), Newton-solved and linearly implicit stages, with every
     check and solver variant.  A new structure must be added here and to the runtime, or
-    it falls back to the template route.
+    it falls back to the template route: so far symmetric projection (its loop calls the base
+    step's kernels with the template route's signatures).
     """
-    return ir.kind in ("explicit", "newton", "linear")
+    return ir.kind in ("explicit", "newton", "linear") and not ir.projection
 
 
 def render(ir: ModuleIR, backend: str = "numpy") -> str:
@@ -288,6 +289,8 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
         vector["hs"] = _vector_view(ir.vector["hs"], [("_out", (2,))], "_out")
     if "force" in ir.vector:   # first-same-as-last Störmer–Verlet: ∇U at a run's start
         vector["force"] = _vector_view(ir.vector["force"], [("_out", ir.vector["force"].shape)], "_out")
+    if "proj" in ir.vector:   # symmetric projection: g, then G row by row (methodgen.projection)
+        vector["proj"] = _vector_view(ir.vector["proj"], [("_out", ir.vector["proj"].shape)], "_out")
     if ir.n_constraints:
         m, d = ir.n_constraints, ir.dim
         vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")

@@ -73,7 +73,8 @@ def fsal_plan(scheme) -> FsalPlan | None:
     point); otherwise None (the module is then generated without first-same-as-last).
     """
     system = scheme.system
-    if scheme.method != "stormer-verlet" or system.constraints:
+    # (a projected method runs its base step: Störmer–Verlet under another name)
+    if (getattr(scheme, "projected_from", None) or scheme).method != "stormer-verlet" or system.constraints:
         return None
     sep = separable_split(system)
     if sep is None:

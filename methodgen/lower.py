@@ -284,6 +284,10 @@ class ModuleIR:
     #: its residual and Newton-matrix loops read (float reprs); None where the residual and
     #: the Newton matrix are straight-line kernels.
     stage: dict | None = None
+    #: Symmetric projection (:mod:`methodgen.projection`): the projected invariants' names,
+    #: H first (kernel ``proj``: their values, their gradients row by row, then the metric
+    #: w of the direction diag(w) Gᵀ); empty without projection.
+    projection: tuple[str, ...] = ()
 
     @property
     def stages(self) -> int:
@@ -492,7 +496,7 @@ def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErro
     def squares(exprs):
         return sp.Add(*[e**2 for e in exprs])
 
-    if system.constraints or scheme.traits.solve == "explicit":
+    if system.constraints or scheme.traits.solve in ("explicit", "projection"):
         d = system.dim
         q = tuple(range(d))
         sep = separable_split(system)
@@ -809,6 +813,13 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         vector["constraints"] = _kernel(list(system.constraints) + list(G), (n_cons + n_cons * system.dim,),
                                         vp, rename)
         vector["minv"] = _kernel(list(Minv), (system.dim * system.dim,), vp, rename)
+    if scheme.projection:
+        # Symmetric projection (methodgen.projection): the projected invariants g and their
+        # gradients G (row by row), at one state.
+        from .projection import gradients
+        g, G, w = gradients(scheme)
+        scalar["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), sp_, rename)
+        vector["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), vp, rename)
 
     all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
     if plan is not None:   # the helpers the loops' template terms call (Jacobian terms too:
@@ -820,7 +831,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         system_name=system.name or "system",
         method=scheme.method,
         description=scheme.description,
-        kind=scheme.traits.solve,
+        # a projected method runs its base explicit step (the projection is its own loop)
+        kind="explicit" if scheme.projection else scheme.traits.solve,
         order=scheme.traits.order,
         traits=scheme.traits.as_dict(),
         source=system.source,
@@ -856,6 +868,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
         **(_stage_fields(scheme) if fplan is not None else {}),
         stage=stage_tables(stage) if stage is not None else None,
+        projection=tuple(scheme.projection),
     )
 
 

@@ -177,7 +177,9 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "invariants": report_inv,
         "newton": {"mean_iterations": its.mean,
                    "max_iterations": its.max,
-                   "solver": getattr(module, "DEFAULT_SOLVER", None)},
+                   # a projected method's iterations are its projection's (Φ_h evaluations)
+                   "solver": "projection" if getattr(module, "PROJECTED", None)
+                   else getattr(module, "DEFAULT_SOLVER", None)},
         "seconds": seconds,
         "us_per_step": seconds / steps_done * 1e6 if steps_done else 0.0,
         "module": str(getattr(module, "__file__", "")),
@@ -517,7 +519,9 @@ def _print_run(rep: dict) -> None:
     stages = f" ({rep['composition']['stages']} stages)" if rep.get("composition") else ""
     # "auto" iterates the fixed point and runs Newton's method only where that is slow.
     what = ("solver iterations (auto: fixed point, Newton where it contracts slowly)"
-            if nw.get("solver") == "auto" else "Newton iterations")
+            if nw.get("solver") == "auto" else
+            "symmetric projection iterations (each one base step)" if nw.get("solver") == "projection"
+            else "Newton iterations")
     print(f"{what} per step{stages}: mean {nw['mean_iterations']:.2f}, max {nw['max_iterations']}")
     print(f"wall time {rep['seconds']:.3f} s, {rep['us_per_step']:.2f} µs/step")
     names = rep["state_names"]

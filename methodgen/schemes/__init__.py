@@ -13,7 +13,7 @@ from types import ModuleType
 from ..errors import InputError, MethodNotApplicable
 from ..poisson import PoissonSystem, is_poisson
 from ..problem import Hamiltonian
-from . import energy_collocation, energy_momentum, gauss, kahan, midpoint, stormer_verlet, trapezoidal
+from . import energy_collocation, energy_momentum, gauss, kahan, midpoint, projected, stormer_verlet, trapezoidal
 from .base import Scheme, Traits, is_quadratic_field, method_key
 from .discrete_gradients import AVF, Gonzalez, ItohAbe
 from .rattle import Rattle, Shake
@@ -23,7 +23,7 @@ __all__ = ["METHODS", "SYMMETRIC_METHODS", "POISSON_METHODS", "Scheme", "Traits"
 
 METHODS: dict[str, ModuleType] = {m.NAME: m for m in (
     midpoint, energy_momentum, trapezoidal, kahan, AVF, Gonzalez, ItohAbe, stormer_verlet,
-    Rattle, Shake, gauss, energy_collocation)}
+    Rattle, Shake, gauss, energy_collocation, projected)}
 
 
 def method_names() -> list[str]:
@@ -114,6 +114,9 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
     comp = composition_for(order, composition)
     if getattr(comp, "kind", None) == "splitting":
         _check_splitting(comp, method, system)   # before deriving the base step
+    # ``project=``: symmetric projection of the (composed) step, applied last (methodgen.projection)
+    project = options.pop("project", None)
+    implied = getattr(mod, "PROJECT", None)   # a method name that stands for a projection
     try:
         scheme = mod.build(system, **options)
     except TypeError as exc:
@@ -127,9 +130,9 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         # local error estimate, which is relative to the step, guards every step instead.
         scheme = dataclasses.replace(scheme, resolution=None)
     if comp is None:
-        return scheme
+        return _projected(scheme, project, implied, method)
     if getattr(comp, "kind", None) == "splitting":
-        return scheme.compose(comp)
+        return _projected(scheme.compose(comp), project, implied, method)
     t = scheme.traits
     if not (t.symmetric and t.order == 2):
         ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
@@ -137,7 +140,19 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
             f"order {order} is built by symmetric composition, which needs a symmetric method of "
             f"order 2; {method} is {'not symmetric' if not t.symmetric else f'of order {t.order}'} "
             f"for this system. Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
-    return scheme.compose(comp)
+    return _projected(scheme.compose(comp), project, implied, method)
+
+
+def _projected(scheme: Scheme, project, implied, method: str) -> Scheme:
+    """``scheme`` with the symmetric projection ``project``, or the one its method name
+    stands for (``implied``: the projected scheme then carries that name; an explicit
+    ``project`` equal to it is not repeated in the key)."""
+    if project is None and implied is None:
+        return scheme
+    from ..projection import project_scheme
+
+    out = project_scheme(scheme, project or implied, record=project not in (None, implied))
+    return dataclasses.replace(out, method=method) if implied is not None else out
 
 
 def _check_splitting(comp, method: str, system):
@@ -160,7 +175,7 @@ def _check_splitting(comp, method: str, system):
 
 #: Methods that are symmetric of order 2 on every system they apply to (Itoh–Abe is not).
 SYMMETRIC_METHODS = ("midpoint", "energy-momentum", "trapezoidal", "kahan", "avf", "gonzalez",
-                     "stormer-verlet", "rattle", "shake")
+                     "stormer-verlet", "rattle", "shake", "stormer-verlet-projected")
 
 
 def scheme_options(method: str, options: dict) -> tuple:

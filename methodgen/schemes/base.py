@@ -258,6 +258,11 @@ class Scheme:
     #: loop over the stages instead of expanding ``residual`` and its ``(s·n)²`` Jacobian.
     #: None for every other method.
     stage_system: object | None = None
+    #: Names of the invariants a symmetric projection keeps (``H`` first,
+    #: :mod:`methodgen.projection`); empty for the method itself.
+    projection: tuple[str, ...] = ()
+    #: The scheme before the projection (its base step's claims are verified on it).
+    projected_from: object | None = None
 
     h = STEP
 

@@ -581,6 +581,14 @@ def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = 
         is ``undecided``.  No exception escapes (except
         ``KeyboardInterrupt`` and the ``ValueError`` of a bad ``timeout``).
     """
+    if getattr(scheme, "projection", ()) and getattr(scheme, "projected_from", None) is not None:
+        # a projected method: the base step's claims, then what the projection keeps
+        from .projection import projection_certificates
+
+        base = verify(scheme.projected_from, conjugacy_dim, timeout=timeout, progress=progress)
+        certs = [_as_base(c, scheme) for c in base.certificates]
+        certs += projection_certificates(scheme, base.certificates)
+        return Report(_title(scheme), certs, method=_key(scheme), composition=_composition_summary(scheme))
     seconds = _claim_seconds(timeout)
     title = _title(scheme)
     label = f"which claims apply ({getattr(scheme, 'method', '?')})"
@@ -608,6 +616,14 @@ def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = 
     finally:
         bar.close()
     return Report(title, certs, method=_key(scheme), composition=_composition_summary(scheme))
+
+
+def _as_base(c: Certificate, scheme) -> Certificate:
+    """A certificate of the unprojected step, named as one (the projected method does not
+    inherit it: e.g. symplecticity, or an invariant that is not projected on)."""
+    import dataclasses
+
+    return dataclasses.replace(c, claim=f"unprojected step: {c.claim}")
 
 
 class _CallableModule(types.ModuleType):
