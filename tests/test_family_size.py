@@ -118,6 +118,32 @@ def test_bad_index_syntax_is_one_line(text, fragment):
     assert fragment in msg and "\n" not in msg
 
 
+def test_long_summand_times_many_terms_is_refused_before_expanding():
+    """The term bound alone does not bound the work: 40 000 terms of a 20-sine summand (a
+    380-character text) built ~10⁷ nodes (11 s; a 20 kB summand, half an hour).  It is refused, one line, before expanding; the
+    same text with the node bound raised parses (control: the refusal is the bound's); a
+    nested sum whose inner ranges grow with the outer index is bounded as well."""
+    from methodgen import parse
+    syms = {f"q{i}": sp.Symbol(f"q{i}", real=True) for i in range(1, 11)}
+    body = " + ".join(f"sin(q[i % 10 + 1]*{j})" for j in range(1, 21))
+    with pytest.raises(ParseError) as err:
+        parse.parse_expr(f"Sum({body}, i, 1, 40000)", syms)
+    assert "syntax nodes" in str(err.value) and "\n" not in str(err.value)
+    small = f"Sum({body}, i, 1, 40)"
+    nested = f"Sum(Sum({body}, j, 1, i), i, 1, 12)"
+    old = parse.MAX_SUM_NODES
+    try:
+        parse.MAX_SUM_NODES = 5_000
+        for text in (small, nested):
+            with pytest.raises(ParseError, match="syntax nodes"):
+                parse.parse_expr(text, syms)
+        parse.MAX_SUM_NODES = 10**9
+        assert len(parse.parse_expr(small, syms).args) == 200
+        assert sp.expand(parse.parse_expr(nested, syms) - parse.parse_expr(f"Sum(i*({body}), i, 1, 12)", syms)) == 0
+    finally:
+        parse.MAX_SUM_NODES = old
+
+
 # --- per-family analyses against the per-instance ones ---------------------------------------------
 
 def _systems():
