@@ -296,6 +296,31 @@ def test_radial_profile_numerical_rejection_keeps_radial_potentials():
     assert radial_profile(_ring(200, TODA_SUM.format(n=200))) is None
 
 
+def test_numerical_rejection_is_not_fooled_by_round_off():
+    """The screen that rejects before simplify (radial test, {I, H}, skewness of S) calls a
+    value nonzero only if it survives doubling the precision.  Identically-zero expressions
+    with large terms are not "clearly nonzero" -- negative control: at 30 digits alone their
+    value exceeds the 1e-20 the screen used to trust -- while a true 1e-15 on top of them is
+    still seen; and a skew S with such entries is accepted (it was refused as "not skew")."""
+    from methodgen.derive import _clearly_nonzero, sample_points
+
+    x, y, z = sp.symbols("x y z", real=True)
+    traps = [sp.expand((x + y + z) ** 30) - (x + y + z) ** 30,
+             sp.Add(sp.exp(40 * x) * (1 + y), -sp.exp(40 * x), -y * sp.exp(40 * x), evaluate=False)]
+    for e in traps:
+        syms = sorted(e.free_symbols, key=lambda v: v.name)
+        at30 = [abs(complex(e.xreplace({v: sp.Float(c, 30) for v, c in zip(syms, pt)}).evalf(30)))
+                for pt in sample_points(len(syms))]
+        assert max(at30) > 1e-20                         # control: the trap is real
+        assert not _clearly_nonzero(e)
+        assert _clearly_nonzero(e + sp.Rational(1, 10**15))
+    big = mg.PoissonSystem("u + v", y=["u", "v"], name="big",
+                           S=[["0", "exp(40*u)*(1 + v)"], ["-exp(40*u) - v*exp(40*u)", "0"]])
+    assert big.name == "big"
+    with pytest.raises(mg.InputError, match="skew"):      # control: a non-skew S is still refused
+        mg.PoissonSystem("u + v", y=["u", "v"], S=[["0", "exp(40*u)*(1 + v)"], ["-exp(40*u)", "0"]])
+
+
 def test_cli_bad_index_is_exit_2_and_one_line(tmp_path, capsys):
     """A scene whose Sum runs past the declared coordinates: exit 2, one line, no traceback;
     the same scene with the periodic wrap runs (control)."""
