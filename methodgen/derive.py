@@ -316,17 +316,27 @@ def _angular_bracket(system: Hamiltonian, i: int, j: int, F: sp.Expr) -> sp.Expr
 
 
 def _clearly_nonzero(expr: sp.Expr) -> bool:
-    """``expr`` (elementary functions only) is clearly nonzero at one of the fixed sample points
-    (30-digit evaluation, |value| > 1e-20): then it is not identically 0.  Only ever used to
-    reject; "zero" is always decided symbolically."""
+    """``expr`` (elementary functions only) is clearly nonzero at one of the fixed sample points:
+    then it is not identically 0.  Only ever used to reject; "zero" is always decided
+    symbolically.
+
+    Clearly nonzero: |value| > 1e-20 at 30 digits, *and* the same value at 60 digits (to 1e-3
+    relative).  An absolute threshold alone took round-off for a value wherever the terms are
+    large: ``exp(40x)(1 + y) − exp(40x) − y exp(40x)`` ≡ 0 evaluates to ~1e-11 at 30 digits
+    (its terms ~1e19), and ``expand((x+y+z)**30) − (x+y+z)**30`` to more than 1e-20.  Doubling
+    the precision shrinks such round-off by ~30 orders of magnitude and leaves a true value."""
     syms = sorted(expr.free_symbols, key=lambda s: s.name)
     for sample in sample_points(len(syms)):
-        point = {s: sp.Float(v, 30) for s, v in zip(syms, sample)}
         try:
-            val = complex(expr.xreplace(point).evalf(30))
+            vals = []
+            for digits in (30, 60):
+                point = {s: sp.Float(v, digits) for s, v in zip(syms, sample)}
+                vals.append(complex(expr.xreplace(point).evalf(digits)))
+                if abs(vals[0]) <= 1e-20:
+                    break
         except (TypeError, ValueError, ZeroDivisionError):
             return False
-        if abs(val) > 1e-20:
+        if len(vals) == 2 and abs(vals[1]) > 1e-20 and abs(vals[0] - vals[1]) <= 1e-3 * abs(vals[1]):
             return True
     return False
 

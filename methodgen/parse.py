@@ -108,6 +108,12 @@ _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 MAX_TEXT = 20_000
 #: Largest number of terms the indexed sums of one expression may expand to.
 MAX_SUM_TERMS = 100_000
+#: Largest number of expression nodes the expansion of the indexed sums may build (the
+#: summand's nodes once per term).  The term bound alone let a 20 kB text with a long summand
+#: build ~10⁸ nodes (a parse of half an hour).  5·10⁶ lets the largest sums the term bound
+#: admits through with their usual summands (99 235 pairs of a 3-D gravity summand, ~25
+#: nodes a term: about a minute, SymPy's constructors dominating).
+MAX_SUM_NODES = 5_000_000
 #: The indexed-sum construct (a word of the grammar, not a user symbol).
 SUM = "Sum"
 MAX_DEPTH = 60
@@ -273,6 +279,11 @@ def check_smooth(expr: sp.Expr, what: str = "expression") -> sp.Expr:
     return expr
 
 
+def _expr_nodes(node: ast.AST) -> int:
+    """Number of expression nodes under ``node`` (operators and load contexts not counted)."""
+    return sum(1 for n in ast.walk(node) if isinstance(n, ast.expr))
+
+
 class _Builder:
     """Walk an :mod:`ast` tree with a whitelist and build SymPy objects."""
 
@@ -288,6 +299,7 @@ class _Builder:
         self.what = what
         self.bound: dict[str, int] = {}     # the indices of the enclosing Sums, and their values
         self.sum_terms = 0
+        self.sum_nodes = 0                  # nodes built inside Sums (bounded by MAX_SUM_NODES)
 
     def fail(self, node: ast.AST, msg: str) -> ParseError:
         col = getattr(node, "col_offset", None)
@@ -297,6 +309,12 @@ class _Builder:
     def build(self, node: ast.AST, depth: int) -> sp.Expr:
         if depth > MAX_DEPTH:
             raise self.fail(node, f"expression nested deeper than {MAX_DEPTH} levels")
+        if self.bound:
+            # the running count: nested sums whose ranges depend on an outer index are
+            # bounded here (a flat sum is refused before expanding, in indexed_sum)
+            self.sum_nodes += 1
+            if self.sum_nodes > MAX_SUM_NODES:
+                raise self.fail(node, self._too_large())
         if isinstance(node, ast.Constant):
             return self.constant(node)
         if isinstance(node, ast.Name):
@@ -444,6 +462,10 @@ class _Builder:
         if self.sum_terms + (hi - lo + 1) > MAX_SUM_TERMS:
             raise self.fail(node, f"the indexed sums expand to more than {MAX_SUM_TERMS} terms")
         self.sum_terms += hi - lo + 1
+        # the summand's syntax nodes once per term, known before expanding (a nested Sum in
+        # the summand counted by its own syntax only; the running count in build bounds it)
+        if self.sum_nodes + (hi - lo + 1) * _expr_nodes(body) > MAX_SUM_NODES:
+            raise self.fail(node, self._too_large())
         terms = []
         try:
             for v in range(lo, hi + 1):
@@ -452,6 +474,11 @@ class _Builder:
         finally:
             self.bound.pop(name, None)
         return sp.Add(*terms)
+
+    @staticmethod
+    def _too_large() -> str:
+        return (f"the indexed sums expand to more than {MAX_SUM_NODES:,} syntax nodes (summand size "
+                "times number of terms); shorten the summand or the ranges")
 
     def name(self, node: ast.Name) -> sp.Expr:
         ident = node.id

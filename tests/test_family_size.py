@@ -118,6 +118,32 @@ def test_bad_index_syntax_is_one_line(text, fragment):
     assert fragment in msg and "\n" not in msg
 
 
+def test_long_summand_times_many_terms_is_refused_before_expanding():
+    """The term bound alone does not bound the work: 40 000 terms of a 20-sine summand (a
+    380-character text) built ~10⁷ nodes (11 s; a 20 kB summand, half an hour).  It is refused, one line, before expanding; the
+    same text with the node bound raised parses (control: the refusal is the bound's); a
+    nested sum whose inner ranges grow with the outer index is bounded as well."""
+    from methodgen import parse
+    syms = {f"q{i}": sp.Symbol(f"q{i}", real=True) for i in range(1, 11)}
+    body = " + ".join(f"sin(q[i % 10 + 1]*{j})" for j in range(1, 21))
+    with pytest.raises(ParseError) as err:
+        parse.parse_expr(f"Sum({body}, i, 1, 40000)", syms)
+    assert "syntax nodes" in str(err.value) and "\n" not in str(err.value)
+    small = f"Sum({body}, i, 1, 40)"
+    nested = f"Sum(Sum({body}, j, 1, i), i, 1, 12)"
+    old = parse.MAX_SUM_NODES
+    try:
+        parse.MAX_SUM_NODES = 5_000
+        for text in (small, nested):
+            with pytest.raises(ParseError, match="syntax nodes"):
+                parse.parse_expr(text, syms)
+        parse.MAX_SUM_NODES = 10**9
+        assert len(parse.parse_expr(small, syms).args) == 200
+        assert sp.expand(parse.parse_expr(nested, syms) - parse.parse_expr(f"Sum(i*({body}), i, 1, 12)", syms)) == 0
+    finally:
+        parse.MAX_SUM_NODES = old
+
+
 # --- per-family analyses against the per-instance ones ---------------------------------------------
 
 def _systems():
@@ -268,6 +294,31 @@ def test_radial_profile_numerical_rejection_keeps_radial_potentials():
                            q=["x", "y", "z"], p=["px", "py", "pz"])
     assert radial_profile(aniso) is None
     assert radial_profile(_ring(200, TODA_SUM.format(n=200))) is None
+
+
+def test_numerical_rejection_is_not_fooled_by_round_off():
+    """The screen that rejects before simplify (radial test, {I, H}, skewness of S) calls a
+    value nonzero only if it survives doubling the precision.  Identically-zero expressions
+    with large terms are not "clearly nonzero" -- negative control: at 30 digits alone their
+    value exceeds the 1e-20 the screen used to trust -- while a true 1e-15 on top of them is
+    still seen; and a skew S with such entries is accepted (it was refused as "not skew")."""
+    from methodgen.derive import _clearly_nonzero, sample_points
+
+    x, y, z = sp.symbols("x y z", real=True)
+    traps = [sp.expand((x + y + z) ** 30) - (x + y + z) ** 30,
+             sp.Add(sp.exp(40 * x) * (1 + y), -sp.exp(40 * x), -y * sp.exp(40 * x), evaluate=False)]
+    for e in traps:
+        syms = sorted(e.free_symbols, key=lambda v: v.name)
+        at30 = [abs(complex(e.xreplace({v: sp.Float(c, 30) for v, c in zip(syms, pt)}).evalf(30)))
+                for pt in sample_points(len(syms))]
+        assert max(at30) > 1e-20                         # control: the trap is real
+        assert not _clearly_nonzero(e)
+        assert _clearly_nonzero(e + sp.Rational(1, 10**15))
+    big = mg.PoissonSystem("u + v", y=["u", "v"], name="big",
+                           S=[["0", "exp(40*u)*(1 + v)"], ["-exp(40*u) - v*exp(40*u)", "0"]])
+    assert big.name == "big"
+    with pytest.raises(mg.InputError, match="skew"):      # control: a non-skew S is still refused
+        mg.PoissonSystem("u + v", y=["u", "v"], S=[["0", "exp(40*u)*(1 + v)"], ["-exp(40*u)", "0"]])
 
 
 def test_cli_bad_index_is_exit_2_and_one_line(tmp_path, capsys):

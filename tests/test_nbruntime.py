@@ -45,7 +45,9 @@ def test_every_step_structure_of_today_takes_the_shared_runtime(kepler):
         assert "def _nb_solve_step(" not in src
     # control: the predicate decides -- refused, the template route is emitted
     ir_kinds = {"explicit", "newton", "linear"}
-    assert all(emit.shared_runtime_supports(type("IR", (), {"kind": k})()) for k in ir_kinds)
+    assert all(emit.shared_runtime_supports(type("IR", (), {"kind": k, "projection": ()})()) for k in ir_kinds)
+    # symmetric projection is not in the shared runtime yet: such a module takes the template route
+    assert not emit.shared_runtime_supports(type("IR", (), {"kind": "explicit", "projection": ("H",)})())
     assert not emit.shared_runtime_supports(type("IR", (), {"kind": "projection"})())
 
 

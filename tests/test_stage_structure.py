@@ -171,8 +171,9 @@ def _program_values(dag, point):
 
 @pytest.mark.parametrize("case", ["kepler", "henon-heiles", "three-body"])
 def test_field_derivative_is_exact(case):
-    """The chain-rule program gives f and f' exactly (proved at rational points: the
-    difference to SymPy's own Jacobian reduces to 0 with no floating point), and the
+    """The chain-rule program gives f and f' exactly at two rational points (the difference
+    to SymPy's own Jacobian reduces to 0 there with no floating point; the identity itself is
+    test_field_derivative_is_an_identity), and the
     structural nonzeros it emits cover every nonzero of f'.  Negative control: one entry
     of the program negated is seen."""
     from methodgen.stages import field_derivative
@@ -195,6 +196,39 @@ def test_field_derivative_is_exact(case):
         bad = list(jv)
         bad[-1] = -bad[-1]
         assert not all(sp.simplify(a - b) == 0 for a, b in zip(bad, ref))
+
+
+PARAM_SYSTEM = mg.Hamiltonian("p1**2/(2*m1) + p2**2/(2*m2) + k*(q2 - q1)**2/2 + a*q1**4*exp(q2/b)",
+                              q=["q1", "q2"], p=["p1", "p2"], params={"m1": 1.0, "m2": 3.5, "k": 2.0, "a": 0.3, "b": 2.0},
+                              name="spring_params")
+
+
+@pytest.mark.parametrize("case", ["kepler", "henon-heiles", "three-body", "params"])
+def test_field_derivative_is_an_identity(case):
+    """Exact as an identity, not only at sample points: the program inlined (each assigned
+    symbol replaced by its right-hand side) minus SymPy's Jacobian expands to 0 in the state
+    and the parameters, entry by entry, and f' is 0 off the pattern.  Negative control: an
+    entry with one parameter or state symbol perturbed does not expand to 0."""
+    from methodgen.stages import field_derivative
+
+    system = PARAM_SYSTEM if case == "params" else CASES[case][0]()
+    f = vector_field(system)
+    y = list(system.y)
+    dag = field_derivative(tuple(f), tuple(y))
+    J = sp.Matrix(f).jacobian(sp.Matrix(y))
+    env: dict = {}
+    for sym, e in dag.assignments:
+        env[sym] = e.xreplace(env)
+    fv = [sp.sympify(e).xreplace(env) for e in dag.field]
+    jv = [sp.sympify(e).xreplace(env) for e in dag.jacobian]
+    assert all(sp.expand(a - b) == 0 for a, b in zip(fv, f))
+    assert all(sp.expand(a - J[i, j]) == 0 for a, (i, j) in zip(jv, dag.pattern))
+    off = set(dag.pattern)
+    assert all(J[i, j] == 0 for i in range(len(y)) for j in range(len(y)) if (i, j) not in off)
+    # control: the same test sees a wrong entry (the last one's first symbol doubled)
+    a, (i, j) = jv[-1], dag.pattern[-1]
+    x = sorted(a.free_symbols, key=lambda v: v.name)[0]
+    assert sp.expand(a.xreplace({x: 2 * x}) - J[i, j]) != 0
 
 
 def test_module_tables_are_the_certified_ones(modules):
