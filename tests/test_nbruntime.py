@@ -112,10 +112,10 @@ def _outcome(mod, y0, h, steps=300):
 
 # --- per-stage coefficients ----------------------------------------------------------
 
-def test_explicit_stage_reads_its_step_from_the_drift_coefficients(tmp_path):
-    """The runtime hands the post kernel h·KICK_A[k], h·DRIFT[k], h·KICK_B[k]; today's kernels
-    take their step from DRIFT.  Doubling DRIFT is then one step of 2h; control: restored,
-    the step of h again (and the two differ)."""
+def test_explicit_stage_reads_its_steps_from_the_stage_coefficients(tmp_path):
+    """The runtime hands the first-same-as-last post kernel h·KICK_A[k], h·DRIFT[k],
+    h·KICK_B[k].  Doubling all three is one step of 2h, bitwise; controls: restored, the
+    step of h again; doubling DRIFT alone is neither (the kicks are read separately)."""
     scene, mod = _module(tmp_path, "simple-pendulum", "stormer-verlet")
     y0 = np.array(scene.y0)
     h = scene.h
@@ -123,15 +123,20 @@ def test_explicit_stage_reads_its_step_from_the_drift_coefficients(tmp_path):
     np.testing.assert_array_equal(mod._DRIFT, np.array(mod.GAMMAS))
     ref_h = mod.integrate(y0, h, 1)
     ref_2h = mod.integrate(y0, 2 * h, 1)
-    saved = mod._DRIFT.copy()
+    saved = [a.copy() for a in (mod._KICK_A, mod._DRIFT, mod._KICK_B)]
     try:
-        mod._DRIFT[:] = 2 * saved
+        for arr, old in zip((mod._KICK_A, mod._DRIFT, mod._KICK_B), saved):
+            arr[:] = 2 * old
         doubled = mod.integrate(y0, h, 1)
+        mod._KICK_A[:], mod._KICK_B[:] = saved[0], saved[2]
+        drift_only = mod.integrate(y0, h, 1)
     finally:
-        mod._DRIFT[:] = saved
+        for arr, old in zip((mod._KICK_A, mod._DRIFT, mod._KICK_B), saved):
+            arr[:] = old
     np.testing.assert_array_equal(doubled, ref_2h)
     np.testing.assert_array_equal(mod.integrate(y0, h, 1), ref_h)
     assert not np.array_equal(ref_h, ref_2h)
+    assert not np.array_equal(drift_only, ref_2h) and not np.array_equal(drift_only, ref_h)
 
 
 def test_configuration_is_checked_by_name():
