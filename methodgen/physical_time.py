@@ -80,6 +80,8 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
     t0 = float(Y[it])
     if not (math.isfinite(T) and T > t0):
         raise InputError(f"t_final must be finite and after the initial time t = {t0!r}, got {t_final!r}")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+        raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
     kw = dict(params=params, check_resolution=check_resolution)
     # What one integrate() call hands the next (compensation of the stage sums, solver state,
     # first-same-as-last force), so that the run in calls is the run in one piece; kept per
@@ -96,7 +98,9 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
         calls += 1
         return out, {k: run[k] for k in _CARRIED if k in run}
 
-    chunk = _FIRST_CHUNK
+    # No chunk runs past max_steps + 1 whole steps in all (the refusal comes before the work,
+    # not after chunks that grew to 3 times the steps so far).
+    chunk = _cap(_FIRST_CHUNK, 0, max_steps)
     # Whole steps in chunks that stay below T: each chunk aims at 90 % of the steps the mean
     # rate so far predicts, and at most 3 times the steps so far (the first chunks see a part
     # of an orbit only: dt/dτ varies along it), so a chunk rarely crosses T.
@@ -113,6 +117,7 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
             raise InputError(f"the physical time does not advance (t = {Y[it]!r} after {steps} steps)")
         left = (T - Y[it]) / rate
         chunk = min(max(1, int(0.9 * left)), 3 * steps) if left > 16 else _FIRST_CHUNK
+        chunk = _cap(chunk, steps, max_steps)
     # The crossing chunk: halves until it is short, then every state of it.
     while chunk > 2 * _FIRST_CHUNK:
         half = chunk // 2
@@ -136,6 +141,11 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
     if info is not None:
         info.update(steps=steps, sigma=sigma, t_error=float(Y[it] - T), calls=calls, tau=steps * h + sigma)
     return Y
+
+
+def _cap(chunk: int, steps: int, max_steps: int) -> int:
+    """``chunk`` cut so that ``steps + chunk`` stays within ``max_steps + 1`` whole steps."""
+    return min(chunk, max_steps + 1 - steps)
 
 
 def _last_step(module, Y, carry, t_hi, T, h, it, kw):

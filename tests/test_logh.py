@@ -185,6 +185,37 @@ def test_run_to_time_reports_and_refuses(build):
         run_to_time(build(system=kepler_system()), pericentre(0.6), 1.0, 0.1)
 
 
+def test_run_to_time_refuses_a_far_T_before_running_past_max_steps(build, monkeypatch):
+    # A T far out is refused after at most max_steps + 1 whole steps of work (the chunks grow
+    # up to 3x the steps so far, so without the cap up to 4x max_steps ran before the refusal)
+    import methodgen.physical_time as pt
+
+    mod = build()
+    Y0 = mod.initial_state(pericentre(0.6))
+
+    class Counting:
+        def __init__(self, m):
+            self.m, self.n = m, 0
+            self.STATE_NAMES, self.TIME_TRANSFORM = m.STATE_NAMES, m.TIME_TRANSFORM
+
+        def integrate(self, Y, h, n, **kw):
+            self.n += n
+            return self.m.integrate(Y, h, n, **kw)
+
+    counted = Counting(mod)
+    with pytest.raises(InputError, match="max_steps = 1100"):
+        run_to_time(counted, Y0, 1e15, 0.1, max_steps=1100)
+    assert counted.n <= 1101, counted.n
+    with pytest.raises(InputError, match="max_steps must be an integer >= 1"):
+        run_to_time(mod, Y0, 1.0, 0.1, max_steps=0)
+    # control: the cap disabled, the chunks overshoot max_steps before the refusal
+    monkeypatch.setattr(pt, "_cap", lambda chunk, steps, max_steps: chunk)
+    counted = Counting(mod)
+    with pytest.raises(InputError, match="max_steps = 1100"):
+        run_to_time(counted, Y0, 1e15, 0.1, max_steps=1100)
+    assert counted.n > 2200, counted.n   # 4096 whole steps run
+
+
 def test_run_to_time_in_calls_is_the_run_in_one_piece(build, monkeypatch):
     # T = t after n whole steps of one integrate() call: run_to_time reaches it in its calls
     # (chunks, discarded crossings, halvings) bitwise; control: without handing the
