@@ -197,14 +197,23 @@ def test_numba_chunks_and_agreement(hh):
 # --- (e) errors ---------------------------------------------------------------------------
 
 def test_a_splitting_with_another_method_is_refused(hh):
-    with pytest.raises(InputError, match="stormer-verlet"):
+    with pytest.raises(InputError, match="stormer-verlet") as exc:
         mg.discretize(hh, "midpoint", order=4, composition="blanes-moan")
+    # the alternatives offered have the order asked for (kahan-li has no order 4), and the
+    # text names no API keyword (the CLI shows it under --composition)
+    msg = str(exc.value)
+    assert "order 4 for midpoint: triple-jump, suzuki)" in msg and "composition=" not in msg
+    for family in msg.split(": ")[-1].rstrip(")").split(", "):
+        assert mg.discretize(hh, "midpoint", order=4, composition=family).traits.order == 4
 
 
 def test_rkn_family_needs_quadratic_t():
     rel = mg.Hamiltonian("sqrt(1 + p**2) + q**2/2", q=["q"], p=["p"])
-    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom"):
+    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom") as exc:
         mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+    # offered: what has order 6 for every T (mclachlan has order 4 only)
+    assert str(exc.value).endswith("of order 6 for every T: blanes-moan") and "composition=" not in str(exc.value)
+    assert mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan").traits.order == 6
     # the general families apply (order 4 for every splitting)
     assert mg.discretize(rel, "stormer-verlet", order=4, composition="blanes-moan").traits.order == 4
 
