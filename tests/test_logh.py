@@ -312,6 +312,16 @@ def test_initial_U_nonnegative_is_refused(build):
         mod.initial_state(np.array([3.0, 0.0, 0.0, 0.0, 0.1, 0.0]))   # U = -1/3 + 1.5 > 0
 
 
+def test_initial_state_with_a_zero_mass_is_a_domain_error(build):
+    # 1/m with m = 0 raised a bare ZeroDivisionError from initial_state (a traceback on the
+    # CLI); now the module's domain error naming the parameters.  Control: m = 1 gives the state
+    mod = build()
+    with pytest.raises(mod.NonFiniteError, match=r"H is not defined .*parameters \{'m': 0.0"):
+        mod.initial_state(pericentre(0.6), 0.0, {"m": 0.0})
+    Y = mod.initial_state(pericentre(0.6), 0.0, {"m": 1.0})
+    assert Y[3] == pytest.approx(-energy(pericentre(0.6)))
+
+
 # --- scene and CLI -----------------------------------------------------------------------------
 
 def _main(capsys, *argv):
@@ -329,6 +339,12 @@ def test_builtin_scene_runs_and_keeps_the_energy(capsys):
     assert rep["time_transform"]["form"] == "log"
     assert rep["time_transform"]["t_final"] > 0
     assert rep["time_transform"]["H_phys_max_abs_error"] < 1e-12
+
+
+def test_cli_zero_mass_is_one_line_without_traceback(capsys):
+    code, out, err = _main(capsys, "run", "kepler-logh", "--param", "m=0", "--steps", "10")
+    assert code != 0 and "H is not defined" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_cli_time_transform_log_on_kepler(capsys):
