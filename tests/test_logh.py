@@ -347,6 +347,12 @@ def test_cli_zero_mass_is_one_line_without_traceback(capsys):
     assert len(err.strip().splitlines()) == 1
 
 
+def test_cli_t_final_names_the_log_form(capsys):
+    # the refusal read "with the time transformation g = log h and steps are ..."
+    code, out, err = _main(capsys, "run", "kepler-logh", "--t-final", "10")
+    assert code == 2 and "logarithmic Hamiltonian" in err and "g = log" not in err and "run_to_time" in err
+
+
 def test_cli_time_transform_log_on_kepler(capsys):
     code, out, err = _main(capsys, "run", "kepler", "--time-transform", "log", "--method", "stormer-verlet",
                            "--steps", "200", "--json")
