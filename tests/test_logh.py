@@ -421,3 +421,16 @@ def test_bench_peers_has_log_form_rows_at_the_physical_T():
     assert all(r["energy_rel_error"] < 1e-13 for r in log), log
     # control: the same method on H in physical time at the same h does not resolve e = 0.99
     assert min(r["error"] for r in plain if "error" in r) > 100 * max(r["error"] for r in log), (plain, log)
+
+
+def test_bench_peers_log_rows_use_the_family():
+    # --composition F chose the family of the rows on H but the [log] rows kept the order's
+    # default (suzuki at order 4): both now use F
+    from methodgen import bench
+
+    out = bench.work_precision(mg.load_scene("kepler-logh"), peers=True, quick=True, orders=(4,),
+                               T=2 * math.pi, composition="mclachlan")
+    log = [r for r in out["rows"] if r["method"].endswith("[log]")]
+    assert log and all(r["composition"] == "mclachlan" and "mclachlan" in r["method"] for r in log), log
+    plain = [r for r in out["rows"] if r["kind"] == "methodgen" and not r["method"].endswith("[log]")]
+    assert plain and all(r["composition"] == "mclachlan" for r in plain), plain
