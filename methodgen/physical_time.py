@@ -8,8 +8,8 @@ fictive steps while ``t ≤ T`` and then one last step of the same method with a
 which increases while dt/dτ > 0).  The last step is a step of the method like the others,
 shorter: its local error is at most that of a full step (measured: Kepler, order 10, T = 2000,
 the error at T equals that of the last whole step at its own t, 1.1e-11 (e = 0.6); 3e-14 against
-1.5e-14 (e = 0.99)), and ``t`` lands on ``T`` to 2 units in the last place (reported as
-``info["t_error"]``).  No interpolation is involved.  The calls hand on the compensation of
+1.5e-14 (e = 0.99)), and ``t`` lands on ``T`` to 2 units in the last place of max(|T|, 1)
+(reported as ``info["t_error"]``; a last step that cannot land there raises RuntimeError).  No interpolation is involved.  The calls hand on the compensation of
 the stage sums, so the run in calls is the run in one piece.
 """
 
@@ -65,6 +65,8 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
     InputError
         Not a time-transformed module, a bad ``h`` or ``t_final``, or more than
         ``max_steps`` steps needed.
+    RuntimeError
+        The last step cannot land on ``t_final`` within 2 ulp of max(|t_final|, 1).
     """
     tt = getattr(module, "TIME_TRANSFORM", None)
     if not tt:
@@ -138,6 +140,13 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
             raise RuntimeError("run_to_time: the crossing step was not found")
         Y, sigma, k = _last_step(module, Y, carry, rows[n + 1, it], T, h, it, kw)
         calls += k
+        tol = _t_tolerance(T)
+        if not abs(Y[it] - T) <= tol:
+            # t(σ) jumped over T by more than the tolerance (not continuous at this resolution):
+            # the state is not the state at T -- say so rather than return it
+            raise RuntimeError(f"run_to_time: the last step (after {steps} whole steps, fictive step "
+                               f"σ = {sigma!r}) ends at t = {float(Y[it])!r}, {float(Y[it] - T):.3g} from "
+                               f"t_final = {T!r} (tolerance {tol:.3g}) after {k} trials")
     if info is not None:
         info.update(steps=steps, sigma=sigma, t_error=float(Y[it] - T), calls=calls, tau=steps * h + sigma)
     return Y
@@ -148,6 +157,11 @@ def _cap(chunk: int, steps: int, max_steps: int) -> int:
     return min(chunk, max_steps + 1 - steps)
 
 
+def _t_tolerance(T: float) -> float:
+    """How close the last step lands on ``T``: 2 units in the last place of max(|T|, 1)."""
+    return float(2 * np.spacing(max(abs(T), 1.0)))
+
+
 def _last_step(module, Y, carry, t_hi, T, h, it, kw):
     """The step of fictive size σ ∈ (0, h) from ``Y`` that ends at ``t = T``: Illinois false
     position on ``t(σ) − T`` (bracketed: ``t(0) < T < t(h) = t_hi``), to a few ulps of T."""
@@ -155,7 +169,7 @@ def _last_step(module, Y, carry, t_hi, T, h, it, kw):
     hi, fhi = h, float(t_hi) - T
     best, fbest = None, math.inf
     side = 0
-    tol = 2 * np.spacing(max(abs(T), 1.0))
+    tol = _t_tolerance(T)
     for k in range(1, 61):
         s = (lo * fhi - hi * flo) / (fhi - flo)
         if not lo < s < hi:

@@ -216,6 +216,33 @@ def test_run_to_time_refuses_a_far_T_before_running_past_max_steps(build, monkey
     assert counted.n > 2200, counted.n   # 4096 whole steps run
 
 
+def test_run_to_time_refuses_a_last_step_that_misses_T(build, monkeypatch):
+    # A module whose t(σ) is coarse (t rounded to 1e-3 on single steps) cannot land on T: the
+    # miss is an error naming the distance, not a returned state off T.  Control: the check
+    # disabled (tolerance inf), the same run returns a state 1e-4 or more away from T
+    import methodgen.physical_time as pt
+
+    mod = build()
+    Y0 = mod.initial_state(pericentre(0.6))
+
+    class Coarse:
+        STATE_NAMES, TIME_TRANSFORM = mod.STATE_NAMES, mod.TIME_TRANSFORM
+
+        def integrate(self, Y, h, n, **kw):
+            out = mod.integrate(Y, h, n, **kw)
+            if n == 1:
+                out[-1, 7] = round(out[-1, 7], 3)
+            return out
+
+    T = 1.23456
+    with pytest.raises(RuntimeError, match=r"from t_final = 1.23456 \(tolerance"):
+        run_to_time(Coarse(), Y0, T, 0.05)
+    monkeypatch.setattr(pt, "_t_tolerance", lambda T: math.inf)
+    info = {}
+    run_to_time(Coarse(), Y0, T, 0.05, info=info)
+    assert abs(info["t_error"]) >= 1e-4, info
+
+
 def test_run_to_time_in_calls_is_the_run_in_one_piece(build, monkeypatch):
     # T = t after n whole steps of one integrate() call: run_to_time reaches it in its calls
     # (chunks, discarded crossings, halvings) bitwise; control: without handing the
