@@ -56,6 +56,29 @@ def test_general_order_decided(family, order):
 
 
 @pytest.mark.parametrize("family, order", CASES)
+def test_rkn_flag_is_where_the_general_order_falls_short(family, order):
+    # rkn (refused off RKN problems, labelled RKN) exactly where the decided general order is
+    # below the claimed one: SRKN_6^b was flagged although its order 4 holds for every splitting
+    s = splitting(order, family)
+    assert s.rkn == (general_order(s) < s.order), (s.rkn, general_order(s))
+
+
+def test_srkn6_applies_to_a_non_quadratic_t_with_order_4():
+    # T = sqrt(1 + p^2): SRKN_6^b was refused ("order 4 for T quadratic only"), yet it has order
+    # 4 for every splitting -- measured: error ratio under halving h ~ 16.  Control: SRKN_11^b
+    # (order 6 RKN only) is still refused there
+    rel = mg.Hamiltonian("sqrt(1 + p**2) + q**4/4", q=["q"], p=["p"])
+    mod = mg.build(rel, "stormer-verlet", order=4, composition="blanes-moan-rkn")
+    ref = mg.build(rel, "stormer-verlet", order=10)
+    y0, T = np.array([1.0, 0.5]), 4.0
+    exact = ref.integrate(y0, T / 400, 400)[-1]
+    e1, e2 = (np.max(np.abs(mod.integrate(y0, T / n, n)[-1] - exact)) for n in (20, 40))
+    assert 3.7 < math.log2(e1 / e2) < 4.3, (e1, e2)
+    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom"):
+        mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+
+
+@pytest.mark.parametrize("family, order", CASES)
 def test_rkn_order_decided(family, order):
     """Modulo the ideal of [B, [B, [B, A]]] (zero for T quadratic): every family has its order
     for RKN problems, SRKN_11^b 6 although its general order is 4."""
