@@ -132,6 +132,23 @@ def test_compositions_keep_the_orbit_splittings_do_not(logh, tmp_path):
     assert dE("blanes-moan") > 1e-4
 
 
+def test_level_defect_error_of_the_log_form_says_smaller_h(logh, tmp_path):
+    # S10 at 100 steps per orbit (e = 0.99) is refused at the pericentre; the message told the
+    # user to "choose a g that is positive along the whole motion" -- the log form's g = -1/U is
+    # not the user's to choose.  Control: the Poincaré form keeps that advice
+    mod = mg.generate(mg.discretize(logh, "stormer-verlet", order=6, composition="blanes-moan"),
+                      tmp_path / "logh_s10.py")
+    with pytest.raises(mod.ResolutionError, match="smaller h") as exc:
+        mod.integrate(mod.initial_state(pericentre(0.99)), 2 * math.pi / 100, 500)
+    assert exc.value.check == "time_scale" and "choose a g" not in str(exc.value)
+    assert "logarithmic Hamiltonian" in str(exc.value)
+    mg.generate(mg.discretize(mg.time_transform(kepler_system(), "sqrt(x**2 + y**2 + z**2)"), "midpoint"),
+                tmp_path / "kep_tt.py")
+    advice = "reaches g = 0, no step size helps); choose a g that is positive along the whole motion"
+    assert advice in (tmp_path / "kep_tt.py").read_text()
+    assert advice not in (tmp_path / "logh_s10.py").read_text()
+
+
 def test_control_kick_drift_kick_leapfrog_of_lambda_is_not_exact(build):
     # The same Λ on the unexchanged state (q, t; p, e): Störmer–Verlet is then the kick–drift–kick
     # leapfrog of Λ, which does not keep the orbit (measured: relative energy error 0.2).
