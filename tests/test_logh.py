@@ -410,6 +410,23 @@ def test_cli_t_final_names_the_log_form(capsys):
     assert code == 2 and "logarithmic Hamiltonian" in err and "g = log" not in err and "run_to_time" in err
 
 
+def test_plot_pairs_of_the_exchanged_state(build, tmp_path):
+    # The log form's state is (p..., e, q..., t): the default pairs by column order drew the
+    # momentum plane px-py (the hodograph) and px-x; now the orbit x-y and x-px, y-py.
+    # Control: the Poincaré form's (q..., t, p..., e) keeps the column-order pairs
+    from methodgen.plots import default_pairs, module_pairs
+
+    mod = build()
+    names = mod.STATE_NAMES
+    assert [(names[i], names[j]) for i, j in module_pairs(mod)] == [("x", "y"), ("x", "px"), ("y", "py")]
+    assert (names[0], names[1]) == ("px", "py") and default_pairs(4)[0] == (0, 1)   # what was drawn
+    tt = mg.generate(mg.discretize(mg.time_transform(kepler_system(), "sqrt(x**2 + y**2 + z**2)"), "midpoint"),
+                     tmp_path / "kep_tt.py")
+    assert module_pairs(tt) == default_pairs(4)
+    assert [(tt.STATE_NAMES[i], tt.STATE_NAMES[j]) for i, j in module_pairs(tt)] == [("x", "y"), ("x", "px"),
+                                                                                      ("y", "py")]
+
+
 def test_cli_time_transform_log_on_kepler(capsys):
     code, out, err = _main(capsys, "run", "kepler", "--time-transform", "log", "--method", "stormer-verlet",
                            "--steps", "200", "--json")
