@@ -354,6 +354,18 @@ def test_run_into_U_zero_is_refused_at_the_step(build):
     assert exc.value.step > 0 and -0.1 < U, (exc.value.step, U)   # it stopped at U ≈ 0, not before
 
 
+def test_hyperbolic_escape_names_the_log_form(build):
+    # H = 1 > 0: as r grows T + e -> 0 cancels to 0 (r ~ 1e15 after 49 steps of h = 0.5) and the
+    # step divides by it; the error said only "try a smaller step size h".  Control: the bound
+    # orbit (H = -0.5) with the same h and steps runs to the end
+    mod = build()
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e") as exc:
+        mod.integrate(mod.initial_state(np.array([1.0, 0, 0, 0, 2.0, 0])), 0.5, 200, check_resolution=False)
+    assert exc.value.step > 0 and "a smaller h does not help there" in str(exc.value)
+    Y = mod.integrate(mod.initial_state(pericentre(0.6)), 0.5, 200, check_resolution=False)
+    assert np.all(np.isfinite(Y))
+
+
 def test_control_the_same_escape_without_the_field_runs_to_the_end(build):
     # c = 0: U = -k/r < 0 everywhere; the same escaping motion runs through, energy kept
     mod = _field_module(build, 0.0)
