@@ -364,6 +364,20 @@ def test_hyperbolic_escape_names_the_log_form(build):
     assert exc.value.step > 0 and "a smaller h does not help there" in str(exc.value)
     Y = mod.integrate(mod.initial_state(pericentre(0.6)), 0.5, 200, check_resolution=False)
     assert np.all(np.isfinite(Y))
+    # a batch (the vectorised loop's non-finite check) says it too
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e"):
+        mod.integrate(mod.initial_state(np.array([[1.0, 0, 0, 0, 2.0, 0], list(pericentre(0.6))])), 0.5, 200,
+                      check_resolution=False)
+
+
+@pytest.mark.slow
+def test_numba_hyperbolic_escape_names_the_log_form(logh, tmp_path):
+    # the numba runtime said only "state became non-finite at step 49" (the fast sibling:
+    # test_hyperbolic_escape_names_the_log_form, numpy)
+    mod = mg.build(logh, "stormer-verlet", backend="numba", path=tmp_path / "logh_nb.py")
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e") as exc:
+        mod.integrate(mod.initial_state(np.array([1.0, 0, 0, 0, 2.0, 0])), 0.5, 200, check_resolution=False)
+    assert exc.value.step == 49
 
 
 def test_control_the_same_escape_without_the_field_runs_to_the_end(build):
