@@ -750,7 +750,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                              f"(that run took {sec:.0f} s CPU)")
                 break
     if scene.transformed is not None and scene.transformed.time_transform.form == "log":
-        rows += _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress)
+        rows += _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress, family_for)
     for name, fn in (("heyoka", pe.heyoka_rows), ("rebound", pe.rebound_rows)):
         if pe.import_peer(name) is None:
             notes.append(f"{name} is not installed: no {name} rows ({pe.INSTALL_HINT})")
@@ -765,12 +765,14 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             "targets": targets(rows), "frontier": frontier(rows)}
 
 
-def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress) -> list[dict]:
+def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress,
+                   family_for=lambda method, order: None) -> list[dict]:
     """``--peers`` rows of a scene with ``time_transform = "log"``: each method and order on the
     logarithmic Hamiltonian (its run system), fictive steps from :func:`composed_steps`, run to
     the physical time T by :func:`methodgen.physical_time.run_to_time` (whole fictive steps,
     then one step solved for t = T).  The error is at T; the energy and invariant errors are
-    those of the final state (``errors_at_T_only``), not maxima along the run."""
+    those of the final state (``errors_at_T_only``), not maxima along the run.  ``family_for``
+    gives the composition family of a (method, order) as for the other rows (``--composition``)."""
     from . import peers as pe
     from .physical_time import run_to_time
 
@@ -779,7 +781,7 @@ def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, prog
     notes.append("rows marked [log] integrate the logarithmic Hamiltonian in fictive time to the physical T "
                  "(h is a fictive step); their energy and invariant errors are at T only")
     for method, order in _progress(jobs, progress, "methodgen [log]"):
-        comp = composition_for(order)
+        comp = composition_for(order, family_for(method, order))
         family = comp.family if comp is not None else None
         stages = comp.stages if comp is not None else 1
         label = row_label(method, order, family) + " [log]"

@@ -8,8 +8,8 @@ fictive steps while ``t ≤ T`` and then one last step of the same method with a
 which increases while dt/dτ > 0).  The last step is a step of the method like the others,
 shorter: its local error is at most that of a full step (measured: Kepler, order 10, T = 2000,
 the error at T equals that of the last whole step at its own t, 1.1e-11 (e = 0.6); 3e-14 against
-1.5e-14 (e = 0.99)), and ``t`` lands on ``T`` to 2 units in the last place (reported as
-``info["t_error"]``).  No interpolation is involved.  The calls hand on the compensation of
+1.5e-14 (e = 0.99)), and ``t`` lands on ``T`` to 2 units in the last place of max(|T|, 1)
+(reported as ``info["t_error"]``; a last step that cannot land there raises RuntimeError).  No interpolation is involved.  The calls hand on the compensation of
 the stage sums, so the run in calls is the run in one piece.
 """
 
@@ -65,6 +65,8 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
     InputError
         Not a time-transformed module, a bad ``h`` or ``t_final``, or more than
         ``max_steps`` steps needed.
+    RuntimeError
+        The last step cannot land on ``t_final`` within 2 ulp of max(|t_final|, 1).
     """
     tt = getattr(module, "TIME_TRANSFORM", None)
     if not tt:
@@ -80,6 +82,8 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
     t0 = float(Y[it])
     if not (math.isfinite(T) and T > t0):
         raise InputError(f"t_final must be finite and after the initial time t = {t0!r}, got {t_final!r}")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+        raise InputError(f"max_steps must be an integer >= 1, got {max_steps!r}")
     kw = dict(params=params, check_resolution=check_resolution)
     # What one integrate() call hands the next (compensation of the stage sums, solver state,
     # first-same-as-last force), so that the run in calls is the run in one piece; kept per
@@ -96,7 +100,9 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
         calls += 1
         return out, {k: run[k] for k in _CARRIED if k in run}
 
-    chunk = _FIRST_CHUNK
+    # No chunk runs past max_steps + 1 whole steps in all (the refusal comes before the work,
+    # not after chunks that grew to 3 times the steps so far).
+    chunk = _cap(_FIRST_CHUNK, 0, max_steps)
     # Whole steps in chunks that stay below T: each chunk aims at 90 % of the steps the mean
     # rate so far predicts, and at most 3 times the steps so far (the first chunks see a part
     # of an orbit only: dt/dτ varies along it), so a chunk rarely crosses T.
@@ -113,6 +119,7 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
             raise InputError(f"the physical time does not advance (t = {Y[it]!r} after {steps} steps)")
         left = (T - Y[it]) / rate
         chunk = min(max(1, int(0.9 * left)), 3 * steps) if left > 16 else _FIRST_CHUNK
+        chunk = _cap(chunk, steps, max_steps)
     # The crossing chunk: halves until it is short, then every state of it.
     while chunk > 2 * _FIRST_CHUNK:
         half = chunk // 2
@@ -133,9 +140,26 @@ def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_reso
             raise RuntimeError("run_to_time: the crossing step was not found")
         Y, sigma, k = _last_step(module, Y, carry, rows[n + 1, it], T, h, it, kw)
         calls += k
+        tol = _t_tolerance(T)
+        if not abs(Y[it] - T) <= tol:
+            # t(σ) jumped over T by more than the tolerance (not continuous at this resolution):
+            # the state is not the state at T -- say so rather than return it
+            raise RuntimeError(f"run_to_time: the last step (after {steps} whole steps, fictive step "
+                               f"σ = {sigma!r}) ends at t = {float(Y[it])!r}, {float(Y[it] - T):.3g} from "
+                               f"t_final = {T!r} (tolerance {tol:.3g}) after {k} trials")
     if info is not None:
         info.update(steps=steps, sigma=sigma, t_error=float(Y[it] - T), calls=calls, tau=steps * h + sigma)
     return Y
+
+
+def _cap(chunk: int, steps: int, max_steps: int) -> int:
+    """``chunk`` cut so that ``steps + chunk`` stays within ``max_steps + 1`` whole steps."""
+    return min(chunk, max_steps + 1 - steps)
+
+
+def _t_tolerance(T: float) -> float:
+    """How close the last step lands on ``T``: 2 units in the last place of max(|T|, 1)."""
+    return float(2 * np.spacing(max(abs(T), 1.0)))
 
 
 def _last_step(module, Y, carry, t_hi, T, h, it, kw):
@@ -145,7 +169,7 @@ def _last_step(module, Y, carry, t_hi, T, h, it, kw):
     hi, fhi = h, float(t_hi) - T
     best, fbest = None, math.inf
     side = 0
-    tol = 2 * np.spacing(max(abs(T), 1.0))
+    tol = _t_tolerance(T)
     for k in range(1, 61):
         s = (lo * fhi - hi * flo) / (fhi - flo)
         if not lo < s < hi:

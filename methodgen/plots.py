@@ -248,6 +248,21 @@ def default_pairs(dof: int) -> list[tuple[int, int]]:
     return [(0, 1)] + [(i, dof + i) for i in range(min(dof, 2))]
 
 
+def module_pairs(module) -> list[tuple[int, int]]:
+    """:func:`default_pairs` for the layout of ``module``'s state: the log form's exchanged
+    state ``(p…, e, q…, t)`` gets the configuration plane (x, y) and (qᵢ, pᵢ) too, not the
+    momentum plane and (pᵢ, qᵢ) its column order would give."""
+    names = tuple(module.STATE_NAMES)
+    tt = getattr(module, "TIME_TRANSFORM", None) or {}
+    if tt.get("form") != "log":
+        return default_pairs(len(names) // 2)
+    d0 = len(names) // 2 - 1                 # physical degrees of freedom
+    q0 = d0 + 1                              # first coordinate column
+    if d0 == 1:
+        return [(q0, 0)]
+    return [(q0, q0 + 1)] + [(q0 + i, i) for i in range(min(d0, 2))]
+
+
 def _resolve_pair(pair, names) -> tuple[int, int]:
     out = []
     for c in pair:
@@ -292,8 +307,7 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
     if traj.ndim != 2 or len(traj) < 1:
         raise InputError("plot_run needs a trajectory of shape (steps+1, 2d)")
     names = tuple(module.STATE_NAMES)
-    dof = len(names) // 2
-    pairs = [_resolve_pair(p, names) for p in (pairs or default_pairs(dof))]
+    pairs = [_resolve_pair(p, names) for p in (pairs or module_pairs(module))]
     nbottom = 2 if constraint_residuals is not None else 1
     ncols = max(len(pairs), nbottom)
     fig = _figure((4 * ncols, 7.5))
@@ -325,7 +339,8 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
             ax.plot([], [], label=f"{name}: error exactly 0")
     if drew:
         ax.set_yscale("log")
-    ax.set_xlabel("t")
+    # a time-transformed run steps in the fictive time τ (the physical t is a state column)
+    ax.set_xlabel("τ (fictive time)" if getattr(module, "TIME_TRANSFORM", None) else "t")
     ax.set_ylabel("absolute error")
     ax.set_title("invariant errors", fontsize=9)
     ax.legend(loc="lower right", fontsize=8)

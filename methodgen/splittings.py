@@ -20,8 +20,10 @@ Families (the published constants, cross-checked against their order conditions 
     order 4 (6 stages = force evaluations) and order 6 (10 stages) for every splitting.
 ``"blanes-moan-rkn"`` (Blanes & Moan 2002, Table 3, SRKN_6^b and SRKN_11^b)
     order 4 (6 stages) and order 6 (11 stages) for Runge–Kutta–Nyström problems
-    (T quadratic in p with a constant mass matrix, so [B,[B,[B,A]]] = 0); only order 2 for a
-    general splitting (see below).
+    (T quadratic in p with a constant mass matrix, so [B,[B,[B,A]]] = 0).  For a general
+    splitting both have order 4 (decided below): the ideal starts at degree 4 and a symmetric
+    method has no even-degree defects, so an RKN order 4 is an order 4 for every splitting;
+    only SRKN_11^b's order 6 needs an RKN problem (``rkn``).
 ``"mclachlan"`` (McLachlan 1995, S5; [HLW06, (V.3.6)])
     order 4, 5 stages, exact algebraic coefficients (√19): the 5-fold composition of
     symplectic Euler with its adjoint, written with the kicks at both ends (6 kicks, 5
@@ -63,7 +65,8 @@ DPS = 60
 
 #: family → orders (the order claimed: for every splitting, or RKN for RKN_FAMILIES).
 SPLITTING_FAMILIES = {"blanes-moan": (4, 6), "blanes-moan-rkn": (4, 6), "mclachlan": (4,)}
-#: Families whose order holds only for RKN problems (T = ½ pᵀ M⁻¹ p, M constant).
+#: Families with an order that holds only for RKN problems (T = ½ pᵀ M⁻¹ p, M constant): their
+#: order 6 (order 4 holds for every splitting; :attr:`Splitting.rkn`).
 RKN_FAMILIES = ("blanes-moan-rkn",)
 
 # Published constants: (kicks b_1 … up to the middle, drifts a_1 … up to the middle); the
@@ -209,8 +212,11 @@ def splitting(order: int, family: str) -> Splitting:
         src = _BM_SRKN6 if order == 4 else _BM_SRKN11
         k, d = _decimal_symmetric(*src)
         name = "SRKN_6^b" if order == 4 else "SRKN_11^b"
-        return Splitting(family, order, k, d, False, f"Blanes & Moan 2002, {name} (15 digits; RKN order)",
-                         rkn=True)
+        # rkn: the claimed order exceeds the order for every splitting (4 for both: SRKN_6^b's
+        # order 4 holds for every T, so only SRKN_11^b is limited to RKN problems)
+        return Splitting(family, order, k, d, False,
+                         f"Blanes & Moan 2002, {name} (15 digits{'; RKN order' if order == 6 else ''})",
+                         rkn=order == 6)
     k, d = _mclachlan()
     return Splitting(family, 4, k, d, True, "McLachlan 1995, S5 (exact, √19)")
 

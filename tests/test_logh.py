@@ -119,6 +119,36 @@ def test_log_leapfrog_keeps_kepler_orbit_at_e099_with_50_steps_per_orbit(build):
     assert 0.9 * 40 * math.pi < t[-1] < 1.1 * 40 * math.pi      # twenty orbits of physical time
 
 
+def test_compositions_keep_the_orbit_splittings_do_not(logh, tmp_path):
+    # The README's scope of the exact orbit: a composition of the leapfrog keeps it (each substep
+    # does); a splitting family is not a composition of leapfrog steps (b_1 != a_1/2) and does
+    # not (measured, e = 0.99, 100 steps per orbit: relative energy error ~1e-2)
+    def dE(family):
+        mod = mg.generate(mg.discretize(logh, "stormer-verlet", order=4, composition=family),
+                          tmp_path / f"logh_{family.replace('-', '_')}.py")
+        return _orbit_errors(mod, 0.99, 100, 5)[0]
+
+    assert dE("suzuki") < 1e-12
+    assert dE("blanes-moan") > 1e-4
+
+
+def test_level_defect_error_of_the_log_form_says_smaller_h(logh, tmp_path):
+    # S10 at 100 steps per orbit (e = 0.99) is refused at the pericentre; the message told the
+    # user to "choose a g that is positive along the whole motion" -- the log form's g = -1/U is
+    # not the user's to choose.  Control: the Poincaré form keeps that advice
+    mod = mg.generate(mg.discretize(logh, "stormer-verlet", order=6, composition="blanes-moan"),
+                      tmp_path / "logh_s10.py")
+    with pytest.raises(mod.ResolutionError, match="smaller h") as exc:
+        mod.integrate(mod.initial_state(pericentre(0.99)), 2 * math.pi / 100, 500)
+    assert exc.value.check == "time_scale" and "choose a g" not in str(exc.value)
+    assert "logarithmic Hamiltonian" in str(exc.value)
+    mg.generate(mg.discretize(mg.time_transform(kepler_system(), "sqrt(x**2 + y**2 + z**2)"), "midpoint"),
+                tmp_path / "kep_tt.py")
+    advice = "reaches g = 0, no step size helps); choose a g that is positive along the whole motion"
+    assert advice in (tmp_path / "kep_tt.py").read_text()
+    assert advice not in (tmp_path / "logh_s10.py").read_text()
+
+
 def test_control_kick_drift_kick_leapfrog_of_lambda_is_not_exact(build):
     # The same Λ on the unexchanged state (q, t; p, e): Störmer–Verlet is then the kick–drift–kick
     # leapfrog of Λ, which does not keep the orbit (measured: relative energy error 0.2).
@@ -183,6 +213,64 @@ def test_run_to_time_reports_and_refuses(build):
         run_to_time(mod, Y0, 1.0, -0.1)
     with pytest.raises(InputError, match="time-transformed"):
         run_to_time(build(system=kepler_system()), pericentre(0.6), 1.0, 0.1)
+
+
+def test_run_to_time_refuses_a_far_T_before_running_past_max_steps(build, monkeypatch):
+    # A T far out is refused after at most max_steps + 1 whole steps of work (the chunks grow
+    # up to 3x the steps so far, so without the cap up to 4x max_steps ran before the refusal)
+    import methodgen.physical_time as pt
+
+    mod = build()
+    Y0 = mod.initial_state(pericentre(0.6))
+
+    class Counting:
+        def __init__(self, m):
+            self.m, self.n = m, 0
+            self.STATE_NAMES, self.TIME_TRANSFORM = m.STATE_NAMES, m.TIME_TRANSFORM
+
+        def integrate(self, Y, h, n, **kw):
+            self.n += n
+            return self.m.integrate(Y, h, n, **kw)
+
+    counted = Counting(mod)
+    with pytest.raises(InputError, match="max_steps = 1100"):
+        run_to_time(counted, Y0, 1e15, 0.1, max_steps=1100)
+    assert counted.n <= 1101, counted.n
+    with pytest.raises(InputError, match="max_steps must be an integer >= 1"):
+        run_to_time(mod, Y0, 1.0, 0.1, max_steps=0)
+    # control: the cap disabled, the chunks overshoot max_steps before the refusal
+    monkeypatch.setattr(pt, "_cap", lambda chunk, steps, max_steps: chunk)
+    counted = Counting(mod)
+    with pytest.raises(InputError, match="max_steps = 1100"):
+        run_to_time(counted, Y0, 1e15, 0.1, max_steps=1100)
+    assert counted.n > 2200, counted.n   # 4096 whole steps run
+
+
+def test_run_to_time_refuses_a_last_step_that_misses_T(build, monkeypatch):
+    # A module whose t(σ) is coarse (t rounded to 1e-3 on single steps) cannot land on T: the
+    # miss is an error naming the distance, not a returned state off T.  Control: the check
+    # disabled (tolerance inf), the same run returns a state 1e-4 or more away from T
+    import methodgen.physical_time as pt
+
+    mod = build()
+    Y0 = mod.initial_state(pericentre(0.6))
+
+    class Coarse:
+        STATE_NAMES, TIME_TRANSFORM = mod.STATE_NAMES, mod.TIME_TRANSFORM
+
+        def integrate(self, Y, h, n, **kw):
+            out = mod.integrate(Y, h, n, **kw)
+            if n == 1:
+                out[-1, 7] = round(out[-1, 7], 3)
+            return out
+
+    T = 1.23456
+    with pytest.raises(RuntimeError, match=r"from t_final = 1.23456 \(tolerance"):
+        run_to_time(Coarse(), Y0, T, 0.05)
+    monkeypatch.setattr(pt, "_t_tolerance", lambda T: math.inf)
+    info = {}
+    run_to_time(Coarse(), Y0, T, 0.05, info=info)
+    assert abs(info["t_error"]) >= 1e-4, info
 
 
 def test_run_to_time_in_calls_is_the_run_in_one_piece(build, monkeypatch):
@@ -266,6 +354,32 @@ def test_run_into_U_zero_is_refused_at_the_step(build):
     assert exc.value.step > 0 and -0.1 < U, (exc.value.step, U)   # it stopped at U ≈ 0, not before
 
 
+def test_hyperbolic_escape_names_the_log_form(build):
+    # H = 1 > 0: as r grows T + e -> 0 cancels to 0 (r ~ 1e15 after 49 steps of h = 0.5) and the
+    # step divides by it; the error said only "try a smaller step size h".  Control: the bound
+    # orbit (H = -0.5) with the same h and steps runs to the end
+    mod = build()
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e") as exc:
+        mod.integrate(mod.initial_state(np.array([1.0, 0, 0, 0, 2.0, 0])), 0.5, 200, check_resolution=False)
+    assert exc.value.step > 0 and "a smaller h does not help there" in str(exc.value)
+    Y = mod.integrate(mod.initial_state(pericentre(0.6)), 0.5, 200, check_resolution=False)
+    assert np.all(np.isfinite(Y))
+    # a batch (the vectorised loop's non-finite check) says it too
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e"):
+        mod.integrate(mod.initial_state(np.array([[1.0, 0, 0, 0, 2.0, 0], list(pericentre(0.6))])), 0.5, 200,
+                      check_resolution=False)
+
+
+@pytest.mark.slow
+def test_numba_hyperbolic_escape_names_the_log_form(logh, tmp_path):
+    # the numba runtime said only "state became non-finite at step 49" (the fast sibling:
+    # test_hyperbolic_escape_names_the_log_form, numpy)
+    mod = mg.build(logh, "stormer-verlet", backend="numba", path=tmp_path / "logh_nb.py")
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e") as exc:
+        mod.integrate(mod.initial_state(np.array([1.0, 0, 0, 0, 2.0, 0])), 0.5, 200, check_resolution=False)
+    assert exc.value.step == 49
+
+
 def test_control_the_same_escape_without_the_field_runs_to_the_end(build):
     # c = 0: U = -k/r < 0 everywhere; the same escaping motion runs through, energy kept
     mod = _field_module(build, 0.0)
@@ -279,6 +393,16 @@ def test_initial_U_nonnegative_is_refused(build):
     mod = _field_module(build, 0.5)
     with pytest.raises(ValueError, match="must be > 0 at the initial state"):
         mod.initial_state(np.array([3.0, 0.0, 0.0, 0.0, 0.1, 0.0]))   # U = -1/3 + 1.5 > 0
+
+
+def test_initial_state_with_a_zero_mass_is_a_domain_error(build):
+    # 1/m with m = 0 raised a bare ZeroDivisionError from initial_state (a traceback on the
+    # CLI); now the module's domain error naming the parameters.  Control: m = 1 gives the state
+    mod = build()
+    with pytest.raises(mod.NonFiniteError, match=r"H is not defined .*parameters \{'m': 0.0"):
+        mod.initial_state(pericentre(0.6), 0.0, {"m": 0.0})
+    Y = mod.initial_state(pericentre(0.6), 0.0, {"m": 1.0})
+    assert Y[3] == pytest.approx(-energy(pericentre(0.6)))
 
 
 # --- scene and CLI -----------------------------------------------------------------------------
@@ -298,6 +422,35 @@ def test_builtin_scene_runs_and_keeps_the_energy(capsys):
     assert rep["time_transform"]["form"] == "log"
     assert rep["time_transform"]["t_final"] > 0
     assert rep["time_transform"]["H_phys_max_abs_error"] < 1e-12
+
+
+def test_cli_zero_mass_is_one_line_without_traceback(capsys):
+    code, out, err = _main(capsys, "run", "kepler-logh", "--param", "m=0", "--steps", "10")
+    assert code != 0 and "H is not defined" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_cli_t_final_names_the_log_form(capsys):
+    # the refusal read "with the time transformation g = log h and steps are ..."
+    code, out, err = _main(capsys, "run", "kepler-logh", "--t-final", "10")
+    assert code == 2 and "logarithmic Hamiltonian" in err and "g = log" not in err and "run_to_time" in err
+
+
+def test_plot_pairs_of_the_exchanged_state(build, tmp_path):
+    # The log form's state is (p..., e, q..., t): the default pairs by column order drew the
+    # momentum plane px-py (the hodograph) and px-x; now the orbit x-y and x-px, y-py.
+    # Control: the Poincaré form's (q..., t, p..., e) keeps the column-order pairs
+    from methodgen.plots import default_pairs, module_pairs
+
+    mod = build()
+    names = mod.STATE_NAMES
+    assert [(names[i], names[j]) for i, j in module_pairs(mod)] == [("x", "y"), ("x", "px"), ("y", "py")]
+    assert (names[0], names[1]) == ("px", "py") and default_pairs(4)[0] == (0, 1)   # what was drawn
+    tt = mg.generate(mg.discretize(mg.time_transform(kepler_system(), "sqrt(x**2 + y**2 + z**2)"), "midpoint"),
+                     tmp_path / "kep_tt.py")
+    assert module_pairs(tt) == default_pairs(4)
+    assert [(tt.STATE_NAMES[i], tt.STATE_NAMES[j]) for i, j in module_pairs(tt)] == [("x", "y"), ("x", "px"),
+                                                                                      ("y", "py")]
 
 
 def test_cli_time_transform_log_on_kepler(capsys):
@@ -368,3 +521,16 @@ def test_bench_peers_has_log_form_rows_at_the_physical_T():
     assert all(r["energy_rel_error"] < 1e-13 for r in log), log
     # control: the same method on H in physical time at the same h does not resolve e = 0.99
     assert min(r["error"] for r in plain if "error" in r) > 100 * max(r["error"] for r in log), (plain, log)
+
+
+def test_bench_peers_log_rows_use_the_family():
+    # --composition F chose the family of the rows on H but the [log] rows kept the order's
+    # default (suzuki at order 4): both now use F
+    from methodgen import bench
+
+    out = bench.work_precision(mg.load_scene("kepler-logh"), peers=True, quick=True, orders=(4,),
+                               T=2 * math.pi, composition="mclachlan")
+    log = [r for r in out["rows"] if r["method"].endswith("[log]")]
+    assert log and all(r["composition"] == "mclachlan" and "mclachlan" in r["method"] for r in log), log
+    plain = [r for r in out["rows"] if r["kind"] == "methodgen" and not r["method"].endswith("[log]")]
+    assert plain and all(r["composition"] == "mclachlan" for r in plain), plain

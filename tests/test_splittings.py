@@ -56,6 +56,29 @@ def test_general_order_decided(family, order):
 
 
 @pytest.mark.parametrize("family, order", CASES)
+def test_rkn_flag_is_where_the_general_order_falls_short(family, order):
+    # rkn (refused off RKN problems, labelled RKN) exactly where the decided general order is
+    # below the claimed one: SRKN_6^b was flagged although its order 4 holds for every splitting
+    s = splitting(order, family)
+    assert s.rkn == (general_order(s) < s.order), (s.rkn, general_order(s))
+
+
+def test_srkn6_applies_to_a_non_quadratic_t_with_order_4():
+    # T = sqrt(1 + p^2): SRKN_6^b was refused ("order 4 for T quadratic only"), yet it has order
+    # 4 for every splitting -- measured: error ratio under halving h ~ 16.  Control: SRKN_11^b
+    # (order 6 RKN only) is still refused there
+    rel = mg.Hamiltonian("sqrt(1 + p**2) + q**4/4", q=["q"], p=["p"])
+    mod = mg.build(rel, "stormer-verlet", order=4, composition="blanes-moan-rkn")
+    ref = mg.build(rel, "stormer-verlet", order=10)
+    y0, T = np.array([1.0, 0.5]), 4.0
+    exact = ref.integrate(y0, T / 400, 400)[-1]
+    e1, e2 = (np.max(np.abs(mod.integrate(y0, T / n, n)[-1] - exact)) for n in (20, 40))
+    assert 3.7 < math.log2(e1 / e2) < 4.3, (e1, e2)
+    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom"):
+        mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+
+
+@pytest.mark.parametrize("family, order", CASES)
 def test_rkn_order_decided(family, order):
     """Modulo the ideal of [B, [B, [B, A]]] (zero for T quadratic): every family has its order
     for RKN problems, SRKN_11^b 6 although its general order is 4."""
@@ -197,14 +220,23 @@ def test_numba_chunks_and_agreement(hh):
 # --- (e) errors ---------------------------------------------------------------------------
 
 def test_a_splitting_with_another_method_is_refused(hh):
-    with pytest.raises(InputError, match="stormer-verlet"):
+    with pytest.raises(InputError, match="stormer-verlet") as exc:
         mg.discretize(hh, "midpoint", order=4, composition="blanes-moan")
+    # the alternatives offered have the order asked for (kahan-li has no order 4), and the
+    # text names no API keyword (the CLI shows it under --composition)
+    msg = str(exc.value)
+    assert "order 4 for midpoint: triple-jump, suzuki)" in msg and "composition=" not in msg
+    for family in msg.split(": ")[-1].rstrip(")").split(", "):
+        assert mg.discretize(hh, "midpoint", order=4, composition=family).traits.order == 4
 
 
 def test_rkn_family_needs_quadratic_t():
     rel = mg.Hamiltonian("sqrt(1 + p**2) + q**2/2", q=["q"], p=["p"])
-    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom"):
+    with pytest.raises(MethodNotApplicable, match="Runge-Kutta-Nystrom") as exc:
         mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan-rkn")
+    # offered: what has order 6 for every T (mclachlan has order 4 only)
+    assert str(exc.value).endswith("of order 6 for every T: blanes-moan") and "composition=" not in str(exc.value)
+    assert mg.discretize(rel, "stormer-verlet", order=6, composition="blanes-moan").traits.order == 6
     # the general families apply (order 4 for every splitting)
     assert mg.discretize(rel, "stormer-verlet", order=4, composition="blanes-moan").traits.order == 4
 

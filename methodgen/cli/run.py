@@ -292,10 +292,14 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     scene, params = apply_overrides(scene, y0, params)
     if t_final is not None:
         if scene.transformed is not None:
-            raise InputError(f"--t-final is a physical time, but with the time transformation g = "
-                             f"{scene.time_transform} h and steps are in fictive time τ (dt = g(q) dτ: the "
-                             "physical time is known only after the run); give --steps instead — the "
-                             "report gives the physical time reached")
+            # the log form's g is -1/U ("g = log" read as a formula)
+            what = ("the logarithmic Hamiltonian (time transformation \"log\", dt = dτ/(-U(q)))"
+                    if scene.time_transform == "log" else
+                    f"the time transformation g = {scene.time_transform} (dt = g(q) dτ)")
+            raise InputError(f"--t-final is a physical time, but with {what} h and steps are in fictive "
+                             "time τ (the physical time is known only after the run); give --steps instead "
+                             "— the report gives the physical time reached (the API's "
+                             "methodgen.physical_time.run_to_time lands on a physical time)")
         if not math.isfinite(t_final):
             raise InputError(f"--t-final must be a finite time, got {t_final!r}")
         # The time to run: from t0 (a time-dependent H's declared start, else 0) to T.

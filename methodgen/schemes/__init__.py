@@ -160,16 +160,23 @@ def _check_splitting(comp, method: str, system):
     ``system``, else InputError / MethodNotApplicable saying why."""
     from ..derive import separable_split
 
+    from ..compositions import FAMILIES
+    from ..splittings import RKN_FAMILIES, SPLITTING_FAMILIES
+
+    # Worded for the API and the CLI alike (composition= there, --composition here), and the
+    # alternatives offered are those with the requested order.
     if method != "stormer-verlet":
-        raise InputError(f"composition={comp.family!r} is a splitting of H = T + U: it is run with "
-                         f"method 'stormer-verlet' only, not {method!r} (valid families for "
-                         f"{method}: triple-jump, suzuki, kahan-li, sofroniou-spaletta)")
+        alt = [f for f, orders in FAMILIES.items() if comp.order in orders]
+        raise InputError(f"the {comp.family} family is a splitting of H = T + U: it is run with method "
+                         f"'stormer-verlet' only, not {method!r} (composition families of order "
+                         f"{comp.order} for {method}: {', '.join(alt) if alt else '(none)'})")
     sep = separable_split(system)
     if comp.rkn and (sep is None or sep.Minv is None):
+        alt = [f for f, orders in SPLITTING_FAMILIES.items() if comp.order in orders and f not in RKN_FAMILIES]
         raise MethodNotApplicable(
             f"the {comp.family} splitting has order {comp.order} for T = p^T M^-1 p / 2 with a constant "
-            f"mass matrix only (Runge-Kutta-Nystrom); this T is not of that form. Use "
-            f"composition='blanes-moan' or 'mclachlan' (order 4 for every splitting)")
+            f"mass matrix only (Runge-Kutta-Nystrom); this T is not of that form. Splitting families "
+            f"of order {comp.order} for every T: {', '.join(alt) if alt else '(none)'}")
     return comp
 
 
