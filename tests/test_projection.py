@@ -308,3 +308,30 @@ def test_projected_splitting_certificates(hh):
     base = [c for c in mg.verify(s.projected_from).certificates if "splitting is symmetric" not in c.claim]
     sym = [c for c in projection_certificates(s, base) if "symmetric" in c.claim]
     assert [c.status for c in sym] == [UNDECIDED]
+
+
+def test_cli_extended_is_one_line_exit_2(capsys):
+    """`run --extended` with the projected method: exit 2 and one line (was a ValueError
+    traceback from integrate(), exit 1); control: the same run without --extended runs."""
+    from methodgen.cli import main
+
+    argv = ["run", "henon-heiles-2d", "--method", "stormer-verlet-projected", "--steps", "5"]
+    assert main(argv + ["--extended"]) == 2
+    err = capsys.readouterr().err
+    assert "--extended is not available for a projected method" in err and "Traceback" not in err
+    assert main(argv) == 0
+
+
+def test_projected_method_name_takes_a_splitting(hh, capsys):
+    """`--method stormer-verlet-projected --composition blanes-moan-rkn` (was refused: 'run
+    with method stormer-verlet only'): the same steps as project="energy" on the splitting;
+    control: a splitting family on another method is still refused."""
+    from methodgen.cli import main
+
+    a = mg.build(hh, "stormer-verlet-projected", order=4, composition="blanes-moan-rkn")
+    b = mg.build(hh, "stormer-verlet", order=4, composition="blanes-moan-rkn", project="energy")
+    assert np.array_equal(a.integrate(HH_Y0, H, 30), b.integrate(HH_Y0, H, 30))
+    assert main(["run", "henon-heiles-2d", "--method", "stormer-verlet-projected", "--order", "4",
+                 "--composition", "blanes-moan-rkn", "--steps", "20"]) == 0
+    with pytest.raises(InputError, match="splitting of H = T \\+ U"):
+        mg.discretize(hh, "midpoint", order=4, composition="blanes-moan-rkn")

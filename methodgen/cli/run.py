@@ -333,6 +333,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     with transformed_context(scene):
         module = build(system, method, path=scene_module_path(scene, key, backend, system=system),
                        backend=backend, order=order, composition=composition, **options)
+    if extended and getattr(module, "PROJECTED", None):
+        # the projected loop has no long-double refinement (integrate() refuses extended=True)
+        raise InputError(f"--extended is not available for a projected method ({method}): its "
+                         f"solve keeps {', '.join(module.PROJECTED)} to round-off in double; "
+                         "run it without --extended")
     if extended and module.EXTENDED_BITS <= 53:
         raise InputError(f"--extended needs a long double wider than double; numpy.longdouble has "
                          f"{module.EXTENDED_BITS} bits on this platform")

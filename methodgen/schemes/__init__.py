@@ -165,10 +165,12 @@ def _check_splitting(comp, method: str, system):
 
     # Worded for the API and the CLI alike (composition= there, --composition here), and the
     # alternatives offered are those with the requested order.
-    if method != "stormer-verlet":
+    # (stormer-verlet-projected runs Störmer–Verlet's kicks and drifts, then projects)
+    if method not in ("stormer-verlet", "stormer-verlet-projected"):
         alt = [f for f, orders in FAMILIES.items() if comp.order in orders]
         raise InputError(f"the {comp.family} family is a splitting of H = T + U: it is run with method "
-                         f"'stormer-verlet' only, not {method!r} (composition families of order "
+                         f"'stormer-verlet' (or 'stormer-verlet-projected') only, not {method!r} "
+                         f"(composition families of order "
                          f"{comp.order} for {method}: {', '.join(alt) if alt else '(none)'})")
     sep = separable_split(system)
     if comp.rkn and (sep is None or sep.Minv is None):
