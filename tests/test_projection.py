@@ -335,3 +335,19 @@ def test_projected_method_name_takes_a_splitting(hh, capsys):
                  "--composition", "blanes-moan-rkn", "--steps", "20"]) == 0
     with pytest.raises(InputError, match="splitting of H = T \\+ U"):
         mg.discretize(hh, "midpoint", order=4, composition="blanes-moan-rkn")
+
+
+@pytest.mark.parametrize("y0,what", [([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], "linearly dependent"),   # circular
+                                     ([0.5, 0.0, 0.0, 0.3, 0.0, 0.0], "gradient of Lx vanishes")])  # radial
+def test_dependent_gradients_refused_at_the_start(kepler, y0, what):
+    """Kepler with H, Lx, Ly, Lz from a circular orbit (∇H ∥ ∇Lz) or a radial one (∇Lx = 0): a
+    clear ValueError up front (was a ConvergenceError after 50 iterations, residual 1.4e16, or
+    'singular matrix', both advising a smaller h, which cannot help); control: the energy-only
+    projection runs from the same state, and a generic state runs with all four."""
+    mod = mg.build(kepler, "stormer-verlet", project="invariants")
+    with pytest.raises(ValueError, match=what):
+        mod.integrate(np.array(y0), 0.01, 5)
+    energy = mg.build(kepler, "stormer-verlet", project="energy")
+    traj = energy.integrate(np.array(y0), 0.01, 5)
+    assert np.all(np.isfinite(traj))
+    assert np.all(np.isfinite(mod.integrate(np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2]), 0.01, 5)))
