@@ -587,7 +587,7 @@ def verify(scheme, conjugacy_dim: int | None = None, *, timeout: float | None = 
 
         base = verify(scheme.projected_from, conjugacy_dim, timeout=timeout, progress=progress)
         certs = [_as_base(c, scheme) for c in base.certificates]
-        certs += projection_certificates(scheme, base.certificates)
+        certs += projection_certificates(scheme, base.certificates, _claim_seconds(timeout))
         return Report(_title(scheme), certs, method=_key(scheme), composition=_composition_summary(scheme))
     seconds = _claim_seconds(timeout)
     title = _title(scheme)

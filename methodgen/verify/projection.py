@@ -32,18 +32,27 @@ from .report import NUMERICAL, REFUTED, UNDECIDED, Certificate
 REF = "symmetric projection [Hairer 2000, BIT 40; HLW06 §V.4.1]"
 
 
-def projection_certificates(scheme, base_certs) -> list[Certificate]:
-    """The projection's certificates, from the base step's ``base_certs``."""
+def projection_certificates(scheme, base_certs, seconds: float = 60.0) -> list[Certificate]:
+    """The projection's certificates, from the base step's ``base_certs``; the 60-digit
+    measurement within a budget of ``seconds`` (beyond it: ``undecided``)."""
+    from .budget import BudgetExceeded, budget
+
     t0 = time.perf_counter()
     names = ", ".join(scheme.projection)
     claim = f"projected invariants kept: {names} at the run's initial level ({scheme.key})"
+    b = budget(seconds)
     try:
-        meas = measure(scheme)
+        with b:
+            meas = measure(scheme)
+    except BudgetExceeded as exc:
+        if exc.budget is not b:
+            raise
+        meas, why = None, f"time budget of {seconds:g} s exceeded"
     except Exception as exc:   # a start point the 60-digit step cannot take: unchecked, not proved
-        meas = None
+        meas, why = None, f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+    if meas is None:
         out = [Certificate(claim=claim, status=UNDECIDED, expression="g(y1) - g(y0)",
-                           method=f"the 60-digit projected step failed: {type(exc).__name__}: "
-                                  f"{str(exc).splitlines()[0] if str(exc) else ''}",
+                           method=f"the 60-digit projected step failed: {why}",
                            seconds=time.perf_counter() - t0, ref=REF,
                            details={"projected": list(scheme.projection)})]
     else:
