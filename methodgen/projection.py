@@ -11,7 +11,9 @@ one unknown λ per invariant.  It keeps what the construction gives and nothing 
 * the invariants projected on, to the solve's round-off at every step (``g`` is the
   level of the *run's* initial state, so the error does not accumulate);
 * symmetry, when Φ_h is symmetric: the step with ``-h`` from y1 is solved by ``-λ`` and
-  returns to y0 (proved below from the structure, :func:`symmetry_argument`);
+  returns to y0 (the argument of :func:`symmetry_argument`; :mod:`methodgen.verify.projection`
+  derives the claim from the base step's symmetry certificate and measures it on the
+  60-digit projected step);
 * the order of Φ_h (λ = O(h^{p+1}), so the projection moves the step by O(h^{p+1}));
 * NOT symplecticity (the projection is not a symplectic map), and NOT an invariant
   the base method kept exactly but that is not projected on (energy-only projection
@@ -152,7 +154,8 @@ def metric(system) -> list[sp.Expr]:
 
 
 def symmetry_argument(scheme) -> dict:
-    """Why the projected step is symmetric, checked on the base step's structure.
+    """Why the projected step is symmetric: the argument, not a check (``holds`` is the
+    base step's symmetry trait; the certificate is :mod:`methodgen.verify.projection`'s).
 
     The projected map with ``-h`` from y1 is solved by ``-λ``: ``ỹ1 = y1 - G(y1)ᵀλ = ŷ1``,
     ``Φ_{-h}(ŷ1) = ỹ0`` (Φ symmetric), ``ỹ0 - G(y0)ᵀλ = y0`` -- the equations of the reverse
