@@ -367,3 +367,15 @@ def test_sixty_digit_measure_keeps_the_time_budget(kepler):
     short = projection_certificates(s, [], seconds=1e-3)[0]
     assert short.status == UNDECIDED and "time budget" in short.method
     assert projection_certificates(s, [], seconds=60.0)[0].status == NUMERICAL
+
+
+def test_equilibrium_start_with_vanishing_gradient(proj2):
+    """∇H = 0 at the start (the origin of Hénon–Heiles, an equilibrium): the energy projection
+    takes one iterate per step and stays exactly there (its residual's scale is 0, not a
+    division by 0); control: a state next to it moves and keeps H to round-off."""
+    info = {}
+    traj = proj2.integrate(np.zeros(4), H, 20, info=info)
+    assert np.array_equal(traj, np.zeros((21, 4))) and info["newton_iterations"].max() == 1
+    near = proj2.integrate(np.array([1e-3, 0.0, 0.0, 0.0]), H, 20)
+    assert np.max(np.abs(near[-1] - near[0])) > 1e-5
+    assert _energy_error(proj2, near) <= 4 * np.finfo(float).eps * 5e-7
