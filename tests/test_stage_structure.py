@@ -121,30 +121,38 @@ def _size_growth(sizes) -> float:
     return c2 / c1
 
 
-def test_source_grows_linearly_in_stages():
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_source_grows_linearly_in_stages(backend):
     """Gauss s = 1..6 on Kepler: the module grows by about the same amount per stage (measured
     ~1.2-1.7 kB: the guess, the increment and the table's row and column); the expanded stage
-    system (negative control, s = 1..4) adds (s·n)² Jacobian entries: quadratic."""
+    system (negative control, s = 1..4) adds (s·n)² Jacobian entries: quadratic.  The numba
+    module too (both its routes: the shared runtime's kernels and the template route's)."""
     system = mg.load_scene("kepler").system
-    structured = [len(emit_source(mg.discretize(system, "gauss", stages=s))) for s in range(1, 7)]
-    expanded = [len(emit_source(mg.discretize(system, "gauss", stages=s), expanded=True)) for s in range(1, 5)]
+    structured = [len(emit_source(mg.discretize(system, "gauss", stages=s), backend=backend)) for s in range(1, 7)]
+    expanded = [len(emit_source(mg.discretize(system, "gauss", stages=s), backend=backend, expanded=True))
+                for s in range(1, 5)]
     print("structured", structured, "expanded", expanded)
     assert abs(_size_growth(structured)) < 0.05, structured
     assert _size_growth(expanded) > 0.2, expanded
 
 
-def test_no_expanded_jacobian_is_derived(monkeypatch):
-    """The lowering of a stage method never builds the scheme's (s·n)² symbolic Jacobian."""
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_no_expanded_jacobian_is_derived(monkeypatch, backend):
+    """The lowering of a stage method never builds the scheme's (s·n)² symbolic Jacobian, and
+    the numba module (shared runtime) loops over the stages like the numpy one."""
     from methodgen.schemes.base import Scheme
 
     scheme = mg.discretize(mg.load_scene("kepler").system, "gauss", stages=3)
     touched = []
     real = Scheme.jacobian.func
     monkeypatch.setattr(Scheme, "jacobian", property(lambda self: touched.append(1) or real(self)))
-    emit_source(scheme)
+    src = emit_source(scheme, backend=backend)
     assert not touched
-    emit_source(scheme, expanded=True)      # control: the expanded route does read it
+    if backend == "numba":
+        assert "_nb_fieldjac(" in src and "_rt.run(" in src
+    src = emit_source(scheme, backend=backend, expanded=True)      # control: the expanded route does read it
     assert touched
+    assert "_nb_fieldjac(" not in src
 
 
 @pytest.mark.slow
