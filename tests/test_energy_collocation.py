@@ -195,6 +195,22 @@ def test_measured_order_can_fail(monkeypatch):
     assert C._measured_order(sc, 6).status == REFUTED
 
 
+def test_measured_order_near_a_singularity_is_not_refuted():
+    """Calogero's 1/(q_i − q_j)² (a user problem): at the random sample points h = 1/8 was not
+    small and the coarse slopes (0.30, 2.71) refuted a method of order 4 (measured in float64
+    against DOP853: error ratios 15.2, 15.8, 15.9 under halving h).  The ladder now halves
+    until the slope settles; control: claiming order 6 is still refuted."""
+    from pathlib import Path
+
+    from methodgen.verify import collocation as C
+
+    scene = mg.load_scene(str(Path(__file__).parent / "user_problems" / "calogero.toml"))
+    sc = mg.discretize(scene.system, "energy-collocation", stages=2)
+    cert = C._measured_order(sc, 4)
+    assert cert.status == NUMERICAL, cert.statement
+    assert C._measured_order(sc, 6).status == REFUTED
+
+
 # --- issue 27.5: the float64 drift of H is measured and stated ---------------------------------
 
 def _drift_per_step(mod, solver=None, phases=32, steps=8000, h=0.1):
