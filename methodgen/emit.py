@@ -265,6 +265,12 @@ def shared_runtime_supports(ir: ModuleIR) -> bool:
     return ir.kind in ("explicit", "newton", "linear") and not ir.projection
 
 
+def runtime_sha256() -> str:
+    """SHA-256 of ``methodgen/nbruntime.py``: its ``SOURCE_SHA256``, read without importing
+    numba.  A numba module on the shared runtime records it and refuses another runtime."""
+    return hashlib.sha256((Path(__file__).resolve().parent / "nbruntime.py").read_bytes()).hexdigest()
+
+
 def render(ir: ModuleIR, backend: str = "numpy") -> str:
     """Render the module source for ``ir`` with the templates of ``backend`` (deterministic)."""
     import sympy
@@ -326,7 +332,8 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     body_env = _environment()
     text = body_env.get_template(template).render(
         ir=clean, vector=vector, header=header, defaults_text=defaults,
-        traits_text=repr(ir.traits), shared=backend == "numba" and shared_runtime_supports(ir))
+        traits_text=repr(ir.traits), shared=backend == "numba" and shared_runtime_supports(ir),
+        runtime_sha256=runtime_sha256())
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     digest = hashlib.sha256(text.encode()).hexdigest()
     return HEADER_CONTENT + digest + "\n" + text
