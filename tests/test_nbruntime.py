@@ -179,12 +179,17 @@ print(f(), sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))
 '''
 
 
-def _stale_roundtrip(tmp_path, stamp):
-    """Compile, load, then edit the source keeping its size and mtime: what runs?"""
+def _stale_roundtrip(tmp_path, stamp, user_cache_dir=True):
+    """Compile, load, then edit the source keeping its size and mtime: what runs?
+
+    ``user_cache_dir``: the cache in ``NUMBA_CACHE_DIR``; else NUMBA_CACHE_DIR unset and
+    numba's default, ``__pycache__`` next to the source (another locator class)."""
     src = tmp_path / "tiny_rt.py"
     src.write_text(_TINY.format(stamp=stamp))
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "nbcache"),
-           "PYTHONPATH": os.pathsep.join([str(tmp_path)] + sys.path)}
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path)] + sys.path)
+    if user_cache_dir:
+        env["NUMBA_CACHE_DIR"] = str(tmp_path / "nbcache")
 
     def run():
         out = subprocess.run([sys.executable, "-c", "import tiny_rt"], cwd=tmp_path, env=env,
@@ -198,20 +203,25 @@ def _stale_roundtrip(tmp_path, stamp):
     src.write_text(text.replace("return 1111", "return 2222"))   # same size
     os.utime(src, ns=(st.st_atime_ns, st.st_mtime_ns))            # same mtime
     assert os.stat(src).st_size == st.st_size
-    return first, second, run()
+    edited = run()
+    assert (tmp_path / "nbcache").is_dir() == user_cache_dir   # the locator meant was used
+    assert (tmp_path / "__pycache__").is_dir() != user_cache_dir
+    return first, second, edited
 
 
-def test_a_stale_cached_runtime_is_rebuilt_never_loaded(tmp_path):
-    first, second, edited = _stale_roundtrip(tmp_path, "_source_digest(P)")
+@pytest.mark.parametrize("user_cache_dir", [True, False], ids=["NUMBA_CACHE_DIR", "in-tree"])
+def test_a_stale_cached_runtime_is_rebuilt_never_loaded(tmp_path, user_cache_dir):
+    first, second, edited = _stale_roundtrip(tmp_path, "_source_digest(P)", user_cache_dir)
     assert first == (1111, 0, 1)     # compiled
     assert second == (1111, 1, 0)    # loaded from the cache
     assert edited == (2222, 0, 1)    # the edit is compiled, not the stale code loaded
 
 
-def test_stale_runtime_negative_control(tmp_path):
+@pytest.mark.parametrize("user_cache_dir", [True, False], ids=["NUMBA_CACHE_DIR", "in-tree"])
+def test_stale_runtime_negative_control(tmp_path, user_cache_dir):
     """A stamp that does not see the edit (as (mtime, size) would not) loads stale code:
     the test above can fail."""
-    first, second, edited = _stale_roundtrip(tmp_path, "'fixed'")
+    first, second, edited = _stale_roundtrip(tmp_path, "'fixed'", user_cache_dir)
     assert second == (1111, 1, 0)
     assert edited == (1111, 1, 0)
 
