@@ -268,3 +268,23 @@ def test_a_module_refuses_a_runtime_it_was_not_generated_for(tmp_path, monkeypat
     monkeypatch.setattr(nbruntime, "SOURCE_SHA256", "0" * 64)
     with pytest.raises(ImportError, match=r"generated for another methodgen\.nbruntime .*installed 0{16}.*regenerate"):
         _import_fresh(path, "rt_other")
+
+
+def test_residual_and_jacobian_of_one_state(tmp_path):
+    """``residual(z, y0, h)`` and ``jacobian`` of one z and one y0 (no broadcasting) on the
+    shared runtime raised numba's 'No matching definition ... readonly array' (the rows are
+    read-only views of numpy.broadcast_to; the runtime's explicit signatures take writable
+    arrays).  Now they equal the numpy module's to round-off; control: the numpy module's
+    values differ at another h, so the comparison sees a wrong step size."""
+    scene = mg.load_scene("simple-pendulum")
+    scheme = mg.discretize(scene.system, "midpoint")
+    nb = mg.generate(scheme, tmp_path / "one_state_numba.py", backend="numba")
+    ref = mg.generate(scheme, tmp_path / "one_state.py", backend="numpy")
+    assert "_rt.run(" in open(nb.__file__).read()
+    y0 = np.array(scene.y0)
+    z = np.full(len(nb.UNKNOWN_NAMES), 0.01)
+    for fn in ("residual", "jacobian"):
+        got = getattr(nb, fn)(z, y0, 0.1)
+        np.testing.assert_allclose(got, getattr(ref, fn)(z, y0, 0.1), rtol=1e-14, atol=1e-16)
+        assert not np.allclose(got, getattr(ref, fn)(z, y0, 0.2), rtol=1e-14, atol=1e-16)
+    np.testing.assert_allclose(nb.residual(z[None], y0[None], 0.1)[0], nb.residual(z, y0, 0.1), rtol=0, atol=0)
