@@ -288,3 +288,25 @@ def test_residual_and_jacobian_of_one_state(tmp_path):
         np.testing.assert_allclose(got, getattr(ref, fn)(z, y0, 0.1), rtol=1e-14, atol=1e-16)
         assert not np.allclose(got, getattr(ref, fn)(z, y0, 0.2), rtol=1e-14, atol=1e-16)
     np.testing.assert_allclose(nb.residual(z[None], y0[None], 0.1)[0], nb.residual(z, y0, 0.1), rtol=0, atol=0)
+
+
+def test_batches_in_any_memory_order(tmp_path):
+    """A Fortran-ordered or broadcast batch y0 (and a Fortran-ordered compensation in info)
+    raised numba's 'No matching definition' on the shared runtime (its signatures take
+    C-contiguous rows; the batch was copied keeping its order).  Now each equals the batch
+    in C order bitwise (first-same-as-last and Newton); control: a batch whose rows differ in
+    the last bit gives another trajectory."""
+    scene = mg.load_scene("simple-pendulum")
+    y0 = np.array(scene.y0)
+    Y = np.array([y0, 1.1 * y0, 0.9 * y0])
+    for method in ("stormer-verlet", "midpoint"):
+        mod = mg.generate(mg.discretize(scene.system, method), tmp_path / f"order_{method}_numba.py".replace("-", "_"),
+                          backend="numba")
+        assert "_rt.run(" in open(mod.__file__).read()
+        ref = mod.integrate(Y, scene.h, 20)
+        np.testing.assert_array_equal(mod.integrate(np.asfortranarray(Y), scene.h, 20), ref)
+        np.testing.assert_array_equal(mod.integrate(np.broadcast_to(y0, (3, 2)), scene.h, 20)[:, 1],
+                                      ref[:, 0])
+        info = {"compensation": np.asfortranarray(np.zeros_like(Y))}
+        np.testing.assert_array_equal(mod.integrate(Y, scene.h, 20, info=info), ref)
+        assert not np.array_equal(mod.integrate(np.nextafter(Y, 2.0), scene.h, 20), ref)
