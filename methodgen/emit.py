@@ -260,9 +260,13 @@ def shared_runtime_supports(ir: ModuleIR) -> bool:
     without first-same-as-last), Newton-solved and linearly implicit stages, with every
     check and solver variant.  A new structure must be added here and to the runtime, or
     it falls back to the template route: so far symmetric projection (its loop calls the base
-    step's kernels with the template route's signatures).
+    step's kernels with the template route's signatures) and s-stage systems by structure
+    (Gauss, energy collocation: ``ir.stage``; their residual and Jacobian are the template
+    route's stage loops, the shared route's kernels would take ``ir.scalar.res``, which is not
+    that residual -- wrong steps, found by the routes' bitwise comparison).
     """
-    return ir.kind in ("explicit", "newton", "linear") and not ir.projection
+    return (ir.kind in ("explicit", "newton", "linear") and not ir.projection
+            and not getattr(ir, "stage", None))
 
 
 def runtime_sha256() -> str:
