@@ -260,9 +260,17 @@ def shared_runtime_supports(ir: ModuleIR) -> bool:
     without first-same-as-last), Newton-solved and linearly implicit stages, with every
     check and solver variant.  A new structure must be added here and to the runtime, or
     it falls back to the template route: so far symmetric projection (its loop calls the base
-    step's kernels with the template route's signatures).
+    step's kernels with the template route's signatures).  s-stage systems by structure
+    (Gauss, energy collocation: ``ir.stage``) run here with their stage loops compiled for the
+    runtime's kernel types (``numba_kernels.stage_kernel``).
     """
     return ir.kind in ("explicit", "newton", "linear") and not ir.projection
+
+
+def runtime_sha256() -> str:
+    """SHA-256 of ``methodgen/nbruntime.py``: its ``SOURCE_SHA256``, read without importing
+    numba.  A numba module on the shared runtime records it and refuses another runtime."""
+    return hashlib.sha256((Path(__file__).resolve().parent / "nbruntime.py").read_bytes()).hexdigest()
 
 
 def render(ir: ModuleIR, backend: str = "numpy") -> str:
@@ -326,7 +334,8 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     body_env = _environment()
     text = body_env.get_template(template).render(
         ir=clean, vector=vector, header=header, defaults_text=defaults,
-        traits_text=repr(ir.traits), shared=backend == "numba" and shared_runtime_supports(ir))
+        traits_text=repr(ir.traits), shared=backend == "numba" and shared_runtime_supports(ir),
+        runtime_sha256=runtime_sha256())
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     digest = hashlib.sha256(text.encode()).hexdigest()
     return HEADER_CONTENT + digest + "\n" + text

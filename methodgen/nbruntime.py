@@ -749,15 +749,21 @@ def _jac_rows(resjac, Z, Y, h, p, R, J):
         resjac(Z[b], Y[b], c, h, p, R[b], J[b])
 
 
+def _writable(a):
+    # The explicit signatures take writable arrays (the kernels' types); a module's rows of
+    # one z and one y0 are read-only views of numpy.broadcast_to, refused by numba's dispatch.
+    return a if a.flags.writeable else a.copy()
+
+
 def res_rows(res, Z, Y, h, p, R):
     """The residual at each row of Z, Y (no compensation); compiled on first use."""
-    _once("res_rows", _t.void(_F["res"], _M, _M, _f8, _V, _M), _res_rows)(res, Z, Y, h, p, R)
+    _once("res_rows", _t.void(_F["res"], _M, _M, _f8, _V, _M), _res_rows)(res, _writable(Z), _writable(Y), h, p, R)
 
 
 def jac_rows(resjac, Z, Y, h, p, R, J):
     """The residual and the Jacobian at each row of Z, Y (no compensation); compiled on first use."""
     _once("jac_rows", _t.void(_F["resjac"], _M, _M, _f8, _V, _M, _t.float64[:, :, ::1]), _jac_rows)(
-        resjac, Z, Y, h, p, R, J)
+        resjac, _writable(Z), _writable(Y), h, p, R, J)
 
 
 # --- configuration arrays (Python) ----------------------------------------------------------
