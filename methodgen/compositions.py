@@ -157,12 +157,15 @@ def composition(order: int, family: str | None = None) -> Composition:
 
 # --- order conditions in the truncated free associative algebra ----------------------
 
-def _mul(a: dict, b: dict, wmax: int) -> dict:
+def _mul(a: dict, b: dict, wmax: int, weight=sum) -> dict:
+    """Product of two truncated series {word: coefficient}, keeping words of ``weight`` ≤
+    ``wmax`` (``sum``: words of generator weights, as here; ``len``: words over letters, the
+    degree in :mod:`methodgen.splittings`)."""
     out: dict = {}
     for u, x in a.items():
-        wu = sum(u)
+        wu = weight(u)
         for v, y in b.items():
-            if wu + sum(v) <= wmax:
+            if wu + weight(v) <= wmax:
                 w = u + v
                 out[w] = out.get(w, 0) + x * y
     return out
@@ -179,12 +182,13 @@ def _exp(Y: dict, wmax: int) -> dict:
     return out
 
 
-def _log(P: dict, wmax: int) -> dict:
+def _log(P: dict, wmax: int, weight=sum) -> dict:
+    """``log P`` of a truncated series with constant term 1 (``weight``: see :func:`_mul`)."""
     Z = {k: v for k, v in P.items() if k != ()}     # P - 1 (P has constant term 1)
     out: dict = {}
     power = {(): mp.mpf(1)}
     for n in range(1, wmax + 1):
-        power = _mul(power, Z, wmax)
+        power = _mul(power, Z, wmax, weight)
         if not power:
             break
         for k, v in power.items():

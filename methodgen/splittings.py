@@ -223,16 +223,6 @@ def splitting(order: int, family: str) -> Splitting:
 
 # --- order conditions in the free associative algebra on {A, B} -------------------------
 
-def _mul(x: dict, y: dict, wmax: int) -> dict:
-    out: dict = {}
-    for u, a in x.items():
-        for v, b in y.items():
-            if len(u) + len(v) <= wmax:
-                w = u + v
-                out[w] = out.get(w, 0) + a * b
-    return out
-
-
 def _exp_letter(letter: str, c, wmax: int) -> dict:
     out = {(): mp.mpf(1)}
     term = mp.mpf(1)
@@ -242,24 +232,16 @@ def _exp_letter(letter: str, c, wmax: int) -> dict:
     return out
 
 
-def _log(P: dict, wmax: int) -> dict:
-    Z = {k: v for k, v in P.items() if k != ()}
-    out: dict = {}
-    power = {(): mp.mpf(1)}
-    for n in range(1, wmax + 1):
-        power = _mul(power, Z, wmax)
-        if not power:
-            break
-        for k, v in power.items():
-            out[k] = out.get(k, 0) + (v if n % 2 else -v) / n
-    return out
-
-
 def log_splitting(kicks, drifts, wmax: int) -> dict:
     """``log Ψ`` (h = 1) up to degree ``wmax`` as {word over "A", "B": coefficient}, for
     Ψ = e^{b_{m+1} B} … e^{a_1 A} e^{b_1 B}.  The operator product applies its rightmost
     factor first; words are written in that product order, so the first flow applied is
     the word's last letter."""
+    # the truncated-series product and log of the composition order conditions, with words
+    # truncated by their length (the degree) instead of their generator weights; imported
+    # here because methodgen.compositions imports this module
+    from .compositions import _log, _mul
+
     with mp.workdps(DPS):
         P = {(): mp.mpf(1)}
         seq = []
@@ -267,8 +249,8 @@ def log_splitting(kicks, drifts, wmax: int) -> dict:
             seq += [("B", kicks[i]), ("A", a)]
         seq.append(("B", kicks[len(drifts)]))
         for letter, c in seq:   # later flows multiply from the left
-            P = _mul(_exp_letter(letter, mp.mpf(c), wmax), P, wmax)
-        return _log(P, wmax)
+            P = _mul(_exp_letter(letter, mp.mpf(c), wmax), P, wmax, len)
+        return _log(P, wmax, len)
 
 
 def splitting_defects(sp_: Splitting, upto: int | None = None) -> dict[int, float]:
@@ -284,17 +266,22 @@ def splitting_defects(sp_: Splitting, upto: int | None = None) -> dict[int, floa
     return out
 
 
-def general_order(sp_: Splitting, tol: float | None = None, upto: int = 7) -> int:
-    """The largest K with every defect of degree ≤ K below ``tol`` — the order for every
-    splitting (1e-40 for exact coefficients, 1e-13 for the 15-digit published constants)."""
+def _order_below(defects: dict, sp_: Splitting, tol: float | None, upto: int) -> int:
+    """The largest K with every defect of degree ≤ K below ``tol`` (default 1e-40 for exact
+    coefficients, 1e-13 for 15-digit published constants)."""
     tol = tol if tol is not None else (1e-40 if sp_.exact else 1e-13)
-    d = splitting_defects(sp_, upto)
     K = 0
     for w in range(1, upto + 1):
-        if d[w] > tol:
+        if defects[w] > tol:
             break
         K = w
     return K
+
+
+def general_order(sp_: Splitting, tol: float | None = None, upto: int = 7) -> int:
+    """The largest K with every defect of degree ≤ K below ``tol`` — the order for every
+    splitting (1e-40 for exact coefficients, 1e-13 for the 15-digit published constants)."""
+    return _order_below(splitting_defects(sp_, upto), sp_, tol, upto)
 
 
 def _bracket(x: dict, y: dict) -> dict:
@@ -351,14 +338,7 @@ def rkn_defects(sp_: Splitting, upto: int | None = None) -> dict[int, float]:
 def rkn_order(sp_: Splitting, tol: float | None = None, upto: int = 7) -> int:
     """The largest K with every RKN defect (:func:`rkn_defects`) of degree ≤ K below ``tol``
     (1e-40 exact, 1e-13 for 15-digit constants): the order for T = ½ pᵀM⁻¹p, M constant."""
-    tol = tol if tol is not None else (1e-40 if sp_.exact else 1e-13)
-    d = rkn_defects(sp_, upto)
-    K = 0
-    for w in range(1, upto + 1):
-        if d[w] > tol:
-            break
-        K = w
-    return K
+    return _order_below(rkn_defects(sp_, upto), sp_, tol, upto)
 
 
 def splitting_error_constant(sp_: Splitting, degree: int | None = None) -> float:
