@@ -32,7 +32,7 @@ length-1 dummy arrays):
 The cache is numba's: ``__pycache__`` next to this file, or ``NUMBA_CACHE_DIR``,
 or numba's per-user fallback when the package directory is not writable.  A
 cached runtime is loaded only when its stamp -- the SHA-256 of this file's bytes
-(:func:`_install_stamp_guard`) -- matches, so an edited runtime is recompiled,
+(:func:`methodgen.nbcache.install_stamp_guard`) -- matches, so an edited runtime is recompiled,
 never loaded stale, whatever the file's mtime and size.
 
 This module imports numpy and numba only (no SymPy: it is on the warm path).
@@ -40,7 +40,6 @@ This module imports numpy and numba only (no SymPy: it is on the warm path).
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 
@@ -48,54 +47,16 @@ import numba
 import numpy
 from numba import types as _t
 
+from .nbcache import install_stamp_guard as _install_stamp_guard
+from .nbcache import source_digest as _source_digest
+
 __all__ = ["run", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256",
            "no_kernel"]
 
 # --- cache stamp ---------------------------------------------------------------------
 
-
-def _source_digest(path: str) -> str:
-    with open(path, "rb") as f:
-        return hashlib.sha256(f.read()).hexdigest()
-
-
 #: SHA-256 of this file: the stamp of its cached machine code.
 SOURCE_SHA256 = _source_digest(os.path.abspath(__file__))
-
-
-def _install_stamp_guard(path: str, digest: str) -> None:
-    """Make numba stamp the cache of the functions of the file ``path`` with ``digest``.
-
-    numba decides whether a cached function is current from a stamp of its
-    source file: a content hash in recent numba, (mtime, size) in older ones,
-    where an edit that keeps both would load stale machine code.  The locators
-    registered here (in front of numba's own, for this file only) keep numba's
-    choice of folder and replace the stamp by the content hash taken at import.
-    """
-    from numba.core import caching
-
-    bases = []
-    for name in ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator"):
-        base = getattr(caching, name, None) or getattr(caching, "_" + name, None)
-        if base is not None:
-            bases.append(base)
-    guarded = []
-    for base in bases:
-        def from_function(cls, py_func, py_file, _base=base):
-            if os.path.abspath(py_file) != path:
-                return None
-            return _base.from_function.__func__(cls, py_func, py_file)
-
-        guarded.append(type("Guarded" + base.__name__.lstrip("_"), (base,), {
-            "get_source_stamp": lambda self: ("methodgen.nbruntime", digest),
-            "from_function": classmethod(from_function),
-        }))
-    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")
-    impl._locator_classes = [c for c in guarded] + [
-        c for c in impl._locator_classes if getattr(c, "_methodgen_path", None) != path]
-    for c in guarded:
-        c._methodgen_path = path
-
 
 _install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
 

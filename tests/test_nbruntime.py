@@ -166,9 +166,9 @@ def test_the_runtime_is_stamped_with_its_content_hash():
 
 _TINY = '''
 import os, sys
-from methodgen.nbruntime import _install_stamp_guard, _source_digest
+from methodgen.nbcache import install_stamp_guard, source_digest
 P = os.path.abspath(__file__)
-_install_stamp_guard(P, {stamp})
+install_stamp_guard(P, {stamp})
 import numba
 
 @numba.njit("int64()", cache=True)
@@ -211,7 +211,7 @@ def _stale_roundtrip(tmp_path, stamp, user_cache_dir=True):
 
 @pytest.mark.parametrize("user_cache_dir", [True, False], ids=["NUMBA_CACHE_DIR", "in-tree"])
 def test_a_stale_cached_runtime_is_rebuilt_never_loaded(tmp_path, user_cache_dir):
-    first, second, edited = _stale_roundtrip(tmp_path, "_source_digest(P)", user_cache_dir)
+    first, second, edited = _stale_roundtrip(tmp_path, "source_digest(P)", user_cache_dir)
     assert first == (1111, 0, 1)     # compiled
     assert second == (1111, 1, 0)    # loaded from the cache
     assert edited == (2222, 0, 1)    # the edit is compiled, not the stale code loaded

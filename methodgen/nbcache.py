@@ -1,0 +1,58 @@
+"""The cache stamp of methodgen's compiled runtimes: their machine code is current only if
+their source's SHA-256 is.
+
+numba decides whether a cached function is current from a stamp of its source file: a
+content hash in recent numba, (mtime, size) in older ones, where an edit that keeps both
+would load stale machine code.  :func:`install_stamp_guard` replaces the stamp of one file
+by its content hash.  Kept apart from :mod:`methodgen.nbruntime` so that the guard can be
+installed (and tested) without compiling or loading the runtime itself.
+
+This module imports the standard library only (numba when the guard is installed).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+
+__all__ = ["source_digest", "install_stamp_guard"]
+
+
+def source_digest(path: str) -> str:
+    """SHA-256 (hex) of the bytes of the file ``path``."""
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
+def install_stamp_guard(path: str, digest: str) -> None:
+    """Make numba stamp the cache of the functions of the file ``path`` with ``digest``.
+
+    numba decides whether a cached function is current from a stamp of its
+    source file: a content hash in recent numba, (mtime, size) in older ones,
+    where an edit that keeps both would load stale machine code.  The locators
+    registered here (in front of numba's own, for this file only) keep numba's
+    choice of folder and replace the stamp by the content hash taken at import.
+    """
+    from numba.core import caching
+
+    bases = []
+    for name in ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator"):
+        base = getattr(caching, name, None) or getattr(caching, "_" + name, None)
+        if base is not None:
+            bases.append(base)
+    guarded = []
+    for base in bases:
+        def from_function(cls, py_func, py_file, _base=base):
+            if os.path.abspath(py_file) != path:
+                return None
+            return _base.from_function.__func__(cls, py_func, py_file)
+
+        guarded.append(type("Guarded" + base.__name__.lstrip("_"), (base,), {
+            "get_source_stamp": lambda self: ("methodgen.nbruntime", digest),
+            "from_function": classmethod(from_function),
+        }))
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")
+    impl._locator_classes = [c for c in guarded] + [
+        c for c in impl._locator_classes if getattr(c, "_methodgen_path", None) != path]
+    for c in guarded:
+        c._methodgen_path = path
