@@ -716,6 +716,9 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             info = {}
 
             def run():
+                # every timed repeat starts afresh: a compensation carried over from the
+                # repeat before would start it from another state (1e-14 on Kepler)
+                info.clear()
                 return module.integrate(y0, T / steps, steps, info=info, check_resolution=False,
                                         **_solver_kw(use))
 
@@ -801,6 +804,7 @@ def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, prog
             info = {}
 
             def run():
+                info.clear()  # every timed repeat starts afresh (see above)
                 return run_to_time(module, Y0, T, h, info=info, check_resolution=False)
 
             try:
