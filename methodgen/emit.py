@@ -652,6 +652,11 @@ def _exec_source(path: Path, source: bytes) -> ModuleType:
     if spec is None:  # pragma: no cover - defensive
         raise GenerationError(f"cannot import {path}")
     module = importlib.util.module_from_spec(spec)
+    if b"\nimport numba\n" in source:
+        # numba modules: cache entries of their own under this private name (a plain
+        # `import` of the same file in another process must not load them)
+        from .nbcache import install_stamp_guard
+        install_stamp_guard(str(path), hashlib.sha256(source).hexdigest(), owner=name, tag=digest)
     sys.modules[name] = module
     try:
         loader.exec_module(module)

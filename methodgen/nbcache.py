@@ -24,14 +24,33 @@ def source_digest(path: str) -> str:
         return hashlib.sha256(f.read()).hexdigest()
 
 
-def install_stamp_guard(path: str, digest: str) -> None:
+def install_stamp_guard(path: str, digest: str, *, owner: str = "methodgen.nbruntime",
+                        tag: str | None = None) -> None:
     """Make numba stamp the cache of the functions of the file ``path`` with ``digest``.
 
     numba decides whether a cached function is current from a stamp of its
     source file: a content hash in recent numba, (mtime, size) in older ones,
     where an edit that keeps both would load stale machine code.  The locators
     registered here (in front of numba's own, for this file only) keep numba's
-    choice of folder and replace the stamp by the content hash taken at import.
+    choice of folder and replace the stamp by ``(owner, digest)``.
+
+    Parameters
+    ----------
+    path : str
+        Absolute path of the source file.
+    digest : str
+        Its content hash (taken from the bytes that were imported).
+    owner : str
+        First element of the stamp.
+    tag : str, optional
+        Appended to numba's disambiguator (the function's line number), so the
+        cache files of this file's functions are this tag's own.  numba records the
+        importing module's name in a cached function's environment and imports that
+        module by name when it loads the function; a file imported under two names
+        (methodgen's loader gives each generated module a private name, a user may
+        import the same file by its plain name) needs one cache entry per name, or
+        the second name's process loads an entry that refers to a module it cannot
+        import.
     """
     from numba.core import caching
 
@@ -47,10 +66,10 @@ def install_stamp_guard(path: str, digest: str) -> None:
                 return None
             return _base.from_function.__func__(cls, py_func, py_file)
 
-        guarded.append(type("Guarded" + base.__name__.lstrip("_"), (base,), {
-            "get_source_stamp": lambda self: ("methodgen.nbruntime", digest),
-            "from_function": classmethod(from_function),
-        }))
+        methods = {"get_source_stamp": lambda self: (owner, digest), "from_function": classmethod(from_function)}
+        if tag:
+            methods["get_disambiguator"] = lambda self, _base=base: f"{_base.get_disambiguator(self)}-{tag}"
+        guarded.append(type("Guarded" + base.__name__.lstrip("_"), (base,), methods))
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")
     impl._locator_classes = [c for c in guarded] + [
         c for c in impl._locator_classes if getattr(c, "_methodgen_path", None) != path]

@@ -10,6 +10,7 @@ rebuilt, never loaded.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -344,3 +345,41 @@ def test_stage_systems_by_structure_run_on_the_shared_runtime(tmp_path, monkeypa
     forced = mg.generate(scheme, tmp_path / "gauss4_forced_numba.py", backend="numba")
     assert "_rt.run(" in open(forced.__file__).read() and "_nb_fieldjac(" not in open(forced.__file__).read()
     assert not np.allclose(forced.residual(z, y0, 0.1), ref.residual(z, y0, 0.1), rtol=1e-6, atol=1e-9)
+
+
+_PLAIN = '''
+import numba
+
+
+@numba.njit("int64()", cache=True)
+def f():
+    return 4242
+'''
+
+
+def test_a_module_loaded_by_methodgen_can_be_imported_by_its_plain_name(tmp_path):
+    """numba records the importing module's name in a cached function; methodgen's loader
+    imports a generated module under a private name.  A plain ``import`` of the same file in a
+    later process must not load that entry (it would import the private name and fail)."""
+    (tmp_path / "plainmod.py").write_text(_PLAIN)
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path)] + sys.path)
+    load = ("from pathlib import Path; import methodgen.emit as e, {patch}; "
+            "p = Path({path!r}).resolve(); m = e._exec_source(p, p.read_bytes()); "
+            "print(m.f(), sum(m.f.stats.cache_hits.values()))")
+
+    def run(code):
+        return subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)
+
+    path = str(tmp_path / "plainmod.py")
+    assert run(load.format(patch="sys", path=path)).stdout.split() == ["4242", "0"]    # compiled, cached
+    assert run(load.format(patch="sys", path=path)).stdout.split() == ["4242", "1"]    # methodgen: cache hit
+    plain = run("import plainmod; print(plainmod.f())")
+    assert plain.returncode == 0, plain.stderr
+    assert plain.stdout.split() == ["4242"]
+    # control: without the per-name cache entries the plain import loads the private one and fails
+    shutil.rmtree(tmp_path / "__pycache__")
+    off = "methodgen.nbcache as c; c.install_stamp_guard = lambda *a, **k: None"
+    assert run(load.format(patch=off, path=path)).stdout.split() == ["4242", "0"]
+    plain = run("import plainmod; print(plainmod.f())")
+    assert plain.returncode != 0 and "methodgen_generated" in plain.stderr
