@@ -367,3 +367,19 @@ def test_cache_path_with_tilde_is_the_home_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("METHODGEN_CACHE", "~/mgc")
     assert emit.cache_dir() == tmp_path / "mgc"
     assert Path(os.path.expanduser("~")) == tmp_path   # the control: HOME is where ~ points
+
+
+@pytest.mark.parametrize("extra", [[], ["--json"]])
+def test_run_with_parameters_outside_the_domain_of_H_is_bad_input(capsys, extra):
+    """`run --param m=0`: H is not defined at the initial state; the input is at fault (exit 2,
+    one line), not the run (3)."""
+    code, out, err = _main(capsys, "run", "kepler", "--steps", "10", "--param", "m=0", *extra)
+    assert code == cli.EXIT_INPUT, err
+    assert "at the initial state" in _one_line(err) and "Traceback" not in err
+
+
+def test_run_failure_after_the_start_is_still_exit_3(capsys):
+    """Control: a run that fails at a later step (h far too large for the eccentric orbit) keeps exit 3."""
+    code, out, err = _main(capsys, "run", "kepler-eccentric", "--time-transform", "none")
+    assert code == cli.EXIT_NUMERICAL, err
+    assert "initial state" not in err

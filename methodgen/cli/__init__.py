@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
         # ConvergenceError / NonFiniteError / ResolutionError of generated modules.
         if type(exc).__name__ in NUMERICAL_ERRORS:
             print(f"methodgen: error: {cli_advice(exc)}", file=sys.stderr)
-            return EXIT_NUMERICAL
+            # an initial state or parameter outside the domain of H is bad input
+            return EXIT_INPUT if getattr(exc, "initial_state", False) else EXIT_NUMERICAL
         raise
     except KeyboardInterrupt:
         print("methodgen: interrupted", file=sys.stderr)

@@ -19,7 +19,7 @@ from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
 from ..schemes import METHODS, composition_for, method_key, scheme_options
 from ..stats import ErrorMax
-from .common import (EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
+from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
                      apply_overrides, check_output_file, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
                      print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
@@ -452,7 +452,8 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
             except OSError as cexc:
                 note, saved_rows = str(cexc), None
         rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
-        code = 130 if isinstance(exc, KeyboardInterrupt) else EXIT_NUMERICAL
+        code = (130 if isinstance(exc, KeyboardInterrupt)
+                else EXIT_INPUT if getattr(exc, "initial_state", False) else EXIT_NUMERICAL)
         raise RunFailure(exc, rep, saved, code, saved_rows, note) from None
     rep = _report(scene, method, h, steps, module, y, inv_acc, its, seconds, done, params, stages=n_stages)
     if h_requested is not None and h_requested != h:
