@@ -49,7 +49,7 @@ import sympy as sp
 
 from ..divdiff import divided_difference
 from ..special import safe_div
-from .exact import reduce_to_zero
+from .exact import expression_text, reduce_to_zero
 from .report import PROVED, Certificate
 
 __all__ = ["coordinate_lemmas", "identity_structural", "gonzalez_symmetry_structural"]
@@ -244,7 +244,8 @@ def identity_structural(scheme, claim: str, ref: str, shown) -> Certificate | No
                   f"case |Δ|² = 0 (y1 = y0): {m0}")
     else:
         return None
-    return Certificate(claim, PROVED, str(shown), sp.latex(shown) if sp.count_ops(shown) < 400 else "",
+    small = not (isinstance(shown, sp.Add) and len(shown.args) > 400) and sp.count_ops(shown) < 400
+    return Certificate(claim, PROVED, expression_text(shown), sp.latex(shown) if small else "",
                        method, time.perf_counter() - t0, ref, {"structural": True})
 
 
