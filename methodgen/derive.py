@@ -514,6 +514,16 @@ def angular_momenta(system: Hamiltonian) -> tuple[Invariant, ...]:
     """
     if is_poisson(system):
         return ()
+    tt = system.time_transform
+    if tt is not None:
+        # The original's components, under their names and signs (Lx, Ly, Lz of q × p),
+        # where they commute with K: found on the extended system they would be the planes
+        # of its own coordinates, named after those (L_x_y; L_px_py with the opposite sign
+        # in the log form's exchanged state (p, e; q, t)).
+        return tuple(Invariant(inv.name, inv.expr, True, f"{{{inv.name}, K}} = 0 exactly")
+                     for inv in angular_momenta(tt.original)
+                     if _zero_status(poisson_bracket(system, inv.expr, system.H), system,
+                                     simplify_limit=400) == "zero")
     d = system.dim
     if d < 2:
         return ()

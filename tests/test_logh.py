@@ -534,3 +534,19 @@ def test_bench_peers_log_rows_use_the_family():
     assert log and all(r["composition"] == "mclachlan" and "mclachlan" in r["method"] for r in log), log
     plain = [r for r in out["rows"] if r["kind"] == "methodgen" and not r["method"].endswith("[log]")]
     assert plain and all(r["composition"] == "mclachlan" for r in plain), plain
+
+
+@pytest.mark.parametrize("form", ["log", "poincare"])
+def test_angular_momenta_keep_their_original_names_and_signs(form):
+    """The monitored L of a transformed Kepler system are the original's (Lx, Ly, Lz of q × p)."""
+    from methodgen import derive
+    sy = kepler_system()
+    tt = (mg.time_transform(sy, form="log") if form == "log"
+          else mg.time_transform(sy, "sqrt(x**2 + y**2 + z**2)"))
+    got = {inv.name: inv.expr for inv in derive.angular_momenta(tt)}
+    want = {inv.name: inv.expr for inv in derive.angular_momenta(sy)}
+    assert set(want) == {"Lx", "Ly", "Lz"} and got == want
+    # control: the extended system's own coordinate planes name (and, in the log form, sign) them otherwise
+    plain = mg.Hamiltonian(tt.H, q=[s.name for s in tt.q], p=[s.name for s in tt.p], params=tt.param_values)
+    own = {inv.name for inv in derive.angular_momenta(plain)}
+    assert own and own.isdisjoint(want)
