@@ -197,3 +197,55 @@ def test_unrecorded_lane_failure_would_go_silent(modules, monkeypatch):
     assert (fstat[:, 0] == 0).all()  # nothing reported ...
     H = mod.hamiltonian(traj[:, bad_lane])
     assert not (np.abs(H - H[0]) < 0.1).all()  # ... though the lane's energy left its value
+
+
+# --- a time-transformed module: domain conditions and the time-scale guard in the lanes --------
+
+@pytest.fixture(scope="module")
+def logh(tmp_path_factory):
+    scene = mg.load_scene("kepler-logh")
+    scheme = mg.discretize(scene.run_system, "stormer-verlet")
+    path = tmp_path_factory.mktemp("ensemble_logh") / module_filename(scene.name, "sv", "numba")
+    mod = mg.generate(scheme, path, backend="numba")
+    cfg = mod._CFG
+    assert cfg[nbruntime.CFG["NDOMAIN"]] > 0 and cfg[nbruntime.CFG["TT_GUARD"]] == 1 and hasattr(mod, "_py_post_block")
+    return mod
+
+
+def logh_orbits(n, ecc, seed=3):
+    """Extended states of n orbits (a = 1) from the apocentre, eccentricities ``ecc``, tilted."""
+    rng = np.random.default_rng(seed)
+    e = np.broadcast_to(ecc, (n,)).copy()
+    ra, va = 1 + e, np.sqrt((1 - e) / (1 + e))
+    tilt = rng.uniform(0.0, 0.5, n)
+    y = np.stack([-ra, 0 * e, 0 * e, 0 * e, -va * np.cos(tilt), -va * np.sin(tilt)], axis=1)
+    return y
+
+
+def test_log_hamiltonian_lanes_equal_one_trajectory_path_bitwise(logh):
+    mod = logh
+    rng = np.random.default_rng(4)
+    Y0 = mod.initial_state(logh_orbits(B, rng.uniform(0.1, 0.6, B)))
+    a = run(mod, "single", Y0, 2 * np.pi / 40, 120)
+    b = run(mod, "block", Y0, 2 * np.pi / 40, 120)
+    assert np.array_equal(a, b)
+
+
+def test_log_hamiltonian_failing_lane_named(logh):
+    """One lane at e = 0.99 among e = 0.3 orbits: at 30 fictive steps per orbit its pericentre
+    passage is refused (local error) by both paths, with the same step, lane and rows."""
+    mod = logh
+    ecc = np.full(B, 0.3)
+    ecc[150] = 0.99
+    Y0 = mod.initial_state(logh_orbits(B, ecc))
+    errs = {}
+    for path in ("single", "block"):
+        with pytest.raises(mod.ResolutionError) as ei:
+            run(mod, path, Y0, 2 * np.pi / 30, 60)
+        errs[path] = ei.value
+    a, b = errs["single"], errs["block"]
+    assert str(a) == str(b) and a.step == b.step and "[150]" in str(b)
+    assert np.array_equal(a.trajectory, b.trajectory) and b.trajectory.shape == (b.step + 1, B, 8)
+    # control: without that lane (all e = 0.3) both paths run through, bitwise alike
+    Y0[150] = Y0[149]
+    assert np.array_equal(run(mod, "single", Y0, 2 * np.pi / 30, 60), run(mod, "block", Y0, 2 * np.pi / 30, 60))
