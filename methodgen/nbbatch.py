@@ -200,56 +200,72 @@ def run_block(post_block, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, 
                 post_block(YS, CS, FS, h * kick_a[k], h * drift[k], h * kick_b[k], p, PS, nl)
                 rk = ratios[k]
                 nbad = 0
-                # the update, as the one-trajectory path does it (compensated or not)
-                if compensated:
-                    for i in range(DIM):
-                        for l in range(nl):
-                            a = PS[i * L + l] + CS[i * L + l]
-                            s = YS[i * L + l] + a
-                            CS[i * L + l] = a - (s - YS[i * L + l])
-                            YS[i * L + l] = s
-                else:
-                    for i in range(DIM):
-                        for l in range(nl):
-                            YS[i * L + l] += PS[i * L + l]
+                # The update, as the one-trajectory path does it (compensated or not), then
+                # a count of failing lanes.  Each loop runs over the lanes of one row, taken
+                # as a view: a unit-stride index that LLVM knows is not negative, so it
+                # vectorises (an index i * L + l with L unknown defeats it).
                 for i in range(DIM):
-                    for l in range(nl):
-                        v = YS[i * L + l]
-                        nbad += not (v - v == 0.0)  # inf - inf and NaN are NaN
+                    y = YS[i * L:i * L + L]
+                    c = CS[i * L:i * L + L]
+                    d = PS[i * L:i * L + L]
+                    if compensated:
+                        for l in range(nl):
+                            a = d[l] + c[l]
+                            s = y[l] + a
+                            c[l] = a - (s - y[l])
+                            y[l] = s
+                            nbad += not (s - s == 0.0)  # inf - inf and NaN are NaN
+                    else:
+                        for l in range(nl):
+                            s = y[l] + d[l]
+                            y[l] = s
+                            nbad += not (s - s == 0.0)
                 for i in range(NF):
+                    f = FS[i * L:i * L + L]
+                    d = PS[(DIM + i) * L:(DIM + i) * L + L]
                     for l in range(nl):
-                        FS[i * L + l] = PS[(DIM + i) * L + l]
+                        f[l] = d[l]
                 for j in range(NDOMAIN):
+                    d = PS[(PD + j) * L:(PD + j) * L + L]
                     if domain_pos[j]:
                         for l in range(nl):
-                            nbad += not (PS[(PD + j) * L + l] > 0.0)
+                            nbad += not (d[l] > 0.0)
                     else:
                         for l in range(nl):
-                            nbad += not (PS[(PD + j) * L + l] >= 0.0)
+                            nbad += not (d[l] >= 0.0)
                 if TT_GUARD:
+                    g = PS[PT * L:PT * L + L]
                     for l in range(nl):
-                        nbad += not (PS[PT * L + l] > 0.0)
+                        nbad += not (g[l] > 0.0)
                     if check_resolution:
+                        dd = PS[(PT + 1) * L:(PT + 1) * L + L]
+                        ds = PS[(PT + 2) * L:(PT + 2) * L + L]
                         for l in range(nl):
-                            nbad += abs(PS[(PT + 1) * L + l]) > MLD * PS[(PT + 2) * L + l]
+                            nbad += abs(dd[l]) > MLD * ds[l]
                 if LERR and check_resolution:
                     if LERR == 1:
+                        ne = PS[PE * L:PE * L + L]
+                        nd = PS[(PE + 1) * L:(PE + 1) * L + L]
                         for l in range(nl):
-                            NE2[l] = PS[PE * L + l]
-                            ND2[l] = PS[(PE + 1) * L + l]
+                            NE2[l] = ne[l]
+                            ND2[l] = nd[l]
                     else:
+                        nd = PS[PE * L:PE * L + L]
                         for l in range(nl):
                             NE2[l] = 0.0
-                            ND2[l] = PS[PE * L + l]
+                            ND2[l] = nd[l]
                         for j in range(KLERR):
+                            pa = PS[(PE + 1 + j) * L:(PE + 1 + j) * L + L]
+                            g0 = G0[j * L:j * L + L]
                             for l in range(nl):
-                                e = PS[(PE + 1 + j) * L + l] - rk * G0[j * L + l]
+                                e = pa[l] - rk * g0[l]
                                 NE2[l] += e * e
                     for l in range(nl):
                         nbad += NE2[l] > LERR2 * ND2[l]
                 if EJUMP and check_resolution:
+                    hj = PS[PJ * L:PJ * L + L]
                     for l in range(nl):
-                        nbad += abs(PS[PJ * L + l] - EJS[0 * L + l]) > MEJ * EJS[1 * L + l]
+                        nbad += abs(hj[l] - EJS[l]) > MEJ * EJS[L + l]
                 if nbad:
                     # which lanes failed, and how: the checks in the one-trajectory path's order
                     for l in range(nl):
@@ -275,12 +291,13 @@ def run_block(post_block, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, 
                 # what the next stage's checks start from
                 if LERR == 2:
                     for j in range(KLERR):
+                        g0 = G0[j * L:j * L + L]
+                        pb = PS[(PE + 1 + KLERR + j) * L:(PE + 1 + KLERR + j) * L + L]
                         for l in range(nl):
-                            G0[j * L + l] = PS[(PE + 1 + KLERR + j) * L + l]
+                            g0[l] = pb[l]
                 if EJUMP:
-                    for l in range(nl):
-                        EJS[0 * L + l] = PS[PJ * L + l]
-                        EJS[1 * L + l] = PS[(PJ + 1) * L + l]
+                    for l in range(2 * L):
+                        EJS[l] = PS[PJ * L + l]  # H and its size: two consecutive rows
             if failed:
                 # the failed lanes keep their state after the failing stage; the others
                 # completed this step
