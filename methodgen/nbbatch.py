@@ -29,12 +29,16 @@ one-trajectory path.  (Trajectories of *earlier* blocks may have run further,
 as earlier trajectories do there.)
 
 The block kernel's type is :data:`KERNEL_TYPES` ``["post_block"]``:
-``post_block(Y, C, G, ha, hd, hb, p, OUT, nl)`` with ``Y``, ``C`` (DIM rows),
-``G`` (NF rows; one dummy row without first-same-as-last force) and ``OUT``
-(POST_LEN rows) flat, row-major with rows of ``lanes`` (component i of lane l at
-``i * lanes + l``; ``lanes`` is the module's constant ``_BLOCK_LANES``, compiled
-into its kernel: a constant stride is what lets LLVM prove that the rows do not
-overlap and vectorise); lanes ``0 .. nl-1`` are computed.
+``post_block(Y, C, G, ha, hd, hb, p, OUT, nl, compensated) -> int`` with ``Y``,
+``C`` (DIM rows), ``G`` (NF rows; one dummy row without first-same-as-last
+force) and ``OUT`` (POST_LEN rows) flat, row-major with rows of ``lanes``
+(component i of lane l at ``i * lanes + l``; ``lanes`` is the module's constant
+``_BLOCK_LANES``, compiled into its kernel: a constant stride is what lets LLVM
+prove that the rows do not overlap and vectorise).  For lanes ``0 .. nl-1`` it
+takes the stage: ``Y`` (and ``C`` when compensated) updated as the one-trajectory
+path updates them from the post kernel's Δy, ``G`` the new force, ``OUT`` the
+check values (its rows of Δy and force are left alone); it returns how many of
+the updated components are not finite (0 when all are).
 
 This module imports numpy and numba only, and is compiled once per machine
 (numba's cache, stamped with this file's SHA-256 as the shared runtime is).
@@ -65,7 +69,7 @@ _IV = _t.int64[::1]
 _B = _t.boolean
 
 #: numba signature of the block kernel (see the module docstring).
-KERNEL_TYPES = {"post_block": _t.void(_V, _V, _V, _f8, _f8, _f8, _V, _V, _i8)}
+KERNEL_TYPES = {"post_block": _i8(_V, _V, _V, _f8, _f8, _f8, _V, _V, _i8, _B)}
 _F = {k: _t.FunctionType(v) for k, v in KERNEL_TYPES.items()}
 _RF = {k: _t.FunctionType(v) for k, v in _rt.KERNEL_TYPES.items()}
 
@@ -197,34 +201,13 @@ def run_block(post_block, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, 
         failed = False
         for n in range(n0, limit):
             for k in range(STAGES):
-                post_block(YS, CS, FS, h * kick_a[k], h * drift[k], h * kick_b[k], p, PS, nl)
+                # the stage for the whole block: the update of y (compensated or not) and the
+                # carried force in place, the check values in PS, the non-finite count back
+                nbad = post_block(YS, CS, FS, h * kick_a[k], h * drift[k], h * kick_b[k], p, PS, nl, compensated)
                 rk = ratios[k]
-                nbad = 0
-                # The update, as the one-trajectory path does it (compensated or not), then
-                # a count of failing lanes.  Each loop runs over the lanes of one row, taken
-                # as a view: a unit-stride index that LLVM knows is not negative, so it
-                # vectorises (an index i * L + l with L unknown defeats it).
-                for i in range(DIM):
-                    y = YS[i * L:i * L + L]
-                    c = CS[i * L:i * L + L]
-                    d = PS[i * L:i * L + L]
-                    if compensated:
-                        for l in range(nl):
-                            a = d[l] + c[l]
-                            s = y[l] + a
-                            c[l] = a - (s - y[l])
-                            y[l] = s
-                            nbad += not (s - s == 0.0)  # inf - inf and NaN are NaN
-                    else:
-                        for l in range(nl):
-                            s = y[l] + d[l]
-                            y[l] = s
-                            nbad += not (s - s == 0.0)
-                for i in range(NF):
-                    f = FS[i * L:i * L + L]
-                    d = PS[(DIM + i) * L:(DIM + i) * L + L]
-                    for l in range(nl):
-                        f[l] = d[l]
+                # The other checks: a count of failing lanes.  Each loop runs over the lanes of
+                # one row, taken as a view: a unit-stride index that LLVM knows is not
+                # negative, so it vectorises (an index i * L + l with L unknown defeats it).
                 for j in range(NDOMAIN):
                     d = PS[(PD + j) * L:(PD + j) * L + L]
                     if domain_pos[j]:
