@@ -249,3 +249,21 @@ def test_log_hamiltonian_failing_lane_named(logh):
     # control: without that lane (all e = 0.3) both paths run through, bitwise alike
     Y0[150] = Y0[149]
     assert np.array_equal(run(mod, "single", Y0, 2 * np.pi / 30, 60), run(mod, "block", Y0, 2 * np.pi / 30, 60))
+
+
+@pytest.mark.skipif(__import__("platform").machine() not in ("x86_64", "AMD64"), reason="x86 instruction names")
+def test_block_kernel_is_vectorised_without_contraction(modules):
+    """The block kernel's lane loops compile to packed double square roots (SIMD over lanes)
+    and no fused multiply-add (which would change the rounding: not bitwise the one-lane
+    path).  Control: the one-lane post kernel, compiled the same way, has no packed ones."""
+    import re
+
+    import numba
+
+    mod = modules["sv2"]
+    block = numba.njit(nbbatch.KERNEL_TYPES["post_block"], error_model="numpy")(mod._py_post_block)
+    asm = "\n".join(block.inspect_asm().values())
+    assert re.search(r"\bv?sqrtpd\b", asm) and not re.search(r"vfn?m(add|sub)", asm)
+    one = numba.njit(nbruntime.KERNEL_TYPES["post"], error_model="numpy")(mod._nb_post.py_func)
+    asm1 = "\n".join(one.inspect_asm().values())
+    assert re.search(r"\bv?sqrtsd\b", asm1) and not re.search(r"\bv?sqrtpd\b", asm1)
