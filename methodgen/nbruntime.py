@@ -46,10 +46,14 @@ import os
 
 import numba
 import numpy
+from llvmlite import ir as _llir
 from numba import types as _t
+from numba.core import cgutils as _cgutils
+from numba.core import errors as _errors
+from numba.extending import intrinsic as _intrinsic
 
 __all__ = ["run", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256",
-           "no_kernel"]
+           "no_kernel", "stack_buffer"]
 
 # --- cache stamp ---------------------------------------------------------------------
 
@@ -173,6 +177,26 @@ def _once(key, sig, py_func):
 def no_kernel(kind: str):
     """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one."""
     return _once("no_" + kind, KERNEL_TYPES[kind], _NO[kind])
+
+
+@_intrinsic
+def stack_buffer(typingctx, size):
+    """A pointer to ``size`` float64 on the stack of the compiled function that calls it
+    (``size`` a literal int); view it as an array with ``numba.carray(ptr, shape)``.
+
+    Work arrays of a kernel without a heap allocation per call (``numpy.empty`` costs about
+    20 ns, more than a small stage kernel's arithmetic).  The buffer lives in the caller's
+    entry block, so it is valid until the caller returns, and is not initialised.
+    """
+    if not isinstance(size, _t.IntegerLiteral):
+        raise _errors.RequireLiteralValue(size)
+    n = size.literal_value
+
+    def codegen(context, builder, signature, args):
+        buf = _cgutils.alloca_once(builder, _llir.ArrayType(_llir.DoubleType(), n))
+        return builder.bitcast(buf, _llir.DoubleType().as_pointer())
+
+    return _t.CPointer(_t.float64)(size), codegen
 
 
 # --- configuration -------------------------------------------------------------------------
