@@ -56,6 +56,13 @@ def _time(mod, y0, h, steps, repeat):
     return best / steps * 1e6, out
 
 
+def _template_route_exists() -> bool:
+    # The template route is the fallback for step structures the shared runtime does not know;
+    # once every structure runs on the runtime it may be gone.
+    root = Path(emit.__file__).resolve().parent.parent
+    return hasattr(emit, "shared_runtime_supports") and (root / "templates" / "numba_runtime.py.j2").exists()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20000)
@@ -66,6 +73,9 @@ def main() -> None:
     print(f"load average {os.getloadavg()}")
     folder = Path(tempfile.mkdtemp(prefix="mg-stepcost-"))
     routes = ("shared", "template") if args.route == "both" else (args.route,)
+    if "template" in routes and not _template_route_exists():
+        print("the template route is not in this methodgen: timing the shared runtime only")
+        routes = ("shared",)
     for scene_name, method, options in CONFIGS:
         if args.only and args.only not in f"{scene_name} {method} {options}":
             continue
