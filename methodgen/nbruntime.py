@@ -45,13 +45,17 @@ import os
 
 import numba
 import numpy
+from llvmlite import ir as _llir
 from numba import types as _t
+from numba.core import cgutils as _cgutils
+from numba.core import errors as _errors
+from numba.extending import intrinsic as _intrinsic
 
 from .nbcache import install_stamp_guard as _install_stamp_guard
 from .nbcache import source_digest as _source_digest
 
 __all__ = ["run", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256",
-           "no_kernel"]
+           "no_kernel", "stack_buffer"]
 
 # --- cache stamp ---------------------------------------------------------------------
 
@@ -134,6 +138,26 @@ def _once(key, sig, py_func):
 def no_kernel(kind: str):
     """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one."""
     return _once("no_" + kind, KERNEL_TYPES[kind], _NO[kind])
+
+
+@_intrinsic
+def stack_buffer(typingctx, size):
+    """A pointer to ``size`` float64 on the stack of the compiled function that calls it
+    (``size`` a literal int); view it as an array with ``numba.carray(ptr, shape)``.
+
+    Work arrays of a kernel without a heap allocation per call (``numpy.empty`` costs about
+    20 ns, more than a small stage kernel's arithmetic).  The buffer lives in the caller's
+    entry block, so it is valid until the caller returns, and is not initialised.
+    """
+    if not isinstance(size, _t.IntegerLiteral):
+        raise _errors.RequireLiteralValue(size)
+    n = size.literal_value
+
+    def codegen(context, builder, signature, args):
+        buf = _cgutils.alloca_once(builder, _llir.ArrayType(_llir.DoubleType(), n))
+        return builder.bitcast(buf, _llir.DoubleType().as_pointer())
+
+    return _t.CPointer(_t.float64)(size), codegen
 
 
 # --- configuration -------------------------------------------------------------------------
@@ -403,7 +427,7 @@ def _solve_linear(resjac, y, c, h, p, check_resolution, cfg, fcfg, z, dz, r, J, 
 
 @_inline
 def _solve_newton(guess, res, resjac, scale, y, c, h, p, maxiter, check_resolution, solver, use_tol, tol,
-                  cfg, fcfg, z, z_pred, dz, r, J, _a, _b, LU, piv, lu_ok, mode):
+                  cfg, fcfg, z, z_pred, dz, r, J, _a, _b, LU, piv, lu_ok, mode, n):
     """Solve R(z) = 0 for one state; returns (status, iterations, value), ``z`` the solution.
 
     ``solver``: 0 Newton (Jacobian every iteration), 1 simplified Newton (Jacobian
@@ -414,9 +438,9 @@ def _solve_newton(guess, res, resjac, scale, y, c, h, p, maxiter, check_resoluti
     while it contracts by AUTO_RATE or better, else Newton from the current iterate,
     and Newton for the next ``mode[0]`` steps).  The start value, stopping rule and
     resolution checks are those of the numpy backend; ``value`` is the residual norm,
-    h·ω or the predictor disagreement of a failure.
+    h·ω or the predictor disagreement of a failure.  ``n`` is cfg[N], a compile-time constant
+    in the specialisations of the integration loop (see :func:`run`).
     """
-    n = cfg[_C_N]
     kl = cfg[_C_KL]
     ku = cfg[_C_KU]
     resol = cfg[_C_RESOLUTION]
@@ -549,24 +573,15 @@ _RUN_SIG = _t.void(
 )
 
 
-@numba.njit(_RUN_SIG, **_OPTS)
-def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-        kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
-    """Steps ``n0 .. n1-1`` of every trajectory: the states after the steps that are multiples
-    of ``every`` go to their rows ``(n+1) // every`` of ``traj`` (rows, B, DIM).
-
-    ``Y`` (B, DIM), the compensation ``C`` and the first-same-as-last force ``FRC``
-    (B, NF; a (B, 1) dummy without) are updated in place; ``its`` (B, n1-n0)
-    receives the iterations per step.  A failure of trajectory b is recorded as
-    ``fstat[b] = (status, step, iterations, stage)``, ``fval[b]`` (for
-    _OUT_OF_DOMAIN the iterations slot holds the index of the violated domain
-    condition and ``fval`` its value, for _LOCAL_ERROR ``fval`` is the estimate
-    relative to the step); later trajectories then only run up to that step (they
-    cannot change which step fails first, only which trajectories fail there), so
-    rows ``0 .. step`` are complete for all trajectories.
-    """
-    N = cfg[_C_N]
+@_inline
+def _loop(kernels, cfg, fcfg, lerr_index, domain_pos, coefs, traj, n0, n1, Y, C, FRC, h, p, options, its, fstat,
+          fval, every, smode, slu_ok, sLU, spiv, N):
+    # The body of run, with the number of unknowns N passed in (a constant in _run_1 .. _run_3);
+    # run's other arguments come in tuples: Python compiles a call of more than 30 arguments
+    # to a call with *args, which numba does not inline.
+    guess, res, resjac, scale, post_k, hs, check = kernels
+    gammas, ratios, kick_a, drift, kick_b = coefs
+    maxiter, check_resolution, solver, use_tol, tol, compensated = options
     DIM = cfg[_C_DIM]
     STAGES = cfg[_C_STAGES]
     NF = cfg[_C_NF]
@@ -624,7 +639,7 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
                         status, it, val = _solve_newton(guess, res, resjac, scale, y, c, hs_, p, maxiter,
                                                         check_resolution, solver, use_tol, tol, cfg, fcfg,
                                                         z, z_pred, dz, r, J, _a, _b, sLU[b, k], spiv[b, k],
-                                                        slu_ok[b, k:k + 1], smode[b, k:k + 1])
+                                                        slu_ok[b, k:k + 1], smode[b, k:k + 1], N)
                     its[b, n - n0] += it
                     if status != _OK:
                         _fail(fstat, fval, b, status, n, it, val)
@@ -696,6 +711,95 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
                 for i in range(DIM):
                     traj[row, b, i] = y[i]
                 nxt += every
+
+
+@numba.njit(_RUN_SIG, **_OPTS)
+def _run_1(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+    # run with N = 1 (see run)
+    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
+          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
+          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
+          sLU, spiv, 1)
+
+
+@numba.njit(_RUN_SIG, **_OPTS)
+def _run_2(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+    # run with N = 2 (see run)
+    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
+          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
+          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
+          sLU, spiv, 2)
+
+
+@numba.njit(_RUN_SIG, **_OPTS)
+def _run_3(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+    # run with N = 3 (see run)
+    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
+          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
+          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
+          sLU, spiv, 3)
+
+
+@numba.njit(_RUN_SIG, **_OPTS)
+def _run_n(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+    # run with any N (see run)
+    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
+          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
+          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
+          sLU, spiv, cfg[_C_N])
+
+
+@numba.njit(_RUN_SIG, **_OPTS)
+def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+        kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+    """Steps ``n0 .. n1-1`` of every trajectory: the states after the steps that are multiples
+    of ``every`` go to their rows ``(n+1) // every`` of ``traj`` (rows, B, DIM).
+
+    ``Y`` (B, DIM), the compensation ``C`` and the first-same-as-last force ``FRC``
+    (B, NF; a (B, 1) dummy without) are updated in place; ``its`` (B, n1-n0)
+    receives the iterations per step.  A failure of trajectory b is recorded as
+    ``fstat[b] = (status, step, iterations, stage)``, ``fval[b]`` (for
+    _OUT_OF_DOMAIN the iterations slot holds the index of the violated domain
+    condition and ``fval`` its value, for _LOCAL_ERROR ``fval`` is the estimate
+    relative to the step); later trajectories then only run up to that step (they
+    cannot change which step fails first, only which trajectories fail there), so
+    rows ``0 .. step`` are complete for all trajectories.
+
+    The loop is compiled four times (each copy once per machine): with the number of
+    unknowns N a constant 1, 2 or 3, and for any N.  With N a constant LLVM unrolls the
+    short loops over the unknowns in Newton's method (copies, updates, max-norms), keeps
+    them in registers and folds the linear solve to its closed form; read from ``cfg`` they
+    stay loops, about a fifth of the step of a 2-unknown system.  The copies are separate
+    functions, not branches of one: a loop with four inlined Newton solvers was not
+    optimised (no faster than the generic one).  Same arithmetic, so bitwise the same
+    results whichever copy runs.
+    """
+    n = cfg[_C_N]
+    if n == 1:
+        _run_1(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
+    elif n == 2:
+        _run_2(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
+    elif n == 3:
+        _run_3(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
+    else:
+        _run_n(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
 
 
 def _res_rows(res, Z, Y, h, p, R):

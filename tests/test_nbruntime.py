@@ -383,3 +383,91 @@ def test_a_module_loaded_by_methodgen_can_be_imported_by_its_plain_name(tmp_path
     assert run(load.format(patch=off, path=path)).stdout.split() == ["4242", "0"]
     plain = run("import plainmod; print(plainmod.f())")
     assert plain.returncode != 0 and "methodgen_generated" in plain.stderr
+
+
+# --- per-step cost: the loop specialised on N, work arrays on the stack ----------------------
+
+class _GenericLoop:
+    """methodgen.nbruntime with ``run`` replaced by its copy for any N (counts its calls)."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def __getattr__(self, name):
+        return getattr(nbruntime, name)
+
+    def run(self, *args):
+        self.calls += 1
+        nbruntime._run_n(*args)
+
+
+def test_loops_specialised_on_the_number_of_unknowns_agree_bitwise_with_the_generic_one(tmp_path, monkeypatch):
+    """``run`` hands N = 1, 2, 3 to copies of the loop compiled with N a constant (unrolled
+    Newton loops, closed-form solve folded: the per-step cost of issue 25).  Same arithmetic,
+    so each gives the trajectory and iteration counts of the copy for any N bit for bit.
+    Control: the comparison sees a one-ulp change of h."""
+    seen = set()
+    for scene_name, method in (("simple-pendulum", "energy-momentum"), ("henon-heiles-2d", "energy-momentum"),
+                               ("kepler", "energy-momentum")):
+        scene, mod = _module(tmp_path, scene_name, method)
+        n = int(mod._CFG[nbruntime.CFG["N"]])
+        seen.add(n)
+        y0 = np.array(scene.y0)
+        i_spec, i_gen = {}, {}
+        a = mod.integrate(y0, scene.h, 300, info=i_spec)
+        generic = _GenericLoop()
+        with monkeypatch.context() as mp:
+            mp.setattr(mod, "_rt", generic)
+            b = mod.integrate(y0, scene.h, 300, info=i_gen)
+            c = mod.integrate(y0, np.nextafter(scene.h, 1.0), 300)
+        assert generic.calls == 2, scene_name   # the generic copy did run
+        assert np.array_equal(a, b), scene_name
+        assert np.array_equal(i_spec["newton_iterations"], i_gen["newton_iterations"]), scene_name
+        assert not np.array_equal(a, c), scene_name
+    assert seen == {1, 2, 3}
+
+
+def test_stack_buffers_are_distinct_and_writable():
+    """nbruntime.stack_buffer: each call is its own buffer in the caller's frame.  Control:
+    two views of one buffer (what a shared buffer would be) fail the same check."""
+    import numba
+
+    @numba.njit
+    def two(x, alias):
+        a = numba.carray(nbruntime.stack_buffer(3), 3)
+        b = numba.carray(nbruntime.stack_buffer(3), 3)
+        if alias:
+            b = a
+        for i in range(3):
+            a[i] = x
+            b[i] = -x
+        return a[0] + a[1] + a[2]
+
+    assert two(1.5, False) == 4.5
+    assert two(1.5, True) == -4.5
+
+
+def test_stage_kernels_keep_their_work_arrays_on_the_stack(tmp_path):
+    """Gauss's stage kernels on the shared runtime take their work arrays (f, f' at the stage
+    points) from the stack instead of allocating them per call (a fifth of Kepler gauss
+    s = 3's step); residual, Jacobian and trajectory are bitwise those of the same kernels
+    allocating with numpy.empty.  Control: the comparison sees a one-ulp change of h."""
+    import re
+
+    scene = mg.load_scene("kepler")
+    nb = mg.generate(mg.discretize(scene.system, "gauss", stages=2), tmp_path / "stack_numba.py", backend="numba")
+    src = open(nb.__file__).read()
+    stage = src[src.index("def _nb_resjac("):src.index("def _nb_post(")]
+    assert stage.count("_rt.stack_buffer(") == 6 and "numpy.empty(" not in stage
+    heap_src = re.sub(r"numba\.carray\(_rt\.stack_buffer\(\d+\), (\([^)]*\))\)", r"numpy.empty(\1)", src)
+    assert heap_src.count("numpy.empty(") == src.count("numpy.empty(") + 6
+    (tmp_path / "heap_numba.py").write_text(heap_src)
+    heap = _import_fresh(tmp_path / "heap_numba.py", "heap_numba")
+    y0 = np.array(scene.y0)
+    z = 0.01 * np.sin(np.arange(len(nb.UNKNOWN_NAMES)) + 1.0)
+    for fn in ("residual", "jacobian"):
+        assert np.array_equal(getattr(nb, fn)(z, y0, 0.1), getattr(heap, fn)(z, y0, 0.1)), fn
+    for solver in ("newton", "fixed-point"):
+        a = nb.integrate(y0, scene.h, 200, solver=solver)
+        assert np.array_equal(a, heap.integrate(y0, scene.h, 200, solver=solver)), solver
+        assert not np.array_equal(a, heap.integrate(y0, np.nextafter(scene.h, 1.0), 200, solver=solver)), solver
