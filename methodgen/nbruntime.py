@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 
 import numba
 import numpy
@@ -713,7 +714,6 @@ def _loop(kernels, cfg, fcfg, lerr_index, domain_pos, coefs, traj, n0, n1, Y, C,
                 nxt += every
 
 
-@numba.njit(_RUN_SIG, **_OPTS)
 def _run_1(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
            kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
@@ -724,7 +724,6 @@ def _run_1(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, 
           sLU, spiv, 1)
 
 
-@numba.njit(_RUN_SIG, **_OPTS)
 def _run_2(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
            kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
@@ -735,7 +734,6 @@ def _run_2(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, 
           sLU, spiv, 2)
 
 
-@numba.njit(_RUN_SIG, **_OPTS)
 def _run_3(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
            kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
@@ -746,7 +744,6 @@ def _run_3(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, 
           sLU, spiv, 3)
 
 
-@numba.njit(_RUN_SIG, **_OPTS)
 def _run_n(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
            kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
@@ -757,7 +754,24 @@ def _run_n(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, 
           sLU, spiv, cfg[_C_N])
 
 
-@numba.njit(_RUN_SIG, **_OPTS)
+_LOOPS = {1: _run_1, 2: _run_2, 3: _run_3, None: _run_n}
+_COMPILED: dict = {}
+
+
+def loop_for(n):
+    """The compiled copy of the integration loop for ``n`` unknowns (1, 2, 3; else the copy
+    for any N), compiled on first use with the fixed signature and cached by numba."""
+    key = n if n in (1, 2, 3) else None
+    f = _COMPILED.get(key)
+    if f is None:
+        with warnings.catch_warnings():
+            # numba calls first-class function types experimental; the runtime is built on them
+            # and tested, and the warning would reach users once per copy and machine
+            warnings.simplefilter("ignore", numba.core.errors.NumbaExperimentalFeatureWarning)
+            f = _COMPILED[key] = numba.njit(_RUN_SIG, **_OPTS)(_LOOPS[key])
+    return f
+
+
 def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
         kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
         compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
@@ -774,32 +788,20 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     cannot change which step fails first, only which trajectories fail there), so
     rows ``0 .. step`` are complete for all trajectories.
 
-    The loop is compiled four times (each copy once per machine): with the number of
-    unknowns N a constant 1, 2 or 3, and for any N.  With N a constant LLVM unrolls the
-    short loops over the unknowns in Newton's method (copies, updates, max-norms), keeps
+    The loop has four copies: with the number of unknowns N a constant 1, 2 or 3, and for
+    any N; each is compiled when a module first needs it (then loaded from the cache), so a
+    new machine compiles only the copies its systems use (all four took 82 s at load 3-4).
+    With N a constant LLVM unrolls the short loops over the unknowns in Newton's method (copies, updates, max-norms), keeps
     them in registers and folds the linear solve to its closed form; read from ``cfg`` they
     stay loops, about a fifth of the step of a 2-unknown system.  The copies are separate
     functions, not branches of one: a loop with four inlined Newton solvers was not
     optimised (no faster than the generic one).  Same arithmetic, so bitwise the same
     results whichever copy runs.
     """
-    n = cfg[_C_N]
-    if n == 1:
-        _run_1(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
-    elif n == 2:
-        _run_2(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
-    elif n == 3:
-        _run_3(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
-    else:
-        _run_n(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-               compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
+    loop_for(int(cfg[_C_N]))(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos,
+                              gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
+                              check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
+                              slu_ok, sLU, spiv)
 
 
 def _res_rows(res, Z, Y, h, p, R):

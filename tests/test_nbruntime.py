@@ -158,7 +158,7 @@ def test_status_codes_match_the_modules(tmp_path):
 # --- cache stamp -------------------------------------------------------------------------
 
 def test_the_runtime_is_stamped_with_its_content_hash():
-    locator = nbruntime.run._cache._impl.locator
+    locator = nbruntime.loop_for(2)._cache._impl.locator
     assert locator.get_source_stamp() == ("methodgen.nbruntime", nbruntime.SOURCE_SHA256)
     import hashlib
     with open(nbruntime.__file__, "rb") as f:
@@ -238,7 +238,7 @@ def test_a_cached_runtime_serves_a_new_system_without_recompiling(tmp_path):
         from methodgen.emit import load_module
         m = load_module({str(path)!r})
         m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
-        print(sum(rt.run.stats.cache_misses.values()), sum(rt.run.stats.cache_hits.values()))
+        L = rt.loop_for(int(m._CFG[rt.CFG["N"]])); print(sum(L.stats.cache_misses.values()), sum(L.stats.cache_hits.values()))
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=os.environ.copy())
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -398,7 +398,7 @@ class _GenericLoop:
 
     def run(self, *args):
         self.calls += 1
-        nbruntime._run_n(*args)
+        nbruntime.loop_for(None)(*args)
 
 
 def test_loops_specialised_on_the_number_of_unknowns_agree_bitwise_with_the_generic_one(tmp_path, monkeypatch):
