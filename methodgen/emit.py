@@ -244,7 +244,7 @@ def _vector_view(kern: Kernel, groups: list[tuple[str, tuple[int, ...]]], return
                 break
     allocs = [(name, repr(tuple(shape))) for name, shape in groups]
     return {"temps": kern.temps, "targets": targets, "allocs": allocs, "returns": returns,
-            "loops": kern.loops, "accs": kern.accs}
+            "loops": kern.loops, "accs": kern.accs, "pre": kern.pre, "pre_out": kern.pre_out}
 
 
 def _docsafe(text: str) -> str:
