@@ -639,7 +639,7 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
 
 
 def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *,
-          expanded: bool = False) -> ModuleIR:
+          expanded: bool = False, backend: str | None = None) -> ModuleIR:
     """Lower ``scheme`` to a :class:`ModuleIR` (deterministic).
 
     Parameters
@@ -657,8 +657,14 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         s-stage method (``scheme.stage_system``) as the expanded straight-line kernels of
         ``scheme.residual`` and its ``(s·n)²`` symbolic Jacobian, instead of the loops over
         the stages (:mod:`methodgen.stages`, the default).
+    backend : str or None
+        ``"numba"``: leave out the batch (numpy) flavour of the kernels the numba templates
+        do not render (guess, residual, Newton matrix, scale, increment, post, hs) -- their
+        lowering is a large part of a cold build's time.  None: lower everything (any
+        backend can render the IR).
     """
     system = scheme.system
+    batch = backend != "numba"
     user = [s.name for s in system.y] + list(system.param_names)
     names = sanitize_names(user)
     rename = {s: sp.Symbol(names[s.name], real=True) for s in list(system.y) + list(system.params)}
@@ -729,7 +735,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     vector = {}
     if n:
         scalar["guess"] = kern(guess, (n,), sp_)
-        vector["guess"] = kern(guess, (n,), vp)
+        if batch:
+            vector["guess"] = kern(guess, (n,), vp)
         # with row scales (looped modules): R then s, and J = I + diag(s) _sB in the module
         scaled = looped and rows is not None
         nj = n if scaled else n * n
@@ -745,15 +752,19 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
             band = jacobian_band(n, stage.newton_pattern())
         else:
             scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
-            vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
+            if batch:
+                vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
             band = _newton_band(n, scalar["resjac"], plan, scaled)
             scalar["res"] = kern(res, (n,), sp_)
-            vector["res"] = kern(res, (n,), vp)
+            if batch:
+                vector["res"] = kern(res, (n,), vp)
         if scheme.unknown_scale is not None:
             scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
-            vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
+            if batch:
+                vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
     # (no scalar flavour: every runtime adds the increment through the post kernel)
-    vector["increment"] = kern(inc, (d2,), vp)
+    if batch:
+        vector["increment"] = kern(inc, (d2,), vp)
     # After each solve one kernel gives the increment together with what the checks
     # need at the new state y1 = y0 + Δy, sharing common subexpressions: the error
     # estimate's field values or E itself, and the domain conditions.
@@ -811,7 +822,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
              + [u.xreplace(at1) for u in tguard] + ejump1)
     shared = lplan.shared if lplan else ()
     vsource = "d" if splan is not None else "z"
-    for flavour, printer, lp in ((scalar, sp_, CheckPrinter({"fully_qualified_modules": True})), (vector, vp, None)):
+    for flavour, printer, lp in ((scalar, sp_, CheckPrinter({"fully_qualified_modules": True})),
+                                 (vector, vp, None))[:2 if batch else 1]:
         k = _with_loops(_chained_kernel(first, later, first_links, printer, rename, lp, shared),
                         first + later, plan, printer, dim, compensated, vsource=vsource)
         if splan is not None:
@@ -846,7 +858,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         ejump = (T + U, sp.Abs(T) + sp.Abs(U))
     if ejump:
         scalar["hs"] = kern(list(ejump), (2,), CheckPrinter({"fully_qualified_modules": True}))
-        vector["hs"] = kern(list(ejump), (2,), vp)
+        if batch:
+            vector["hs"] = kern(list(ejump), (2,), vp)
     vector["hamiltonian"] = kern([T + U] if pot is not None else [system.H], (1,), vp)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
     n_cons = len(system.constraints)
