@@ -395,12 +395,27 @@ def _program_kernel(dag, printer, rename) -> Kernel:
     return Kernel(temps, outputs, (len(outs),))
 
 
-def _helpers(exprs) -> tuple[str, ...]:
+_HELPER_CALL = re.compile(r"\b_[fv]_([A-Za-z0-9_]+)\(")
+
+
+def _helpers_called(*flavours) -> tuple[str, ...]:
+    """The removable-singularity helpers the kernels' code calls (``_f_<name>(`` or
+    ``_v_<name>(``, as the printers print them), with the helpers those call: read off the
+    printed code, so exactly what the module needs (a scan of the expressions' function
+    atoms cost seconds on an unrolled N-body step)."""
+    known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
     used = set()
-    for e in exprs:
-        for f in sp.sympify(e).atoms(sp.Function):
-            if type(f) in SPECIAL_FUNCTIONS:
-                used.add(SPECIAL_FUNCTIONS[type(f)][1:])
+    for flavour in flavours:
+        for k in flavour.values():
+            codes = [c for _, c in k.pre + k.temps + k.outputs]
+            for L in k.loops:
+                codes += [c for _, c in L.temps] + [c for *_, c in L.adds]
+            for code in codes:
+                used.update(m for m in _HELPER_CALL.findall(code) if m in known)
+    return _helper_closure(used)
+
+
+def _helper_closure(used: set) -> tuple[str, ...]:
     # Close over the helpers a helper calls (e.g. expdd calls sinhc).
     todo = list(used)
     while todo:
@@ -719,7 +734,9 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     else:
         res = cmp_(list(scheme.residual), comp)
         jac = cmp_(list(scheme.jacobian), comp) if n else []
-        inc = cmp_(list(scheme.increment), comp)
+        # (a numba module of a first-same-as-last step needs no increment kernel: its post
+        # kernel gives Δy, and the compensated expansion is a large part of the lowering)
+        inc = cmp_(list(scheme.increment), comp) if batch or fplan is None else []
         guess = list(scheme.guess)
     invs: tuple[Invariant, ...] = scheme.invariants
     inv_exprs = [inv.expr for inv in invs]
@@ -803,7 +820,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     # The energy-jump test (methods that do not keep H): H and its size Σ|terms| at y1, carried
     # over as the values at y0 of the next step (a kernel gives them at the initial state).
     ejump = energy_jump(scheme, lplan, tguard) if not conds else ()
-    ejump1 = [u.xreplace(at1) for u in ejump]
+    ejump_form = energy_jump_form(system) if ejump and plan is not None else None
+    ejump1 = None
     if splan is not None:
         # Δq first (straight-line, ahead of the loops: its values are the loops' slot
         # increments), then the end force Σ_t ∇U_t(q0 + c + Δq) as the sum _sG, and H at
@@ -812,12 +830,14 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         G1 = [acc_symbol("_sG", i) for i in range(dim)]
         ha, hb = fplan.steps[0], fplan.steps[2]
         first = list(links[:dim]) + [-ha * g0 - hb * g1 for g0, g1 in zip(fplan.symbols, G1)] + G1
-        if ejump and tuple(ejump) == energy_jump_form(system):
+        if ejump and tuple(ejump) == ejump_form:
             T, _ = potential_via_sums(system, splan)
             T1 = T.xreplace(at1)
             U1 = sp.Add(*[t for t in sp.Add.make_args(separable_split(system).U)
                           if not t.free_symbols & set(system.q)]) + acc_symbol("_sV", 0)
             ejump1 = [T1 + U1, sp.Abs(T1) + sp.Abs(U1)]
+    if ejump1 is None:
+        ejump1 = [u.xreplace(at1) for u in ejump]
     later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
              + [u.xreplace(at1) for u in tguard] + ejump1)
     shared = lplan.shared if lplan else ()
@@ -854,7 +874,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         vector["domain"] = _kernel([u for _, u in conds], (len(conds),), vp, rename)
     if tguard:
         vector["tguard"] = _kernel(list(tguard), (len(tguard),), vp, rename)
-    if ejump and pot is not None and tuple(ejump) == energy_jump_form(system):
+    if ejump and pot is not None and tuple(ejump) == ejump_form:
         ejump = (T + U, sp.Abs(T) + sp.Abs(U))
     if ejump:
         scalar["hs"] = kern(list(ejump), (2,), CheckPrinter({"fully_qualified_modules": True}))
@@ -880,11 +900,6 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         scalar["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), sp_, rename)
         vector["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), vp, rename)
 
-    all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
-    if plan is not None:   # the helpers the loops' template terms call (Jacobian terms too:
-        # dsinc, dsinhc, ... appear only there)
-        for lf in plan.families:
-            all_exprs += [*lf.dg, *lf.grad, *(e for row in lf.jacobian for e in row)]
     return ModuleIR(
         module_name=module_name,
         system_name=system.name or "system",
@@ -908,7 +923,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         invariant_exprs=tuple(str(inv.expr) for inv in invs),
         scalar=scalar,
         vector=vector,
-        helpers=_helpers(all_exprs),
+        helpers=_helpers_called(scalar, vector),
         signature=signature,
         resolution=scheme.resolution,
         fixed_point=scheme.fixed_point,
