@@ -666,7 +666,10 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         Python module name of the generated file.
     loops : bool or None
         Loop over families of like terms instead of unrolling every term
-        (:func:`uses_loops`; default: where a family has ≥ 3 instances).
+        (:func:`uses_loops`; default: where a family has ≥ 3 instances).  For Störmer–Verlet
+        (first-same-as-last, compensated) the families of U are those of
+        :func:`methodgen.lower_loops.force_plan`: the post kernel's end force and H at y1,
+        and H in the initial-state kernels, are loops; Δq stays straight-line code.
     expanded : bool
         Internal (tests and benchmarks): emit the residual and the Newton matrix of an
         s-stage method (``scheme.stage_system``) as the expanded straight-line kernels of
