@@ -244,7 +244,7 @@ def _vector_view(kern: Kernel, groups: list[tuple[str, tuple[int, ...]]], return
                 break
     allocs = [(name, repr(tuple(shape))) for name, shape in groups]
     return {"temps": kern.temps, "targets": targets, "allocs": allocs, "returns": returns,
-            "loops": kern.loops, "accs": kern.accs}
+            "loops": kern.loops, "accs": kern.accs, "pre": kern.pre, "pre_out": kern.pre_out}
 
 
 def _docsafe(text: str) -> str:
@@ -280,15 +280,21 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     _check_backend(backend)
     template = _TEMPLATES[backend]
     n, d2 = ir.n_unknowns, ir.n_state
+    if backend != "numba" and "increment" not in ir.vector:
+        raise ValueError("this IR was lowered for the numba backend (lower(..., backend='numba')): "
+                         "it has no batch flavour of the step kernels to render a numpy module from")
+    # (an IR lowered for numba has no batch flavour of the step kernels: the numba templates
+    # do not render them)
     vector = {
-        "increment": _vector_view(ir.vector["increment"], [("_out", (d2,))], "_out"),
         "hamiltonian": _vector_view(ir.vector["hamiltonian"], [("_out", (1,))], "_out[..., 0]"),
         "invariants": _vector_view(ir.vector["invariants"],
                                    [("_out", (len(ir.invariant_names),))], "_out"),
         # the increment with what the per-step checks need, and the initial-state checks
-        "post": _vector_view(ir.vector["post"], [("_out", ir.vector["post"].shape)], "_out"),
         "check": _vector_view(ir.vector["check"], [("_out", ir.vector["check"].shape)], "_out"),
     }
+    if "increment" in ir.vector:
+        vector["increment"] = _vector_view(ir.vector["increment"], [("_out", (d2,))], "_out")
+        vector["post"] = _vector_view(ir.vector["post"], [("_out", ir.vector["post"].shape)], "_out")
     if "domain" in ir.vector:
         vector["domain"] = _vector_view(ir.vector["domain"], [("_out", ir.vector["domain"].shape)], "_out")
     if "tguard" in ir.vector:
@@ -303,7 +309,7 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
         m, d = ir.n_constraints, ir.dim
         vector["constraints"] = _vector_view(ir.vector["constraints"], [("_g", (m,)), ("_G", (m, d))], "_g, _G")
         vector["minv"] = _vector_view(ir.vector["minv"], [("_out", (d, d))], "_out")
-    if n:
+    if n and "guess" in ir.vector:
         vector["guess"] = _vector_view(ir.vector["guess"], [("_out", (n,))], "_out")
         vector["res"] = _vector_view(ir.vector["res"], [("_R", (n,))], "_R")
         if ir.vector["resjac"].jac_rows:   # J = I + diag(s) _sB (methodgen.lower_loops)
@@ -784,6 +790,6 @@ def emit_source(scheme, sig: str | None = None, module_name: str | None = None,
     sig = sig or signature(scheme.system, scheme.key, backend)
     name = module_name or module_filename(scheme.system.name or "system", scheme.key, backend)[:-3]
     with phase("lower", progress):
-        ir = lower(scheme, sig, name, expanded=expanded)
+        ir = lower(scheme, sig, name, expanded=expanded, backend=backend)
     with phase("render", progress):
         return render(ir, backend)

@@ -30,7 +30,8 @@ from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 from .compensate import compensate, compensation_symbols
-from .lower_loops import jacobian_row_scales, jacobian_via_sums, loop_prefix, sum_pattern, table_names
+from .lower_loops import (acc_symbol, force_plan, jacobian_row_scales, jacobian_via_sums, loop_prefix, potential_via_sums,
+                          sum_pattern, table_names)
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
 from .fsal import fsal_plan
 from .splittings import composition_stages, is_splitting
@@ -163,6 +164,11 @@ class Kernel:
     #: A Newton kernel whose outputs after the residual are row scales s: the Jacobian
     #: is ``I + diag(s) _sB`` (:func:`methodgen.lower_loops.jacobian_row_scales`).
     jac_rows: bool = False
+    #: Straight-line assignments ahead of the loops, and the names of the first outputs they
+    #: give (Δq of a looped Störmer–Verlet step), which the loops read as slot increments
+    #: (load source ``"d"``) and the kernel returns first.
+    pre: tuple = ()
+    pre_out: tuple = ()
     _names: frozenset | None = field(default=None, repr=False, compare=False)
 
     def reads(self, name: str) -> bool:
@@ -170,7 +176,7 @@ class Kernel:
         kernel then loads only what it reads: its loops load their slots themselves)."""
         if self._names is None:
             found = set()
-            for code in [c for _, c in self.temps] + [c for _, c in self.outputs]:
+            for code in [c for _, c in self.pre + self.temps] + [c for _, c in self.outputs]:
                 found.update(_IDENT.findall(code))
             object.__setattr__(self, "_names", frozenset(found))
         return name in self._names
@@ -372,7 +378,8 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
               if later else ([], []))
     r2 = r2[:len(later)]
     temps = [(str(s), printer.doprint(e)) for s, e in t1]
-    temps += [(str(s), printer.doprint(e)) for s, e in zip(links, r1)]
+    # (a link whose expression is itself -- Δq computed ahead of the loops -- is not reassigned)
+    temps += [(str(s), printer.doprint(e)) for s, e in zip(links, r1) if e != s]
     temps += [(str(s), lp.doprint(e)) for s, e in t2]
     outputs = [((i,), str(s)) for i, s in enumerate(links)]
     outputs += [((len(links) + j,), lp.doprint(e)) for j, e in enumerate(r2) if e != 0]
@@ -388,12 +395,27 @@ def _program_kernel(dag, printer, rename) -> Kernel:
     return Kernel(temps, outputs, (len(outs),))
 
 
-def _helpers(exprs) -> tuple[str, ...]:
+_HELPER_CALL = re.compile(r"\b_[fv]_([A-Za-z0-9_]+)\(")
+
+
+def _helpers_called(*flavours) -> tuple[str, ...]:
+    """The removable-singularity helpers the kernels' code calls (``_f_<name>(`` or
+    ``_v_<name>(``, as the printers print them), with the helpers those call: read off the
+    printed code, so exactly what the module needs (a scan of the expressions' function
+    atoms cost seconds on an unrolled N-body step)."""
+    known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
     used = set()
-    for e in exprs:
-        for f in sp.sympify(e).atoms(sp.Function):
-            if type(f) in SPECIAL_FUNCTIONS:
-                used.add(SPECIAL_FUNCTIONS[type(f)][1:])
+    for flavour in flavours:
+        for k in flavour.values():
+            codes = [c for _, c in k.pre + k.temps + k.outputs]
+            for L in k.loops:
+                codes += [c for _, c in L.temps] + [c for *_, c in L.adds]
+            for code in codes:
+                used.update(m for m in _HELPER_CALL.findall(code) if m in known)
+    return _helper_closure(used)
+
+
+def _helper_closure(used: set) -> tuple[str, ...]:
     # Close over the helpers a helper calls (e.g. expdd calls sinhc).
     todo = list(used)
     while todo:
@@ -598,11 +620,16 @@ def energy_jump(scheme, lplan, tguard) -> tuple[sp.Expr, ...]:
     system = scheme.system
     if lplan is None or tguard or scheme.traits.energy_preserving:
         return ()
+    return energy_jump_form(system)
+
+
+def energy_jump_form(system) -> tuple[sp.Expr, sp.Expr]:
+    """``(H, S)`` of :func:`energy_jump` for ``system``: ``S = |T| + |U|`` for a separable H
+    (the same scale where U's terms share a sign, as gravity's do, and two abs() instead of
+    one per term on an N-body H), else ``Σ|terms of H|``."""
     H = system.H
     sep = separable_split(system)
     if sep is not None and sep.T != 0 and sep.U != 0:
-        # |T| + |U|: the same scale where U's terms share a sign (gravity), and two abs()
-        # instead of one per term on an N-body H
         return (H, sp.Abs(sep.T) + sp.Abs(sep.U))
     return (H, sp.Add(*(sp.Abs(t) for t in sp.Add.make_args(H))))
 
@@ -627,7 +654,7 @@ def uses_loops(scheme, loops: bool | None = None) -> bool:
 
 
 def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *,
-          expanded: bool = False) -> ModuleIR:
+          expanded: bool = False, backend: str | None = None) -> ModuleIR:
     """Lower ``scheme`` to a :class:`ModuleIR` (deterministic).
 
     Parameters
@@ -639,14 +666,23 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         Python module name of the generated file.
     loops : bool or None
         Loop over families of like terms instead of unrolling every term
-        (:func:`uses_loops`; default: where a family has ≥ 3 instances).
+        (:func:`uses_loops`; default: where a family has ≥ 3 instances).  For Störmer–Verlet
+        (first-same-as-last, compensated) the families of U are those of
+        :func:`methodgen.lower_loops.force_plan`: the post kernel's end force and H at y1,
+        and H in the initial-state kernels, are loops; Δq stays straight-line code.
     expanded : bool
         Internal (tests and benchmarks): emit the residual and the Newton matrix of an
         s-stage method (``scheme.stage_system``) as the expanded straight-line kernels of
         ``scheme.residual`` and its ``(s·n)²`` symbolic Jacobian, instead of the loops over
         the stages (:mod:`methodgen.stages`, the default).
+    backend : str or None
+        ``"numba"``: leave out the batch (numpy) flavour of the kernels the numba templates
+        do not render (guess, residual, Newton matrix, scale, increment, post, hs) -- their
+        lowering is a large part of a cold build's time.  None: lower everything (any
+        backend can render the IR).
     """
     system = scheme.system
+    batch = backend != "numba"
     user = [s.name for s in system.y] + list(system.param_names)
     names = sanitize_names(user)
     rename = {s: sp.Symbol(names[s.name], real=True) for s in list(system.y) + list(system.params)}
@@ -666,8 +702,14 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     # of A and d, not from the stage sums.
     cmp_ = ((lambda exprs, c: list(exprs)) if any(not u.name.startswith("_d_") for u in scheme.unknowns)
             else compensate)
-    looped = uses_loops(scheme, loops) and n > 0
-    plan = scheme.loops if looped else None
+    # An explicit first-same-as-last Störmer–Verlet step loops over U's families for its end
+    # force (and H at both ends) where U has a family of at least LOOP_MIN_INSTANCES terms.
+    fplan = fsal_plan(scheme) if n == 0 and cmp_ is compensate else None
+    splan = force_plan(system) if fplan is not None and loops is not False else None
+    if splan is not None and (not (splan.looped or loops) or potential_via_sums(system, splan) is None):
+        splan = None
+    looped = splan is None and uses_loops(scheme, loops) and n > 0
+    plan = scheme.loops if looped else splan
     # An s-stage method: f and f' derived once, the stage system assembled by loops in the
     # module (methodgen.stages) -- neither the residual's s copies of f per stage nor the
     # (s·n)² Jacobian are lowered.
@@ -695,7 +737,9 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     else:
         res = cmp_(list(scheme.residual), comp)
         jac = cmp_(list(scheme.jacobian), comp) if n else []
-        inc = cmp_(list(scheme.increment), comp)
+        # (a numba module of a first-same-as-last step needs no increment kernel: its post
+        # kernel gives Δy, and the compensated expansion is a large part of the lowering)
+        inc = cmp_(list(scheme.increment), comp) if batch or fplan is None else []
         guess = list(scheme.guess)
     invs: tuple[Invariant, ...] = scheme.invariants
     inv_exprs = [inv.expr for inv in invs]
@@ -711,7 +755,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     vector = {}
     if n:
         scalar["guess"] = kern(guess, (n,), sp_)
-        vector["guess"] = kern(guess, (n,), vp)
+        if batch:
+            vector["guess"] = kern(guess, (n,), vp)
         # with row scales (looped modules): R then s, and J = I + diag(s) _sB in the module
         scaled = looped and rows is not None
         nj = n if scaled else n * n
@@ -727,15 +772,19 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
             band = jacobian_band(n, stage.newton_pattern())
         else:
             scalar["resjac"] = kern(res + jac, (n + nj,), sp_, scaled)
-            vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
+            if batch:
+                vector["resjac"] = kern(res + jac, (n + nj,), vp, scaled)
             band = _newton_band(n, scalar["resjac"], plan, scaled)
             scalar["res"] = kern(res, (n,), sp_)
-            vector["res"] = kern(res, (n,), vp)
+            if batch:
+                vector["res"] = kern(res, (n,), vp)
         if scheme.unknown_scale is not None:
             scalar["scale"] = _kernel([scheme.unknown_scale], (1,), sp_, rename)
-            vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
-    scalar["increment"] = kern(inc, (d2,), sp_)
-    vector["increment"] = kern(inc, (d2,), vp)
+            if batch:
+                vector["scale"] = _kernel([scheme.unknown_scale], (1,), vp, rename)
+    # (no scalar flavour: every runtime adds the increment through the post kernel)
+    if batch:
+        vector["increment"] = kern(inc, (d2,), vp)
     # After each solve one kernel gives the increment together with what the checks
     # need at the new state y1 = y0 + Δy, sharing common subexpressions: the error
     # estimate's field values or E itself, and the domain conditions.
@@ -745,14 +794,16 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     # First-same-as-last Störmer–Verlet: the post kernel takes the start force and returns
     # the end force after Δy (one ∇U per stage); Δy's code then differs from the increment
     # kernel's only in reading the start force (see methodgen.fsal).
-    fplan = fsal_plan(scheme) if not looped and n == 0 and compensated else None
     first, first_links = inc, links
     if fplan is None and is_splitting(scheme.composition):
         raise InputError(f"the {scheme.composition.family} splitting runs as first-same-as-last "
                          "kick-drift-kick stages, which this module does not have (it needs a "
                          "separable H written without loops, compensated=True); use a composition "
                          "family (triple-jump, suzuki, kahan-li, sofroniou-spaletta)")
-    if fplan is not None:
+    if splan is not None:   # the end force is looped (below): only Δq is straight-line code
+        first = cmp_(fplan.increment[:dim], comp)
+        first_links = links + tuple(sp.Symbol(f"_gy{i}", real=True) for i in range(len(fplan.symbols)))
+    elif fplan is not None:
         first = cmp_(fplan.increment + fplan.end_force, comp)
         first_links = links + tuple(sp.Symbol(f"_gy{i}", real=True) for i in range(len(fplan.symbols)))
     # With loops, the force at the step's end is the sum _sK (Σ ∇U_t(q0 + Δq), Δq = z).
@@ -772,16 +823,37 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     # The energy-jump test (methods that do not keep H): H and its size Σ|terms| at y1, carried
     # over as the values at y0 of the next step (a kernel gives them at the initial state).
     ejump = energy_jump(scheme, lplan, tguard) if not conds else ()
+    ejump_form = energy_jump_form(system) if ejump and plan is not None else None
+    ejump1 = None
+    if splan is not None:
+        # Δq first (straight-line, ahead of the loops: its values are the loops' slot
+        # increments), then the end force Σ_t ∇U_t(q0 + c + Δq) as the sum _sG, and H at
+        # y1 through _sV = Σ_t U_t(q0 + Δq).
+        pre = first[:dim]
+        G1 = [acc_symbol("_sG", i) for i in range(dim)]
+        ha, hb = fplan.steps[0], fplan.steps[2]
+        first = list(links[:dim]) + [-ha * g0 - hb * g1 for g0, g1 in zip(fplan.symbols, G1)] + G1
+        if ejump and tuple(ejump) == ejump_form:
+            T, _ = potential_via_sums(system, splan)
+            T1 = T.xreplace(at1)
+            U1 = sp.Add(*[t for t in sp.Add.make_args(separable_split(system).U)
+                          if not t.free_symbols & set(system.q)]) + acc_symbol("_sV", 0)
+            ejump1 = [T1 + U1, sp.Abs(T1) + sp.Abs(U1)]
+    if ejump1 is None:
+        ejump1 = [u.xreplace(at1) for u in ejump]
     later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
-             + [u.xreplace(at1) for u in tguard]
-             + [u.xreplace(at1) for u in ejump])
+             + [u.xreplace(at1) for u in tguard] + ejump1)
     shared = lplan.shared if lplan else ()
-    scalar["post"] = _with_loops(
-        _chained_kernel(first, later, first_links, sp_, rename, CheckPrinter({"fully_qualified_modules": True}),
-                        shared),
-        first + later, plan, sp_, dim, compensated)
-    vector["post"] = _with_loops(_chained_kernel(first, later, first_links, vp, rename, shared=shared),
-                                 first + later, plan, vp, dim, compensated)
+    vsource = "d" if splan is not None else "z"
+    for flavour, printer, lp in ((scalar, sp_, CheckPrinter({"fully_qualified_modules": True})),
+                                 (vector, vp, None))[:2 if batch else 1]:
+        k = _with_loops(_chained_kernel(first, later, first_links, printer, rename, lp, shared),
+                        first + later, plan, printer, dim, compensated, vsource=vsource)
+        if splan is not None:
+            head = _kernel(pre, (dim,), printer, rename)
+            dq = tuple(str(s) for s in links[:dim])
+            k = replace(k, pre=head.temps + tuple(zip(dq, head.entries())), pre_out=dq)
+        flavour["post"] = k
     if fplan is not None:
         # The start force of a run: ∇U at the exact numerical state y + c, with the stage
         # sums of the step without first-same-as-last.
@@ -790,18 +862,28 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         vector["force"] = _kernel(force, (len(force),), vp, rename)
     # At the initial state: H and the whole vector field (the carried field values
     # of the first step are components of it), then the domain conditions.
-    check = [system.H] + list(vector_field(system))
-    scalar["check"] = _kernel(check, (len(check),), sp_, rename)
-    vector["check"] = _kernel(check, (len(check),), vp, rename)
+    # With loops, H and the field at one state through the sums over the families (the
+    # potential _sU, the force _sF): code that grows like the families, not like U.
+    pot = potential_via_sums(system, plan) if plan is not None else None
+    if pot is not None:
+        T, U = pot
+        check = [T + U] + [sp.diff(T, s) for s in system.p] + [-acc_symbol("_sF", i) for i in range(dim)]
+    else:
+        check = [system.H] + list(vector_field(system))
+    scalar["check"] = kern(check, (len(check),), sp_)
+    vector["check"] = kern(check, (len(check),), vp)
     if conds:
         scalar["domain"] = _kernel([u for _, u in conds], (len(conds),), sp_, rename)
         vector["domain"] = _kernel([u for _, u in conds], (len(conds),), vp, rename)
     if tguard:
         vector["tguard"] = _kernel(list(tguard), (len(tguard),), vp, rename)
+    if ejump and pot is not None and tuple(ejump) == ejump_form:
+        ejump = (T + U, sp.Abs(T) + sp.Abs(U))
     if ejump:
-        scalar["hs"] = _kernel(list(ejump), (2,), CheckPrinter({"fully_qualified_modules": True}), rename)
-        vector["hs"] = _kernel(list(ejump), (2,), vp, rename)
-    vector["hamiltonian"] = _kernel([system.H], (1,), vp, rename)
+        scalar["hs"] = kern(list(ejump), (2,), CheckPrinter({"fully_qualified_modules": True}))
+        if batch:
+            vector["hs"] = kern(list(ejump), (2,), vp)
+    vector["hamiltonian"] = kern([T + U] if pot is not None else [system.H], (1,), vp)
     vector["invariants"] = _kernel(inv_exprs, (len(inv_exprs),), vp, rename)
     n_cons = len(system.constraints)
     if n_cons:
@@ -821,11 +903,6 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         scalar["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), sp_, rename)
         vector["proj"] = _kernel(g + G + w, (len(g) + len(G) + len(w),), vp, rename)
 
-    all_exprs = res + jac + inc + guess + [system.H] + inv_exprs
-    if plan is not None:   # the helpers the loops' template terms call (Jacobian terms too:
-        # dsinc, dsinhc, ... appear only there)
-        for lf in plan.families:
-            all_exprs += [*lf.dg, *lf.grad, *(e for row in lf.jacobian for e in row)]
     return ModuleIR(
         module_name=module_name,
         system_name=system.name or "system",
@@ -849,7 +926,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         invariant_exprs=tuple(str(inv.expr) for inv in invs),
         scalar=scalar,
         vector=vector,
-        helpers=_helpers(all_exprs),
+        helpers=_helpers_called(scalar, vector),
         signature=signature,
         resolution=scheme.resolution,
         fixed_point=scheme.fixed_point,
@@ -927,10 +1004,10 @@ def _newton_band(n: int, resjac: Kernel, plan, scaled: bool) -> tuple[int, int]:
     return jacobian_band(n, entries)
 
 
-def _with_loops(k: Kernel, exprs, plan, printer, dim: int, compensated: bool, whole=()) -> Kernel:
+def _with_loops(k: Kernel, exprs, plan, printer, dim: int, compensated: bool, whole=(), vsource="z") -> Kernel:
     if plan is None:
         return k
-    loops, accs = loop_prefix(exprs, plan, printer, dim, compensated, whole)
+    loops, accs = loop_prefix(exprs, plan, printer, dim, compensated, whole, vsource)
     return Kernel(k.temps, k.outputs, k.shape, loops, accs)
 
 

@@ -20,6 +20,11 @@ Accumulators (``d`` = degrees of freedom):
 ``_sF``   (d,)       ``Σ_t ∇U_t(q0)`` (the predictor's force)
 ``_sK``   (d,)       ``Σ_t ∇U_t(q0 + Δq)`` (the force at the step's end, for the
                      local error estimate)
+``_sU``   (1,)       ``Σ_t U_t(q0)`` (the potential: H and the energy-jump scale in
+                     the check kernels; ``adds`` with no columns add to entry 0)
+``_sG``   (d,)       ``Σ_t ∇U_t(q0 + Δq)`` at the compensated end point (Störmer–Verlet's
+                     end force, :func:`force_plan`; Δq from the kernel's first outputs)
+``_sV``   (1,)       ``Σ_t U_t(q0 + Δq)`` (H at the step's end, for the energy jump)
 ========  =========  ==============================================================
 """
 
@@ -32,12 +37,14 @@ import sympy as sp
 
 from .compensate import compensate
 
-__all__ = ["Loop", "Accumulator", "ACC_PREFIXES", "acc_symbol", "jacobian_row_scales", "jacobian_via_sums", "loop_prefix",
-           "sum_pattern", "table_names"]
+__all__ = ["Loop", "Accumulator", "ACC_PREFIXES", "acc_symbol", "force_plan", "jacobian_row_scales", "jacobian_via_sums",
+           "loop_prefix", "potential_via_sums", "sum_pattern", "table_names"]
 
 #: Accumulator array → what it sums (documentation and the symbols' name prefixes).
-ACC_PREFIXES = ("_sA", "_sB", "_sF", "_sK")
-_ACC_RE = re.compile(r"^(_sA|_sF|_sK)(\d+)$|^(_sB)(\d+)_(\d+)$")
+ACC_PREFIXES = ("_sA", "_sB", "_sF", "_sK", "_sU", "_sG", "_sV")
+_ACC_RE = re.compile(r"^(_sA|_sF|_sK|_sU|_sG|_sV)(\d+)$|^(_sB)(\d+)_(\d+)$")
+#: Accumulators of one scalar (the potential), not of one entry per coordinate.
+_SCALAR_ACCS = ("_sU", "_sV")
 
 
 @dataclass(frozen=True)
@@ -52,11 +59,13 @@ class Loop:
         Number of instances.
     loads : tuple of (str, str, int)
         ``(variable, source, column)``: the slot variable is ``source[table[k, column]]``
-        (``ptable`` for source ``"p"``), source one of ``"y"``, ``"z"``, ``"c"``, ``"p"``.
+        (``ptable`` for source ``"p"``), source one of ``"y"``, ``"z"``, ``"c"``, ``"p"``, or
+        ``"d"``: the kernel's first outputs (Δq), computed before the loops (``Kernel.pre``).
     temps : tuple of (str, str)
         The template's common subexpressions.
     adds : tuple of (str, tuple of int, str)
-        ``(accumulator, columns, code)``: ``accumulator[table[k, columns]] += code``.
+        ``(accumulator, columns, code)``: ``accumulator[table[k, columns]] += code``;
+        ``accumulator[0] += code`` where columns is ``()`` (a scalar accumulator, ``_sU``).
     """
 
     table: str
@@ -96,6 +105,53 @@ def _used(exprs) -> dict[str, set]:
                 else:
                     used.setdefault("_sB", set()).add((int(m.group(4)), int(m.group(5))))
     return used
+
+
+def potential_via_sums(system, plan) -> tuple[sp.Expr, sp.Expr] | None:
+    """``(T, U)`` of a separable H with U written as its terms free of q plus the symbol
+    ``_sU0`` (``Σ_t U_t(q)`` over the plan's families, accumulated by the loops), or None
+    where the families are not U's q-dependent terms exactly.
+
+    The families' instances are checked to be U's q-dependent additive terms as written
+    (structurally, as a multiset): then ``T + rest + Σ_t U_t`` is H term by term, and H and
+    the field at one state cost the loops plus a few operations, not the expanded U.
+    """
+    from .derive import separable_split
+
+    sep = separable_split(system)
+    if sep is None:
+        return None
+    q = set(system.q)
+    terms = sp.Add.make_args(sep.U)
+    rest = [t for t in terms if not t.free_symbols & q]
+    inst = sorted((sp.srepr(t) for lf in plan.families for t in lf.family.terms))
+    if inst != sorted(sp.srepr(t) for t in terms if t.free_symbols & q):
+        return None
+    return sep.T, sp.Add(*rest) + acc_symbol("_sU", 0)
+
+
+def force_plan(system):
+    """A :class:`~methodgen.schemes.base.LoopPlan` of U's families of like terms for an
+    explicit method (Störmer–Verlet): only their gradients (``_sF``, ``_sG``) and values
+    (``_sU``, ``_sV``) are accumulated, so the step equations are left empty.  None where U
+    has no family of like terms or H is not separable."""
+    from .derive import separable_split
+    from .families import term_families
+    from .schemes.base import LoopFamily, LoopPlan
+
+    sep = separable_split(system)
+    if sep is None or sep.U == 0:
+        return None
+    fams = term_families(sep.U, system.q, system.params)
+    if not fams:
+        return None
+    out = []
+    for fam in fams:
+        v = tuple(sp.Symbol(f"_v{j}", real=True) for j in range(len(fam.slots)))
+        grad = tuple(sp.diff(fam.template, u) for u in fam.slots)
+        out.append(LoopFamily(fam, v, grad, grad))
+    empty = sp.zeros(0, 1)
+    return LoopPlan(tuple(out), (), (), empty, empty, empty)
 
 
 def sum_pattern(plan) -> list[tuple[int, int]]:
@@ -161,7 +217,7 @@ def jacobian_row_scales(residual: sp.Matrix, unknowns, plan) -> list[sp.Expr] | 
 
 
 def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
-                whole: tuple[str, ...] = ()) -> tuple[tuple, tuple]:
+                whole: tuple[str, ...] = (), vsource: str = "z") -> tuple[tuple, tuple]:
     """The loops and accumulators a kernel over ``exprs`` needs (empty if it uses no sum).
 
     Parameters
@@ -178,6 +234,9 @@ def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
     whole : tuple of str
         Accumulators the kernel reads as arrays (``_sB`` for a Newton matrix assembled by
         :func:`jacobian_row_scales`), accumulated even where no symbol of theirs is used.
+    vsource : str
+        Where the slots' increments ``v`` are loaded from: ``"z"`` (the unknowns) or ``"d"``
+        (the kernel's first outputs, Δq computed ahead of the loops).
     """
     used = _used(exprs)
     for name in whole:
@@ -187,13 +246,13 @@ def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
     accs = []
     for name in ACC_PREFIXES:
         if name in used:
-            shape = (dim, dim) if name == "_sB" else (dim,)
+            shape = (dim, dim) if name == "_sB" else (1,) if name in _SCALAR_ACCS else (dim,)
             entries = tuple((str(acc_symbol(name, *ix)), ix) for ix in sorted(used[name]))
             accs.append(Accumulator(name, shape, entries))
     loops = []
     for f, lf in enumerate(plan.families):
         fam = lf.family
-        temps, reduced, contrib, loads = _template_code(f, lf, frozenset(used), compensated)
+        temps, reduced, contrib, loads = _template_code(f, lf, frozenset(used), compensated, vsource)
         table, ptable = table_names(f)
         loops.append(Loop(table, ptable if fam.pslots else "", fam.size, loads,
                           tuple((str(s), printer.doprint(e)) for s, e in temps),
@@ -206,36 +265,42 @@ def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
 _TEMPLATE_CACHE: dict = {}
 
 
-def _template_code(f: int, lf, used: frozenset, compensated: bool):
+def _template_code(f: int, lf, used: frozenset, compensated: bool, vsource: str = "z"):
     """The template's contributions to the accumulators ``used`` (common subexpressions
     eliminated), memoised per family: ``(temps, reduced, contributions, loads)``."""
-    key = (f, used, compensated)
+    key = (f, used, compensated, vsource)
     hit = _TEMPLATE_CACHE.get(key)
     if hit is not None and hit[0] is lf:
         return hit[1]
-    out = _template_code_uncached(f, lf, used, compensated)
+    out = _template_code_uncached(f, lf, used, compensated, vsource)
     if len(_TEMPLATE_CACHE) > 64:
         _TEMPLATE_CACHE.clear()
     _TEMPLATE_CACHE[key] = (lf, out)
     return out
 
 
-def _template_code_uncached(f: int, lf, used: frozenset, compensated: bool):
+def _template_code_uncached(f: int, lf, used: frozenset, compensated: bool, vsource: str = "z"):
     fam = lf.family
     k = len(fam.slots)
+    end = {u: u + v for u, v in zip(fam.slots, lf.vslots)}
     contrib = []   # (accumulator, slot columns, expression)
     if "_sA" in used:
         contrib += [("_sA", (j,), lf.dg[j]) for j in range(k)]
     if "_sB" in used:
         contrib += [("_sB", (a, b), lf.jacobian[a][b]) for a in range(k) for b in range(k)]
+    if "_sG" in used:
+        contrib += [("_sG", (j,), lf.grad[j].xreplace(end)) for j in range(k)]
     if compensated:
         cslots = {u: sp.Symbol(f"_cu{j}", real=True) for j, u in enumerate(fam.slots)}
         contrib = [(a, c, e) for (a, c, _), e in zip(contrib, compensate([e for *_, e in contrib], cslots))]
     if "_sF" in used:
         contrib += [("_sF", (j,), lf.grad[j]) for j in range(k)]
     if "_sK" in used:
-        end = {u: u + v for u, v in zip(fam.slots, lf.vslots)}
         contrib += [("_sK", (j,), lf.grad[j].xreplace(end)) for j in range(k)]
+    if "_sU" in used:
+        contrib += [("_sU", (), fam.template)]
+    if "_sV" in used:
+        contrib += [("_sV", (), fam.template.xreplace(end))]
     contrib = [(a, c, e) for a, c, e in contrib if e != 0]
     temps, reduced = sp.cse([e for *_, e in contrib], symbols=sp.numbered_symbols(f"_t{f}_"),
                             order="canonical")
@@ -244,7 +309,7 @@ def _template_code_uncached(f: int, lf, used: frozenset, compensated: bool):
         free |= e.free_symbols
     loads = []
     for j, u in enumerate(fam.slots):
-        for sym, src in ((u, "y"), (lf.vslots[j], "z"), (sp.Symbol(f"_cu{j}", real=True), "c")):
+        for sym, src in ((u, "y"), (lf.vslots[j], vsource), (sp.Symbol(f"_cu{j}", real=True), "c")):
             if sym in free:
                 loads.append((sym.name, src, j))
     loads += [(w.name, "p", j) for j, w in enumerate(fam.pslots) if w in free]

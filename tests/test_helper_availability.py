@@ -21,7 +21,9 @@ import pytest
 
 import methodgen as mg
 from methodgen.emit import _environment, emit_source
-from methodgen.lower import _helpers
+import dataclasses
+
+from methodgen.lower import _helpers_called, lower
 from methodgen.problem import Hamiltonian
 from methodgen.special import SPECIAL_FUNCTIONS
 
@@ -81,12 +83,18 @@ def test_loop_module_defines_every_helper_it_calls(method):
 
 
 def test_helper_scan_without_jacobian_terms_misses_dsinc():
-    """Negative control: the loops' value and gradient terms alone do not call ``dsinc``
-    (the scan that left it out), their Jacobian terms do."""
-    plan = mg.discretize(_cos_ring(), "energy-momentum").loops
-    assert plan is not None and plan.looped
-    assert "dsinc" not in _helpers([e for lf in plan.families for e in (*lf.dg, *lf.grad)])
-    assert "dsinc" in _helpers([e for lf in plan.families for row in lf.jacobian for e in row])
+    """The helpers are read off the printed kernels, loops included.  Negative control: the
+    Newton-matrix loops (the template's Jacobian terms) are the only caller of ``dsinc``;
+    a scan without them misses it (the scan that left it out)."""
+    scheme = mg.discretize(_cos_ring(), "energy-momentum")
+    assert scheme.loops is not None and scheme.loops.looped
+    ir = lower(scheme, "s", "m")
+    assert "dsinc" in ir.helpers and ir.helpers == _helpers_called(ir.scalar, ir.vector)
+
+    def without_jacobian(flavour):
+        return {k: dataclasses.replace(v, loops=()) if k == "resjac" else v for k, v in flavour.items()}
+
+    assert "dsinc" not in _helpers_called(without_jacobian(ir.scalar), without_jacobian(ir.vector))
 
 
 def test_cos_ring_keeps_energy_on_numpy():
