@@ -57,7 +57,8 @@ def _good_then_failing(osc, tmp_path, capsys):
     assert run(capsys, "run", osc, "--steps", "100", "--save", g)[0] == 0
     good = g.read_bytes()
     code, _, err = run(capsys, "run", osc, "--param", "m=0", "--steps", "100", "--save", g)
-    assert code == cli.EXIT_NUMERICAL and "Traceback" not in err
+    # m = 0: H is not defined at the initial state -- bad input (exit 2), the run fails at step 0
+    assert code == cli.EXIT_INPUT and "Traceback" not in err
     return g, good, err
 
 
@@ -71,7 +72,7 @@ def test_failing_run_keeps_the_complete_file_and_saves_beside_it(osc, tmp_path, 
     p_states, p_meta = load_trajectory(partial)
     assert p_states.shape == (1, 2) and not bool(p_meta["complete"]) and int(p_meta["steps_done"]) == 0
     # A second failing run keeps the first partial file too.
-    assert run(capsys, "run", osc, "--param", "m=0", "--save", g)[0] == cli.EXIT_NUMERICAL
+    assert run(capsys, "run", osc, "--param", "m=0", "--save", g)[0] == cli.EXIT_INPUT
     assert (tmp_path / "g.partial-2.npz").is_file() and partial.is_file() and g.read_bytes() == good
     assert not list(tmp_path.glob(".*.tmp"))
 
@@ -97,7 +98,7 @@ def test_a_complete_run_does_replace_the_file(osc, tmp_path, capsys):
 def test_a_failing_run_with_no_file_there_saves_under_the_name(osc, tmp_path, capsys):
     g = tmp_path / "new.npz"
     code, _, err = run(capsys, "run", osc, "--param", "m=0", "--save", g)
-    assert code == cli.EXIT_NUMERICAL and f"saved 1 states to {g}" in err and "exists" not in err
+    assert code == cli.EXIT_INPUT and f"saved 1 states to {g}" in err and "exists" not in err
 
 
 def test_interrupt_and_disk_full_never_replace_a_file(tmp_path, monkeypatch):
