@@ -99,6 +99,9 @@ class Composition:
     gammas: tuple
     exact: bool
     source: str
+    #: "method" (a composition that is the method), or a piece of a processed composition
+    #: (:mod:`methodgen.processing`): "kernel", "pre-processor", "post-processor".
+    role: str = "method"
 
     @property
     def stages(self) -> int:

@@ -301,7 +301,10 @@ class ModuleIR:
 
     @property
     def gamma_ratios(self) -> tuple[str, ...]:
-        """γ_i / γ_{i-1} (γ_0 / γ_{s-1} = 1 for i = 0: the sequence is palindromic), as reprs."""
+        """γ_i / γ_{i-1} (γ_0 / γ_{s-1} = 1 for i = 0: the sequence is palindromic), as reprs.
+
+        A processor's sequence (:mod:`methodgen.processing`) is not palindromic: its modules
+        are run one step at a time, where the first stage starts from (γ_0 h / 2) f (ratio 1)."""
         g = [float(x) for x in self.gammas]
         return tuple(repr(g[i] / g[i - 1]) if i else "1.0" for i in range(len(g)))
 
@@ -1066,5 +1069,5 @@ def _composition_fields(scheme) -> dict:
     if comp is None:
         return {}
     return {"composition": {"family": comp.family, "order": comp.order, "stages": comp.stages,
-                            "source": comp.source},
+                            "source": comp.source, "role": getattr(comp, "role", "method")},
             "gammas": tuple(repr(g) for g in comp.floats())}

@@ -1,0 +1,177 @@
+"""Processed compositions (issue 26, item 2; methodgen/processing.py).
+
+(a) Effective order decided in the free algebra (60 digits, to the published digits): the
+    whole sequence pre-processor, kernel, post-processor has order 6 / 8 while the kernel
+    alone has order 4.  Controls: the processors applied the other way round, and one
+    processor coefficient moved (Σ = 0 kept), fail the order-5 conditions.
+(b) Measured orders on Hénon–Heiles (error ratio under halving h against DOP853) for
+    energy–momentum and Störmer–Verlet.  Control: the processors swapped in the built
+    integrator drop the measured order to the kernel's 4.
+(c) What is kept: energy–momentum processed keeps H and q × p on Kepler to round-off at every
+    row (control: Störmer–Verlet processed does not keep H).
+(d) Rows: row 0 is y0; chunked runs with ``info`` and ``save_every`` rows equal the run in
+    one piece bitwise; a batch row by row to round-off (control: without the record the chunk boundary re-processes and the
+    bits change).
+(e) Clear errors: unknown family or order, a method that is not symmetric, ``t_eval``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from conftest import HH_T, HH_Y0, KEPLER_Y0
+from methodgen.errors import InputError, MethodNotApplicable
+from methodgen.processing import (PROCESSED, Processed, ProcessedIntegrator, achieved_order,
+                                  build_processed, order_defects, processed_composition)
+
+CASES = [(f, o) for f, orders in PROCESSED.items() for o in orders]
+
+
+@pytest.fixture(scope="module")
+def hh():
+    return mg.load_scene("henon-heiles-2d").run_system
+
+
+@pytest.fixture(scope="module")
+def kep():
+    return mg.load_scene("kepler").system
+
+
+# --- (a) order conditions ---------------------------------------------------------------
+
+@pytest.mark.parametrize("family, order", CASES)
+def test_effective_order_decided(family, order):
+    proc = processed_composition(order, family)
+    r = achieved_order(proc)
+    assert r["order"] == order, r["defects"]
+    assert r["kernel_order"] == 4, r["kernel_defects"]         # processing is what lifts it
+    assert r["defects"][order + 1] > 1e-6                       # the next condition is a real one
+    assert max(r["defects"][w] for w in range(1, order + 1)) < 1e-15
+    assert math.isclose(sum(float(g) for g in proc.kernel), 1.0, abs_tol=1e-15)
+    assert abs(sum(float(g) for g in proc.pre)) < 1e-15
+    assert proc.kernel == tuple(reversed(proc.kernel))          # symmetric kernel
+
+
+@pytest.mark.parametrize("family, order", CASES)
+def test_processors_the_other_way_round_fail(family, order):
+    proc = processed_composition(order, family)
+    d = order_defects(proc.post + proc.kernel + proc.pre, order)
+    assert d[5] > 1e-4, d
+
+
+def test_a_moved_processor_coefficient_fails():
+    proc = processed_composition(8)
+    pre = [float(g) for g in proc.pre]
+    pre[1] += 1e-4
+    pre[2] -= 1e-4                      # Σ = 0 kept
+    bad = Processed("moved", 8, proc.kernel, tuple(map(repr, pre)), "test")
+    r = achieved_order(bad)
+    # the processor is not symmetric: an even weight fails first
+    assert r["order"] == 3 and r["defects"][4] > 1e-6, r["defects"]
+
+
+def test_post_is_the_inverse_sequence():
+    proc = processed_composition(6)
+    assert [float(x) for x in proc.post] == [-float(x) for x in reversed(proc.pre)]
+
+
+# --- (b) measured orders ------------------------------------------------------------------
+
+#: (method, order, N): N and 2N steps over HH_T, in the asymptotic range, above round-off.
+MEASURED = [("energy-momentum", 6, 20), ("energy-momentum", 8, 20),
+            ("stormer-verlet", 6, 80), ("stormer-verlet", 8, 40)]
+
+
+def _errors(P, ref, N):
+    return [float(np.abs(P.integrate(HH_Y0, HH_T / n, n, check_resolution=False)[-1] - ref).max())
+            for n in (N, 2 * N)]
+
+
+@pytest.mark.parametrize("method, K, N", MEASURED)
+def test_measured_order(hh, hh_reference, method, K, N):
+    P = build_processed(hh, method, K)
+    assert P.ORDER == K and P.TRAITS["order"] == K and not P.TRAITS["symmetric"]
+    errs = _errors(P, hh_reference, N)
+    assert errs[1] > 3e-13, f"error {errs[1]:.1e} at 2N is at round-off: the case measures nothing"
+    rate = math.log2(errs[0] / errs[1])
+    assert K - 0.5 < rate < K + 0.7, f"measured order {rate:.2f}, claimed {K} ({errs})"
+
+
+def test_swapped_processors_lose_the_order(hh, hh_reference):
+    P = build_processed(hh, "energy-momentum", 8)
+    swapped = ProcessedIntegrator(P.processed, P.kernel, P.post, P.pre)
+    errs = _errors(swapped, hh_reference, 20)
+    assert math.log2(errs[0] / errs[1]) < 5, errs
+    good = _errors(P, hh_reference, 20)
+    assert good[1] < errs[1] / 100
+
+
+# --- (c) what is kept ---------------------------------------------------------------------
+
+def test_energy_momentum_processed_keeps_H_and_L(kep):
+    P = build_processed(kep, "energy-momentum", 8)
+    Y = P.integrate(KEPLER_Y0, 0.1, 400)
+    H = P.hamiltonian(Y)
+    L = np.cross(Y[:, :3], Y[:, 3:])
+    assert np.abs(H - H[0]).max() < 4e-15
+    assert np.abs(L - L[0]).max() < 4e-15
+    # control: the same processing of Störmer–Verlet keeps H only approximately
+    S = build_processed(kep, "stormer-verlet", 8)
+    HS = S.hamiltonian(S.integrate(KEPLER_Y0, 0.1, 400, check_resolution=False))
+    assert np.abs(HS - HS[0]).max() > 1e-9
+
+
+# --- (d) rows -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", ["stormer-verlet", "energy-momentum"])
+def test_chunks_and_save_every_equal_one_piece(kep, method):
+    P = build_processed(kep, method, 6)
+    h = 0.05
+    whole = P.integrate(KEPLER_Y0, h, 60)
+    assert np.array_equal(whole[0], KEPLER_Y0)
+    info: dict = {}
+    a = P.integrate(KEPLER_Y0, h, 25, info=info)
+    b = P.integrate(a[-1], h, 35, info=info)
+    assert np.array_equal(np.vstack([a, b[1:]]), whole)
+    sparse = P.integrate(KEPLER_Y0, h, 60, save_every=7)
+    assert np.array_equal(sparse, whole[list(range(0, 61, 7)) + [60]])
+    # control: without the record the second chunk starts from π⁻¹(last row), not the kernel state
+    c = P.integrate(a[-1], h, 35)
+    assert not np.array_equal(c, b)
+    assert np.abs(c - b).max() < 1e-12
+
+
+def test_a_batch_is_row_by_row(kep):
+    P = build_processed(kep, "stormer-verlet", 8)
+    y0 = np.vstack([KEPLER_Y0, KEPLER_Y0 * [1.1, 1, 1, 1, 0.95, 1]])
+    Y = P.integrate(y0, 0.05, 20)
+    assert Y.shape == (21, 2, 6)
+    for i in range(2):     # a module's batch path agrees with its one-trajectory path to round-off
+        np.testing.assert_allclose(Y[:, i], P.integrate(y0[i], 0.05, 20), rtol=0, atol=1e-14)
+
+
+# --- (e) errors ---------------------------------------------------------------------------
+
+def test_clear_errors(kep):
+    with pytest.raises(InputError, match="orders"):
+        build_processed(kep, "energy-momentum", 4)
+    with pytest.raises(InputError, match="unknown processed family"):
+        build_processed(kep, "energy-momentum", 8, family="nope")
+    with pytest.raises(MethodNotApplicable, match="symmetric"):
+        build_processed(kep, "itoh-abe", 8)
+    P = build_processed(kep, "stormer-verlet", 6)
+    with pytest.raises(ValueError, match="t_eval"):
+        P.integrate(KEPLER_Y0, 0.1, 10, t_eval=[0.0, 0.5])
+
+
+def test_numba_agrees_with_numpy(kep):
+    pytest.importorskip("numba")
+    P = build_processed(kep, "stormer-verlet", 8)
+    F = build_processed(kep, "stormer-verlet", 8, backend="numba")
+    assert F.BACKEND == "numba" and F.kernel.BACKEND == "numba"
+    np.testing.assert_allclose(F.integrate(KEPLER_Y0, 0.05, 200, save_every=50),
+                               P.integrate(KEPLER_Y0, 0.05, 200, save_every=50), rtol=0, atol=1e-12)
