@@ -682,22 +682,20 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             raise InputError(f"unknown composition family {composition!r}; families: {', '.join(ALL_FAMILIES)}")
     estimate = 0
     for method, order in jobs:
-        comp = composition_for(order, family_for(method, order))
-        st = comp.stages if comp is not None else 1
+        st = _family_stages(order, family_for(method, order))[1]
         estimate += sum(st * max(1, round(T / h)) for h in composed_steps(scene.h, order, st, quick=quick))
     if progress:
         print(f"methodgen: note: the --peers rows of methodgen run at most about {estimate:.3g} steps in all "
               f"({len(jobs)} method/order pairs; a row under 5 s runs 3 times for its CPU minimum)",
               file=sys.stderr)
     for method, order in _progress(jobs, progress, "methodgen"):
-        comp = composition_for(order, family_for(method, order))
-        family = comp.family if comp is not None else None
-        stages = comp.stages if comp is not None else 1
+        family, stages, processed = _family_stages(order, family_for(method, order))
         label = row_label(method, order, family)
-        key = method_key(method, comp)
         try:
-            module = build(scene.system, method, path=scene_module_path(scene, key, used), backend=used,
-                           order=order, composition=family)
+            # a processed composition is three cache modules (path None), the others one file
+            path = None if processed else scene_module_path(
+                scene, method_key(method, composition_for(order, family)), used)
+            module = build(scene.system, method, path=path, backend=used, order=order, composition=family)
         except MethodgenError as exc:
             notes.append(f"{label}: not built ({' '.join(str(exc).split())})")
             continue
@@ -715,15 +713,22 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             steps = max(1, int(round(T / h)))
             info = {}
 
-            def run():
+            def run(every=1):
                 # every timed repeat starts afresh: a compensation carried over from the
                 # repeat before would start it from another state (1e-14 on Kepler)
                 info.clear()
                 return module.integrate(y0, T / steps, steps, info=info, check_resolution=False,
-                                        **_solver_kw(use))
+                                        save_every=every, **_solver_kw(use))
 
             try:
-                sec, traj = pe.min_cpu(run)
+                if processed:
+                    # The processor is paid per returned row: timed keeping the end state only (what
+                    # a run for the final state costs), every step's errors from an untimed rerun
+                    # (as for the peers' rows).  Same kernel states, same final row, bitwise.
+                    sec, _ = pe.min_cpu(lambda: run(steps))
+                    traj = run()
+                else:
+                    sec, traj = pe.min_cpu(run)
             except (RuntimeError, FloatingPointError) as exc:
                 notes.append(f"{label}, h = {T / steps:.4g}: {type(exc).__name__}: "
                              f"{' '.join(str(exc).split())[:160]}")
@@ -731,6 +736,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             its = info["newton_iterations"]
             row = {"method": label, "kind": "methodgen", "base_method": method, "order": order,
                    "composition": family, "stages": stages, "backend": used, "h": T / steps, "steps": steps,
+                   "processed": processed,
                    "seconds": sec, "us_per_step": sec / steps * 1e6,
                    "newton_mean": float(its.mean()) if its.size else 0.0,
                    **_errors(module, traj, ref.y, monitors)}
@@ -768,6 +774,22 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             "targets": targets(rows), "frontier": frontier(rows)}
 
 
+def _family_stages(order: int, family: str | None) -> tuple[str | None, int, bool]:
+    """``(family, base steps per step, processed)`` of a row: the composition's (None and 1 for
+    order 2), or a processed composition's kernel (:mod:`methodgen.processing`)."""
+    from .compositions import PROCESSED_FAMILIES
+
+    if family in PROCESSED_FAMILIES:
+        from .processing import processed_composition
+
+        try:
+            return family, processed_composition(order, family).stages, True
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+    comp = composition_for(order, family)
+    return (comp.family if comp is not None else None), (comp.stages if comp is not None else 1), False
+
+
 def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress,
                    family_for=lambda method, order: None) -> list[dict]:
     """``--peers`` rows of a scene with ``time_transform = "log"``: each method and order on the
@@ -783,8 +805,15 @@ def _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, prog
     rows = []
     notes.append("rows marked [log] integrate the logarithmic Hamiltonian in fictive time to the physical T "
                  "(h is a fictive step); their energy and invariant errors are at T only")
+    from .compositions import PROCESSED_FAMILIES
+
     for method, order in _progress(jobs, progress, "methodgen [log]"):
-        comp = composition_for(order, family_for(method, order))
+        fam = family_for(method, order)
+        if fam in PROCESSED_FAMILIES:   # run_to_time's last step is not a processed one
+            notes.append(f"[log] rows: the processed {fam} composition is not run by run_to_time; "
+                         f"order {order} uses its default family there")
+            fam = None
+        comp = composition_for(order, fam)
         family = comp.family if comp is not None else None
         stages = comp.stages if comp is not None else 1
         label = row_label(method, order, family) + " [log]"

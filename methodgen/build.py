@@ -238,6 +238,17 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     **options
         Method options (e.g. ``stages=3`` for ``"gauss"``), passed to :func:`methodgen.discretize`.
     """
+    from .compositions import PROCESSED_FAMILIES
+
+    if composition in PROCESSED_FAMILIES:
+        # three modules of one base scheme (kernel, pre- and post-processor): methodgen.processing
+        from .processing import build_processed
+
+        if path is not None:
+            raise InputError(f"path= does not apply to the processed composition {composition!r}: it is "
+                             "three generated modules (kernel, pre- and post-processor), kept in the cache")
+        return build_processed(system, method, order, composition, backend=backend, progress=progress,
+                               **options)
     return _build(system, method, path, backend, order, composition, options, progress)[0]
 
 

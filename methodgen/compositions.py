@@ -86,8 +86,12 @@ FAMILIES = {"triple-jump": (4, 6, 8, 10), "suzuki": (4, 6, 8, 10), "kahan-li": (
 # kick/drift/kick stages rather than as compositions of the base step.
 from .splittings import SPLITTING_FAMILIES as _SPLIT  # noqa: E402
 
-#: Every family ``composition=`` accepts: the compositions above, then the splittings.
-ALL_FAMILIES = {**FAMILIES, **_SPLIT}
+# Processed compositions (methodgen.processing): a kernel between two processors, three modules.
+PROCESSED_FAMILIES = {"blanes-casas-murua": (6, 8)}
+
+#: Every family ``composition=`` accepts: the compositions above, the splittings, then the
+#: processed families (built by :func:`methodgen.build` as three modules, not as one scheme).
+ALL_FAMILIES = {**FAMILIES, **_SPLIT, **PROCESSED_FAMILIES}
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,15 @@ class Composition:
     #: "method" (a composition that is the method), or a piece of a processed composition
     #: (:mod:`methodgen.processing`): "kernel", "pre-processor", "post-processor".
     role: str = "method"
+    #: Largest order defect that counts as satisfied for decimal constants: their printed
+    #: digits (26 for Kahan–Li and Sofroniou–Spaletta: 1e-22; 15–19 for the processed
+    #: families: 1e-14).  Exact coefficients: 1e-40 at 60 digits.
+    digits_tol: float = 1e-22
+
+    @property
+    def tolerance(self) -> float:
+        """The defect tolerance of the order conditions (see :attr:`digits_tol`)."""
+        return 1e-40 if self.exact else self.digits_tol
 
     @property
     def stages(self) -> int:
@@ -147,6 +160,10 @@ def composition(order: int, family: str | None = None) -> Composition:
     if family in _SPLIT:
         from .splittings import splitting
         return splitting(order, family)
+    if family in PROCESSED_FAMILIES:
+        raise ValueError(f"the {family} family is a processed composition: a kernel between two "
+                         "processors, three modules built by methodgen.build (methodgen.processing), "
+                         "not one composed scheme")
     if family == "triple-jump":
         return Composition(family, order, _recursive(order, 3), True, "Creutz–Gocksch 1989, Yoshida 1990")
     if family == "suzuki":
@@ -228,7 +245,7 @@ def achieved_order(comp: Composition, tol: float | None = None, upto: int = 11) 
     ``tol``: 1e-40 for exact coefficients (evaluated at 60 digits), 1e-22 for
     the published 26-digit constants.
     """
-    tol = tol if tol is not None else (1e-40 if comp.exact else 1e-22)
+    tol = tol if tol is not None else getattr(comp, "tolerance", 1e-40 if comp.exact else 1e-22)
     d = order_defects(comp, upto)
     K = 0
     for w in range(1, upto + 1):

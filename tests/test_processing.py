@@ -175,3 +175,71 @@ def test_numba_agrees_with_numpy(kep):
     assert F.BACKEND == "numba" and F.kernel.BACKEND == "numba"
     np.testing.assert_allclose(F.integrate(KEPLER_Y0, 0.05, 200, save_every=50),
                                P.integrate(KEPLER_Y0, 0.05, 200, save_every=50), rtol=0, atol=1e-12)
+
+
+# --- (f) the API, the command line, verify and bench ---------------------------------------
+
+def test_build_with_a_processed_family(kep):
+    P = mg.build(kep, "energy-momentum", order=6, composition="blanes-casas-murua")
+    assert isinstance(P, ProcessedIntegrator) and P.COMPOSITION["processed"] and P.ORDER == 6
+    assert P.INVARIANT_NAMES == P.kernel.INVARIANT_NAMES and P.ConvergenceError is P.kernel.ConvergenceError
+    with pytest.raises(AttributeError, match="three generated modules"):
+        P.residual
+    with pytest.raises(InputError, match="path="):
+        mg.build(kep, "energy-momentum", "x.py", order=6, composition="blanes-casas-murua")
+    with pytest.raises(InputError, match="processed composition"):
+        mg.discretize(kep, "energy-momentum", order=6, composition="blanes-casas-murua")
+    # one step is post(K(pre(y0)))
+    y1 = P.step(KEPLER_Y0, 0.05)
+    assert np.array_equal(y1, P.integrate(KEPLER_Y0, 0.05, 1)[-1])
+
+
+def _cli(capsys, *args):
+    import methodgen.cli as cli
+    code = cli.main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_run_verify_generate(capsys):
+    import json
+    code, out, err = _cli(capsys, "run", "kepler", "--order", "8", "--composition", "blanes-casas-murua",
+                          "--steps", "300", "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    assert rep["composition"]["processed"] and rep["order"] == 8
+    assert rep["invariants"]["H"]["max_abs_error"] < 4e-15 and rep["invariants"]["H"]["claim"] == "exact"
+    code, out, err = _cli(capsys, "verify", "kepler", "--method", "energy-momentum", "--order", "8",
+                          "--composition", "blanes-casas-murua", "--json")
+    assert code == 0, err
+    rep = json.loads(out)
+    first = rep["certificates"][0]
+    assert "processed composition" in first["claim"] and first["status"] == "numerical"
+    assert rep["verdict"] == "ok" and rep["composition"]["processor_stages"] == 20
+    code, out, err = _cli(capsys, "generate", "kepler", "--order", "8", "--composition", "blanes-casas-murua",
+                          "--out", "unused-dir")
+    assert code == 2 and "three generated modules" in err and "Traceback" not in err
+
+
+def test_effective_order_certificate_and_its_control():
+    from methodgen.verify.processed import effective_order_certificate, float64_certificate
+    proc = processed_composition(8)
+    c = effective_order_certificate(proc)
+    assert c.status == "numerical" and c.details["passed"] and c.details["kernel_order"] == 4
+    f = float64_certificate(proc)
+    assert f.status == "numerical" and f.details["passed"]
+    pre = [float(g) for g in proc.pre]
+    pre[3] += 1e-4
+    pre[4] -= 1e-4
+    bad = Processed("moved", 8, proc.kernel, tuple(map(repr, pre)), "test")
+    assert effective_order_certificate(bad).status == "refuted"
+
+
+def test_bench_peers_rows_of_a_processed_family():
+    pytest.importorskip("heyoka")
+    from methodgen import bench
+    wp = bench.work_precision(mg.load_scene("henon-heiles-2d"), ["stormer-verlet"], quick=True,
+                              T=2.0, peers=True, orders=(8,), composition="blanes-casas-murua")
+    rows = [r for r in wp["rows"] if r["kind"] == "methodgen" and r["order"] == 8]
+    assert rows and all(r["processed"] and r["stages"] == 13 for r in rows), rows
+    assert all(r["error"] < 1e-3 for r in rows)

@@ -40,13 +40,15 @@ def _composed_files(names: list[str], backend: str) -> dict:
     """File name → ``(scene, method, order, family, options, True)`` of every composed module a
     built-in scene could have (each method × family × order): such a file in ``generated/`` (from
     ``methodgen generate --order``) is regenerated and checked like the scenes' own."""
-    from ..compositions import ALL_FAMILIES
+    from ..compositions import ALL_FAMILIES, PROCESSED_FAMILIES
 
     out = {}
     for name in names or scene_names():
         scene = load_scene(name)
         for method in scene.methods:
             for family, orders in ALL_FAMILIES.items():
+                if family in PROCESSED_FAMILIES:   # three cache modules, never one file in generated/
+                    continue
                 for o in orders:
                     opts = scene.options(method)
                     key = target_key(method, o, family, opts)

@@ -17,6 +17,7 @@ from ..limits import check_memory, check_steps, steps_for_time
 from ..progress import about, phase
 from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
+from ..compositions import PROCESSED_FAMILIES
 from ..schemes import METHODS, composition_for, method_key, scheme_options
 from ..stats import ErrorMax
 from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
@@ -285,7 +286,10 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
     order, composition = resolve_order(scene, order, composition)
     options = scene.options(method, resolve_stages(scene, [method], stages))
-    key = method_key(method, composition_for(order, composition), scheme_options(method, options))
+    # a processed composition is three modules in the cache (methodgen.processing), no one scheme
+    processed = composition in PROCESSED_FAMILIES
+    key = (method_key(method, None, scheme_options(method, options)) + f"-order{order}-{composition}"
+           if processed else method_key(method, composition_for(order, composition), scheme_options(method, options)))
     h_given = h is not None
     h = scene.h if h is None else h
     h_requested = None   # --h when --t-final rounds it to whole steps
@@ -331,7 +335,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if scene.transformed is not None:
         check_g_positive(system, scene.y0, params)
     with transformed_context(scene):
-        module = build(system, method, path=scene_module_path(scene, key, backend, system=system),
+        module = build(system, method, path=None if processed else scene_module_path(scene, key, backend, system=system),
                        backend=backend, order=order, composition=composition, **options)
     if extended and getattr(module, "PROJECTED", None):
         # the projected loop has no long-double refinement (integrate() refuses extended=True)

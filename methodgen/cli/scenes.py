@@ -53,6 +53,10 @@ def cmd_methods(args) -> int:
         from ..splittings import RKN_FAMILIES, SPLITTING_FAMILIES
         print(f"  splittings of T + U (stormer-verlet only): {', '.join(SPLITTING_FAMILIES)}; "
               f"{', '.join(RKN_FAMILIES)}: order 6 for T quadratic with a constant mass only (RKN)")
+        from ..compositions import PROCESSED_FAMILIES
+        print(f"  processed (a kernel between two processors, any composable method; not symmetric, "
+              f"invariants and symplecticity kept; pays off when few rows are kept): "
+              f"{', '.join(PROCESSED_FAMILIES)}")
     return 0
 
 

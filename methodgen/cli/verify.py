@@ -61,9 +61,26 @@ def cmd_verify(args) -> int:
     # --stages over [run] stages, for the methods that take it (an error if none does).
     stages = resolve_stages(scene, methods, getattr(args, "stages", None))
     options = {m: scene.options(m, stages) for m in methods}
-    with transformed_context(scene):
-        schemes = [discretize(system, m, order=order, composition=composition, **options[m]) for m in methods]
-    reports = [verify(s, conjugacy_dim=args.conjugacy_dim, timeout=args.timeout, progress=True) for s in schemes]
+    from ..compositions import PROCESSED_FAMILIES
+
+    kw = dict(conjugacy_dim=args.conjugacy_dim, timeout=args.timeout, progress=True)
+    if composition in PROCESSED_FAMILIES:
+        # three modules: the kernel's report with the effective order certified first
+        from ..processing import processed_composition
+        from ..verify.processed import verify_processed
+
+        proc = processed_composition(order, composition)
+        with transformed_context(scene):
+            bases = [discretize(system, m, **options[m]) for m in methods]
+        reports = [verify_processed(b, proc, **kw) for b in bases]
+        comp_json = {"family": composition, "order": order, "stages": proc.stages,
+                     "processor_stages": proc.processor_stages, "processed": True}
+    else:
+        with transformed_context(scene):
+            schemes = [discretize(system, m, order=order, composition=composition, **options[m]) for m in methods]
+        reports = [verify(s, **kw) for s in schemes]
+        comp = composition_for(order, composition)
+        comp_json = None if comp is None else {"family": comp.family, "order": comp.order, "stages": comp.stages}
     ok = all(r.ok for r in reports)
     verdict = ("refuted" if any(r.refuted for r in reports) else "ok" if ok else
                "undecided" if any(r.undecided for r in reports) else "nothing verified")
@@ -72,10 +89,8 @@ def cmd_verify(args) -> int:
         for r in reports:
             for c in r.certificates:
                 certs.append({**c.to_dict(), "method_name": r.title})
-        comp = composition_for(order, composition)
         print(dump_json({"ok": ok, "verdict": verdict, "scene": scene.name, "order": order,
-                         "composition": None if comp is None else
-                         {"family": comp.family, "order": comp.order, "stages": comp.stages},
+                         "composition": comp_json,
                          "stages": {m: effective_stages(m, options[m]) for m in methods
                                     if effective_stages(m, options[m]) is not None} or None,
                          "time_transform": None if scene.transformed is None else

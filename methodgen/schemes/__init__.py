@@ -225,4 +225,11 @@ def composition_for(order, family: str | None = None):
         have = [f for f, orders in ALL_FAMILIES.items() if order in orders]
         raise InputError(f"the {family} family has orders {', '.join(map(str, ALL_FAMILIES[family]))}, not "
                          f"{order}; families with order {order}: {', '.join(have)}")
+    from ..compositions import PROCESSED_FAMILIES
+
+    if family in PROCESSED_FAMILIES:
+        raise InputError(f"the {family} family is a processed composition (a kernel between two processors, "
+                         f"three generated modules): methodgen.build(system, method, order={order}, "
+                         f"composition={family!r}) builds it, not one composed scheme "
+                         "(methodgen.processing.build_processed)")
     return _composition(order, family)

@@ -303,7 +303,7 @@ def _free_algebra(comp: Composition) -> tuple[dict[int, float], int]:
     :func:`methodgen.compositions.achieved_order` (its default tolerances: 1e-40 for exact
     coefficients, 1e-22 for 26-digit constants) applied to the cached defects."""
     d = _defects(comp, comp.order + 1)
-    tol = 1e-40 if comp.exact else 1e-22
+    tol = getattr(comp, "tolerance", 1e-40 if comp.exact else 1e-22)
     got = 0
     for w in sorted(d):
         if d[w] > tol:
@@ -318,7 +318,8 @@ def _numerical_order(comp: Composition, claim: str, why: str) -> Certificate:
     worst = max(d[w] for w in range(1, K + 1))
     det = {"defects_by_weight": _fmt_defects(d), "max_defect_up_to_K": f"{worst:.1e}",
            "conditions_hold_to_digits": _digits(worst), "achieved_order": got,
-           "tolerance": 1e-40 if comp.exact else 1e-22, "digits": DPS, "why_numerical": why,
+           "tolerance": getattr(comp, "tolerance", 1e-40 if comp.exact else 1e-22), "digits": DPS,
+           "why_numerical": why,
            "how": ("log Ψ in the free associative algebra of Φ_h = exp(hX1 + h³X3 + …), truncated at "
                    "weight K + 1, 60-digit arithmetic: order K iff every weight 2…K coefficient vanishes"),
            "source": comp.source}
