@@ -217,6 +217,9 @@ def _environment():
     )
     env.filters["pyrepr"] = repr
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
+    from .lower_rows import row_body
+
+    env.globals["row_body"] = row_body   # loops over like rows in compiled kernels
     return env
 
 
