@@ -90,7 +90,8 @@ def differs(A, B, y0, steps) -> bool:
     return not np.array_equal(a, b)
 
 
-CASES = [("toda", 30, "energy-momentum"), ("fpu", 24, "energy-momentum"),
+CASES = [("toda", 30, "energy-momentum"),
+         pytest.param("fpu", 24, "energy-momentum", marks=pytest.mark.slow),
          pytest.param("toda", 30, "midpoint", marks=pytest.mark.slow),
          pytest.param("toda", 26, "avf", marks=pytest.mark.slow)]
 
