@@ -69,6 +69,9 @@ class RowBody:
     needed: frozenset
     lines: tuple
     loops: int
+    #: Lines replacing the straight-line code ahead of the term loops (Störmer–Verlet's Δq,
+    #: the kernel's ``pre``) and its writes into the first output; empty without ``pre``.
+    pre_lines: tuple = ()
 
 
 def _aliases(kern, ir, outs) -> dict:
@@ -220,9 +223,14 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     """Row loops for ``kern`` (a scalar :class:`~methodgen.lower.Kernel`) printed with inputs
     ``args`` and outputs ``outs`` by the numba kernel macro, or None when nothing is looped
     (the macro then prints its straight-line body).  See the module docstring."""
-    if not outs or kern.pre or kern.pre_out:
+    if not outs:
         return None
     flat = kern.entries()
+    npre = len(kern.pre_out)
+    pre_assign = dict(kern.pre)
+    if npre and (len(outs) != 1 or any(v not in pre_assign for v in kern.pre_out)
+                 or any(flat[r] != v for r, v in enumerate(kern.pre_out))):
+        return None
     if len(outs) == 2:
         if not kern.jac_rows:
             return None
@@ -235,9 +243,15 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
         return None
     names = _names(kern, ir, args)
     aliases = _aliases(kern, ir, outs)
+    pre_out = set(kern.pre_out)
+    for r, v in enumerate(kern.pre_out):     # Δq: element r of the first output once written
+        names[v] = (outs[0], r)
+    pre_temps = [(v, c) for v, c in kern.pre if v not in pre_out]
+    pre_rows = [pre_assign[v] for v in kern.pre_out]
 
     # 1. temporaries: which read per-coordinate names, and their inlined (expanded) code
-    temps = list(kern.temps)
+    #    (the temporaries of Δq ahead of the term loops first: they precede all others)
+    temps = pre_temps + list(kern.temps)
     tcode = dict(temps)
     rowtemp, expanded = set(), {}
     for var, code in temps:
@@ -283,7 +297,12 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
             a = b
         return out
 
-    res_blocks = blocks(res)
+    # Δq ahead of the term loops (first outputs 0 … npre - 1, never written again: the
+    # accumulators follow them): row loops of their own, then read as elements of the output
+    pre_blocks = blocks(pre_rows) if npre else []
+    if npre:
+        res = ["0.0"] * npre + list(res[npre:])      # already written: not looped again below
+    res_blocks = [B for B in blocks(res) if B[0] >= npre]
     # 4. hazards: positions of outs[0] each block reads through an aliased accumulator
     def read_positions(a, b, reads):
         pos = set()
@@ -319,7 +338,8 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     sloop = set()
     for a, b, _, _ in scale_blocks:
         sloop.update(range(a, b))
-    if not order and not scale_blocks and not any(
+    looped.update(range(npre))                        # written ahead of the term loops
+    if not order and not scale_blocks and not pre_blocks and not any(
             r not in looped and _reduction(expand(c), names, rowtemp) for r, c in enumerate(res)):
         return None
 
@@ -335,21 +355,49 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
                [c for r, c in enumerate(scales) if r not in sloop]
     loop_tpls = [tpl for _, _, tpl, _ in order] + [tpl for _, _, tpl, _ in scale_blocks] + \
                 [line for red in reductions.values() for line in red]
+    pre_looped = set()
+    for a, b, _, _ in pre_blocks:
+        pre_looped.update(range(a, b))
+    pre_straight = [c for r, c in enumerate(pre_rows) if r not in pre_looped]
     need = set()
-    for c in straight + loop_tpls:
+    for c in straight + loop_tpls + pre_straight + [tpl for _, _, tpl, _ in pre_blocks]:
         need |= _idents(c)
+    # long temporaries that are sums of like terms (a kinetic energy at the end state, used by
+    # two outputs): ordered loops too, computed where the temporary was
+    temp_red = {}
+    for var, code in temps:
+        if var in rowtemp and var not in expanded:
+            red = _reduction(expand(code), names, rowtemp)
+            if red is not None:
+                temp_red[var] = [line.replace("_red", var) for line in red]
     kept = []
     for var, code in reversed(temps):
         if var in need:
             kept.append((var, code))
-            need |= _idents(code)
+            need |= _idents("\n".join(temp_red[var])) if var in temp_red else _idents(code)
     kept.reverse()
+    # ahead of the term loops: the kept temporaries of Δq, its loops and straight rows
+    pre_names = {v for v, _ in pre_temps}
+    pre_lines = [line for var, code in kept if var in pre_names
+                 for line in (temp_red[var] if var in temp_red else [f"{var} = {code}"])]
+    kept = [(v, c) for v, c in kept if v not in pre_names]
+    for a, b, tpl, _ in pre_blocks:
+        pre_lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.lower_rows)")
+        pre_lines.append(f"    {outs[0]}[_i] = {tpl}")
+    for r, v in enumerate(kern.pre_out):
+        if r not in pre_looped:
+            pre_lines.append(f"{v} = {pre_rows[r]}")
+            pre_lines.append(f"{outs[0]}[{r}] = {v}")
     lines = []
+    for r, v in enumerate(kern.pre_out):     # a looped Δq that straight-line code reads by name
+        if r in pre_looped and v in need:
+            lines.append(f"{v} = {outs[0]}[{r}]")
     for a in kern.accs:
         for var, ix in a.unpack:
             if var in need:
                 lines.append(f"{var} = {a.name}[{', '.join(map(str, ix))}]")
-    lines += [f"{var} = {code}" for var, code in kept]
+    for var, code in kept:
+        lines += temp_red[var] if var in temp_red else [f"{var} = {code}"]
     o0 = outs[0]
     # the sums first: they read the accumulators before any output is written
     for r, red in reductions.items():
@@ -380,4 +428,5 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
                 lines.append(f"{o1}[{r}, {r}] += 1.0")
     inputs = set(ir.state_vars) | set(ir.unknown_vars) | set(ir.comp_vars) | set(ir.fsal_vars) | \
         set(ir.param_vars)
-    return RowBody(frozenset(need & inputs), tuple(lines), len(order) + len(scale_blocks))
+    return RowBody(frozenset(need & inputs), tuple(lines), len(order) + len(scale_blocks) + len(pre_blocks),
+                   tuple(pre_lines))

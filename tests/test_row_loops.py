@@ -1,8 +1,9 @@
 """Loops over like rows in compiled kernels (issue 25; methodgen/lower_rows.py).
 
 (a) A numba module whose kernels print like rows as loops gives the straight-line module's
-    trajectory *bitwise* (Toda ring and FPU chain; energy-momentum, midpoint, AVF), and its
-    kernels' outputs bitwise on random inputs.
+    trajectory *bitwise* (Toda ring and FPU chain; energy-momentum, Störmer–Verlet with its
+    Δq ahead of the term loops, midpoint, AVF), and its kernels' outputs bitwise on random
+    inputs.
 (b) The compiled kernels stop growing with the size: the numba kernel section of a ring of 60
     is barely longer than that of a ring of 30, where the straight-line section doubles.
 (c) Controls: one template offset moved in the printed module changes the trajectory; the
@@ -90,7 +91,7 @@ def differs(A, B, y0, steps) -> bool:
     return not np.array_equal(a, b)
 
 
-CASES = [("toda", 30, "energy-momentum"),
+CASES = [("toda", 30, "energy-momentum"), ("toda", 24, "stormer-verlet"),
          pytest.param("fpu", 24, "energy-momentum", marks=pytest.mark.slow),
          pytest.param("toda", 30, "midpoint", marks=pytest.mark.slow),
          pytest.param("toda", 26, "avf", marks=pytest.mark.slow)]
