@@ -30,8 +30,9 @@ This module finds such rows and prints them as loops, for the numba backend's ke
 
 Everything not in a loop is printed as before, and only what it reads is loaded and unpacked.
 The arithmetic of every entry is unchanged, so the loops give the straight-line kernel's
-results bit for bit (``tests/test_row_loops.py``).  Kernels with fewer than
-:data:`MIN_KERNEL_ROWS` outputs are left straight-line (small systems' modules are unchanged).
+results bit for bit (``tests/test_row_loops.py``).  Kernels of systems with fewer than
+:data:`MIN_KERNEL_ROWS` state components, and with fewer outputs, are left straight-line
+(small systems' modules are unchanged).
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ __all__ = ["row_body", "RowBody", "MIN_ROWS", "MIN_KERNEL_ROWS", "INLINE_MAX"]
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 #: Shortest run of like rows printed as a loop.
 MIN_ROWS = 6
-#: Kernels with fewer outputs (or residual rows) than this keep their straight-line body.
+#: Kernels with fewer outputs (or residual rows) than this, of systems with fewer state
+#: components, keep their straight-line body.
 MIN_KERNEL_ROWS = 24
 #: Longest temporary (characters, after its own inlining) inlined into the rows that use it.
 INLINE_MAX = 120
@@ -239,7 +241,7 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     else:
         n = len(flat)
         res, scales = flat, []
-    if n < MIN_KERNEL_ROWS:
+    if max(n, ir.n_state) < MIN_KERNEL_ROWS:       # a small system: left as it is
         return None
     names = _names(kern, ir, args)
     aliases = _aliases(kern, ir, outs)
@@ -339,9 +341,6 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     for a, b, _, _ in scale_blocks:
         sloop.update(range(a, b))
     looped.update(range(npre))                        # written ahead of the term loops
-    if not order and not scale_blocks and not pre_blocks and not any(
-            r not in looped and _reduction(expand(c), names, rowtemp) for r, c in enumerate(res)):
-        return None
 
     # straight-line entries that are long sums of like terms: ordered loops (see _reduction)
     reductions = {}
@@ -376,6 +375,8 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
             kept.append((var, code))
             need |= _idents("\n".join(temp_red[var])) if var in temp_red else _idents(code)
     kept.reverse()
+    if not (order or scale_blocks or pre_blocks or reductions or any(v in temp_red for v, _ in kept)):
+        return None                   # nothing to loop: the straight-line body as it was
     # ahead of the term loops: the kept temporaries of Δq, its loops and straight rows
     pre_names = {v for v, _ in pre_temps}
     pre_lines = [line for var, code in kept if var in pre_names

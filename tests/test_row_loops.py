@@ -117,6 +117,12 @@ def test_row_loops_are_bitwise_the_straight_line_kernels(tmp_path, request, kind
         y = start(system, rng.integers(1000))
         c = 1e-17 * rng.normal(size=y.size)
         p = np.array([float(v) for v in A.DEFAULT_PARAMS.values()])
+        for kern in ("_nb_check", "_nb_hs"):     # H and the field at one state
+            if hasattr(A, kern):
+                oa, ob = np.zeros(4 * y.size + 8), np.zeros(4 * y.size + 8)
+                getattr(A, kern)(y, p, oa)
+                getattr(B, kern)(y, p, ob)
+                assert np.array_equal(oa, ob), kern
         if hasattr(A, "_nb_guess"):
             oa, ob = np.zeros(len(A.UNKNOWN_NAMES)), np.zeros(len(A.UNKNOWN_NAMES))
             A._nb_guess(y, 0.05, p, oa)
