@@ -30,9 +30,8 @@ This module finds such rows and prints them as loops, for the numba backend's ke
 
 Everything not in a loop is printed as before, and only what it reads is loaded and unpacked.
 The arithmetic of every entry is unchanged, so the loops give the straight-line kernel's
-results bit for bit (``tests/test_row_loops.py``).  Kernels of systems with fewer than
-:data:`MIN_KERNEL_ROWS` state components, and with fewer outputs, are left straight-line
-(small systems' modules are unchanged).
+results bit for bit (``tests/test_row_loops.py``).  Systems with fewer than
+:data:`MIN_KERNEL_ROWS` state components are left straight-line (their modules are unchanged).
 """
 
 from __future__ import annotations
@@ -45,9 +44,10 @@ __all__ = ["row_body", "RowBody", "MIN_ROWS", "MIN_KERNEL_ROWS", "INLINE_MAX"]
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 #: Shortest run of like rows printed as a loop.
 MIN_ROWS = 6
-#: Kernels with fewer outputs (or residual rows) than this, of systems with fewer state
-#: components, keep their straight-line body.
-MIN_KERNEL_ROWS = 24
+#: Systems with fewer state components than this keep their kernels' straight-line bodies
+#: (the outer solar system's 36: its rows differ body by body, and its compile time did not
+#: drop with the loops that applied).
+MIN_KERNEL_ROWS = 48
 #: Longest temporary (characters, after its own inlining) inlined into the rows that use it.
 INLINE_MAX = 120
 
@@ -241,7 +241,7 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     else:
         n = len(flat)
         res, scales = flat, []
-    if max(n, ir.n_state) < MIN_KERNEL_ROWS:       # a small system: left as it is
+    if ir.n_state < MIN_KERNEL_ROWS:       # a small system: left as it is
         return None
     names = _names(kern, ir, args)
     aliases = _aliases(kern, ir, outs)
