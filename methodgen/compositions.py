@@ -50,6 +50,7 @@ import mpmath as mp
 import sympy as sp
 
 __all__ = ["Composition", "FAMILIES", "ALL_FAMILIES", "ORDERS", "DEFAULT_FAMILY", "composition", "order_defects",
+           "sequence_defects",
            "achieved_order", "error_constant", "efficiency", "triple_jump_exact"]
 
 ORDERS = (2, 4, 6, 8, 10)
@@ -229,8 +230,13 @@ def log_composition(gammas, wmax: int) -> dict:
 
 def order_defects(comp: Composition, upto: int | None = None) -> dict[int, float]:
     """Largest |coefficient| of log Ψ - h X1 at each weight 1..upto (60-digit arithmetic)."""
-    upto = upto or comp.order + 1
-    L = log_composition(comp.mp(), upto)
+    return sequence_defects(comp.mp(), upto or comp.order + 1)
+
+
+def sequence_defects(gammas, upto: int) -> dict[int, float]:
+    """:func:`order_defects` of any sequence of steps ``gammas`` (decimal strings or mpf, in the
+    order of application; a processed composition's pre-processor, kernel and post-processor)."""
+    L = log_composition(gammas, upto)
     out = {}
     with mp.workdps(DPS):
         for w in range(1, upto + 1):
@@ -246,9 +252,13 @@ def achieved_order(comp: Composition, tol: float | None = None, upto: int = 11) 
     the published 26-digit constants.
     """
     tol = tol if tol is not None else getattr(comp, "tolerance", 1e-40 if comp.exact else 1e-22)
-    d = order_defects(comp, upto)
+    return order_of_defects(order_defects(comp, upto), tol)
+
+
+def order_of_defects(d: dict[int, float], tol: float) -> int:
+    """The largest K such that every defect ``d[w]`` of weight w ≤ K is at most ``tol``."""
     K = 0
-    for w in range(1, upto + 1):
+    for w in sorted(d):
         if d[w] > tol:
             break
         K = w

@@ -56,7 +56,7 @@ from functools import lru_cache
 import mpmath as mp
 import numpy as np
 
-from .compositions import DPS, PROCESSED_FAMILIES, Composition, log_composition
+from .compositions import DPS, PROCESSED_FAMILIES, Composition, order_of_defects, sequence_defects
 
 __all__ = ["PROCESSED", "Processed", "processed_composition", "order_defects", "achieved_order",
            "ProcessedIntegrator", "build_processed"]
@@ -160,13 +160,7 @@ def processed_composition(order: int, family: str = "blanes-casas-murua") -> Pro
 def order_defects(seq, upto: int) -> dict[int, float]:
     """Largest |coefficient| of ``log(Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h}) − h X1`` at each weight
     1 … ``upto`` for the steps ``seq`` in the order of application (60 digits)."""
-    L = log_composition([mp.mpf(g) for g in seq], upto)
-    out = {}
-    with mp.workdps(DPS):
-        for w in range(1, upto + 1):
-            vals = [abs(v - (1 if k == (1,) else 0)) for k, v in L.items() if sum(k) == w]
-            out[w] = float(max(vals)) if vals else 0.0
-    return out
+    return sequence_defects(seq, upto)
 
 
 def achieved_order(proc: Processed, tol: float = 1e-14, upto: int | None = None) -> dict:
@@ -177,19 +171,10 @@ def achieved_order(proc: Processed, tol: float = 1e-14, upto: int | None = None)
     below ``tol`` (numerical: the published constants have 15–19 digits).
     """
     upto = upto or proc.order + 1
-
-    def largest(d):
-        K = 0
-        for w in range(1, upto + 1):
-            if d[w] > tol:
-                break
-            K = w
-        return K
-
     whole = order_defects(proc.pre + proc.kernel + proc.post, upto)
     kern = order_defects(proc.kernel, upto)
-    return {"order": largest(whole), "kernel_order": largest(kern), "defects": whole,
-            "kernel_defects": kern, "tol": tol}
+    return {"order": order_of_defects(whole, tol), "kernel_order": order_of_defects(kern, tol),
+            "defects": whole, "kernel_defects": kern, "tol": tol}
 
 
 # --- running it ---------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ from __future__ import annotations
 import time
 from decimal import Decimal
 
+from ..compositions import order_of_defects
 from ..processing import Processed, order_defects
 from .report import NUMERICAL, REFUTED, Certificate
 
@@ -67,7 +68,7 @@ def effective_order_certificate(proc: Processed) -> Certificate:
     K = proc.order
     d = order_defects(proc.pre + proc.kernel + proc.post, K + 1)
     dk = order_defects(proc.kernel, K + 1)
-    kernel_order = next((w - 1 for w in range(1, K + 2) if dk[w] > TOL), K + 1)
+    kernel_order = order_of_defects(dk, TOL)
     claim = (f"processed composition ({proc.family}, {proc.stages}-stage kernel, {proc.processor_stages}-"
              f"stage processor): π ∘ K_h ∘ π⁻¹ has order {K} for every symmetric base step Φ_h of order 2 "
              f"(the kernel alone: order {kernel_order})")
