@@ -130,6 +130,22 @@ def _gradient_by_families(system: Hamiltonian) -> sp.Matrix | None:
     return sp.Matrix([sp.Add(*parts[s]) for s in system.y])
 
 
+def separable_gradients(system: Hamiltonian) -> tuple[list, list]:
+    """``(∇T(p), ∇U(q))`` of a separable H = T(p) + U(q), as lists.
+
+    Where H is written as T(p) + U(q) term by term, from :func:`gradient` (per family of like
+    terms: a Toda ring of 200 in a fraction of a second instead of 200 differentiations of
+    the whole sum; the same expressions, as ``∂H/∂q = ∂U/∂q`` term by term); otherwise each
+    component differentiated from the split.
+    """
+    sep = separable_split(system)
+    if potential_families(system) is not None:
+        g = gradient(system)
+        d = system.dim
+        return list(g[d:]), list(g[:d])
+    return [sp.diff(sep.T, s) for s in system.p], [sp.diff(sep.U, s) for s in system.q]
+
+
 @_cache
 def vector_field(system: Hamiltonian) -> sp.Matrix:
     """``f(y) = J ∇H(y)`` with ``J = [[0, I], [-I, 0]]`` (column of length 2d); for a

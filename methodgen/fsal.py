@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .derive import separable_split
+from .derive import separable_gradients, separable_split
 from .schemes.base import STEP
 
 __all__ = ["FsalPlan", "fsal_plan", "STAGE_STEPS"]
@@ -81,8 +81,8 @@ def fsal_plan(scheme) -> FsalPlan | None:
         return None
     h = STEP
     q0, p0 = list(system.q), list(system.p)
-    gradU = sp.Matrix([sp.diff(sep.U, s) for s in q0])
-    gradT = sp.Matrix([sp.diff(sep.T, s) for s in p0])
+    gT, gU = separable_gradients(system)     # per family of like terms where U has them
+    gradU, gradT = sp.Matrix(gU), sp.Matrix(gT)
     G0 = sp.Matrix([sp.Symbol(f"_g{i}", real=True) for i in range(len(q0))])
     ha, hd, hb = STAGE_STEPS
     phalf = sp.Matrix(p0) - ha * G0

@@ -32,8 +32,7 @@ from typing import Callable
 import sympy as sp
 
 from ..derive import (Invariant, _partials, _zero_status, first_integrals, gradient, invariants, plain_terms,
-                      separable_split,
-                      vector_field)
+                      separable_gradients, separable_split, vector_field)
 from ..poisson import is_poisson
 from ..problem import Hamiltonian
 
@@ -489,8 +488,7 @@ def splitting_invariants(system: Hamiltonian) -> tuple[str, ...]:
         return ()
     d = system.dim
     q, p = list(system.q), list(system.p)
-    gradT = [sp.diff(sep.T, s) for s in p]
-    gradU = [sp.diff(sep.U, s) for s in q]
+    gradT, gradU = separable_gradients(system)
     out = []
     for inv in first_integrals(system):
         if not _qp_degrees_within(inv.expr, system, lambda dq, dp: dq <= 1 and dp <= 1):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from ..derive import invariants, separable_split
+from ..derive import invariants, separable_gradients, separable_split
 from ..problem import Hamiltonian
 from .base import STEP, Scheme, Traits, splitting_invariants
 
@@ -30,11 +30,10 @@ def applies(system: Hamiltonian) -> str | None:
 
 
 def build(system: Hamiltonian) -> Scheme:
-    sep = separable_split(system)
     h = STEP
     q0, p0 = list(system.q), list(system.p)
-    gradU = sp.Matrix([sp.diff(sep.U, s) for s in q0])
-    gradT = sp.Matrix([sp.diff(sep.T, s) for s in p0])
+    gT, gU = separable_gradients(system)     # per family of like terms where U has them
+    gradU, gradT = sp.Matrix(gU), sp.Matrix(gT)
     phalf = sp.Matrix(p0) - h / 2 * gradU
     dq = h * gradT.xreplace(dict(zip(p0, phalf)))
     q1 = sp.Matrix(q0) + dq
