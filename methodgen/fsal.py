@@ -64,21 +64,32 @@ class FsalPlan:
     start_force: list
 
 
-def fsal_plan(scheme) -> FsalPlan | None:
+def fsal_applies(scheme) -> bool:
+    """Whether :func:`fsal_plan` can apply: Störmer–Verlet (or a composition or projection of
+    it) on an unconstrained separable H (cheap; the plan itself is checked when built)."""
+    system = scheme.system
+    # (a projected method runs its base step: Störmer–Verlet under another name)
+    if (getattr(scheme, "projected_from", None) or scheme).method != "stormer-verlet" or system.constraints:
+        return False
+    return separable_split(system) is not None
+
+
+def fsal_plan(scheme, full: bool = True) -> FsalPlan | None:
     """The first-same-as-last form of ``scheme`` if it is Störmer–Verlet (or a composition of
     it), else None.
 
     The plan is checked against the scheme: with ``G0 = ∇U(q0)`` its increment must be the
     scheme's increment expression for expression (structural equality, no floating
     point); otherwise None (the module is then generated without first-same-as-last).
+
+    ``full=False``: Δq only (``increment`` has the d entries of Δq, checked against the
+    scheme's; ``end_force`` is empty) -- what a module whose end force and Δp are loops over
+    U's families (:func:`methodgen.lower_loops.force_plan`) uses; the unrolled end force
+    ∇U(q0 + Δq) is then never built (a Toda ring of 200: seconds of SymPy).
     """
+    if not fsal_applies(scheme):
+        return None
     system = scheme.system
-    # (a projected method runs its base step: Störmer–Verlet under another name)
-    if (getattr(scheme, "projected_from", None) or scheme).method != "stormer-verlet" or system.constraints:
-        return None
-    sep = separable_split(system)
-    if sep is None:
-        return None
     h = STEP
     q0, p0 = list(system.q), list(system.p)
     gT, gU = separable_gradients(system)     # per family of like terms where U has them
@@ -87,6 +98,12 @@ def fsal_plan(scheme) -> FsalPlan | None:
     ha, hd, hb = STAGE_STEPS
     phalf = sp.Matrix(p0) - ha * G0
     dq = hd * gradT.xreplace(dict(zip(p0, phalf)))
+    if not full:
+        sv = {ha: h / 2, hd: h, hb: h / 2, **dict(zip(G0, gradU))}
+        if dq.xreplace(sv) != sp.Matrix(scheme.increment[:len(q0)]):
+            return None
+        return FsalPlan(symbols=tuple(G0), steps=STAGE_STEPS, increment=list(dq), end_force=[],
+                        start_force=list(gradU))
     g1 = gradU.xreplace(dict(zip(q0, sp.Matrix(q0) + dq)))
     dp = -ha * G0 - hb * g1
     inc = sp.Matrix(list(dq) + list(dp))

@@ -33,7 +33,7 @@ from .compensate import compensate, compensation_symbols
 from .lower_loops import (acc_symbol, force_plan, jacobian_row_scales, jacobian_via_sums, loop_prefix, potential_via_sums,
                           sum_pattern, table_names)
 from .derive import Invariant, casimir_invariants, separable_split, vector_field
-from .fsal import fsal_plan
+from .fsal import fsal_applies, fsal_plan
 from .splittings import composition_stages, is_splitting
 from .poisson import is_poisson
 from .errors import InputError
@@ -707,9 +707,13 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
             else compensate)
     # An explicit first-same-as-last Störmer–Verlet step loops over U's families for its end
     # force (and H at both ends) where U has a family of at least LOOP_MIN_INSTANCES terms.
-    fplan = fsal_plan(scheme) if n == 0 and cmp_ is compensate else None
-    splan = force_plan(system) if fplan is not None and loops is not False else None
+    fsal = n == 0 and cmp_ is compensate and fsal_applies(scheme)
+    splan = force_plan(system) if fsal and loops is not False else None
     if splan is not None and (not (splan.looped or loops) or potential_via_sums(system, splan) is None):
+        splan = None
+    # with the end force in loops only Δq of the plan is used: the unrolled ∇U(q0 + Δq) is not built
+    fplan = fsal_plan(scheme, full=splan is None) if fsal else None
+    if fplan is None:
         splan = None
     looped = splan is None and uses_loops(scheme, loops) and n > 0
     plan = scheme.loops if looped else splan
