@@ -238,11 +238,30 @@ class ProcessedIntegrator:
         return self.integrate(y0, h, 1, params, **kw)[-1]
 
     def _apply(self, module, Y, h, params, kw):
-        """One step of a processor module on every row of ``Y`` (any leading shape)."""
+        """One step of a processor module on every row of ``Y`` (a state or any leading shape)."""
         Y = np.asarray(Y, dtype=float)
+        if Y.ndim == 1:
+            return np.array(module.integrate(Y, h, 1, params, **kw)[-1])
         flat = Y.reshape(-1, Y.shape[-1])
         out = module.integrate(flat, h, 1, params, **kw)[-1]
         return np.asarray(out).reshape(Y.shape)
+
+    def _relabel(self, exc, where: str, y0) -> None:
+        """Say in ``exc`` (a module's error, re-raised) which of the three modules failed: its own
+        message speaks of "the order-4 composition" (the kernel alone) or of a processor's
+        stages.  ``.trajectory`` becomes the rows of the processed run that exist (y0 alone
+        when a processor failed)."""
+        proc = self.processed
+        head = (f"in the {where} of the processed composition ({proc.family}, order {proc.order}; "
+                f"its kernel has {proc.stages} stages, its processors {proc.processor_stages}): ")
+        if exc.args and isinstance(exc.args[0], str):
+            msg = exc.args[0].replace("of the order-4 composition", f"of the {where}")
+            exc.args = (head + msg,) + tuple(exc.args[1:])
+        if where != "kernel" or getattr(exc, "trajectory", None) is None:
+            try:
+                exc.trajectory = np.asarray(y0, dtype=float)[None].copy()
+            except AttributeError:   # pragma: no cover - an exception class without attributes
+                pass
 
     def integrate(self, y0, h, steps, params=None, *, save_every=1, info=None, **kw):
         """Integrate ``steps`` steps of size ``h`` from ``y0``; rows as a module's ``integrate``.
@@ -266,20 +285,31 @@ class ProcessedIntegrator:
                 and rec.get("params") == params):
             x0, kinfo = rec["kernel_state"], rec["kernel_info"]
         else:
-            x0, kinfo = self._apply(self.pre, y0, h, params, kw), {}
+            try:
+                x0, kinfo = self._apply(self.pre, y0, h, params, kw), {}
+            except (RuntimeError, FloatingPointError) as exc:   # the modules' errors
+                self._relabel(exc, "pre-processor", y0)
+                raise
         try:
             X = self.kernel.integrate(x0, h, steps, params, save_every=save_every, info=kinfo, **kw)
-        except Exception as exc:
+        except (RuntimeError, FloatingPointError) as exc:
             part = getattr(exc, "trajectory", None)
+            rows = None
             if part is not None and len(part):
                 try:
                     rows = self._apply(self.post, part, h, params, kw)
                     rows[0] = y0
-                    exc.trajectory = rows
-                except Exception:  # noqa: BLE001 -- the kernel's error is the one to report
-                    pass
+                except (RuntimeError, FloatingPointError):   # the kernel's error is the one to report
+                    rows = None
+            # the rows of the processed run, never the kernel's own states
+            exc.trajectory = rows if rows is not None else np.asarray(y0, dtype=float)[None].copy()
+            self._relabel(exc, "kernel", y0)
             raise
-        Y = self._apply(self.post, X, h, params, kw)
+        try:
+            Y = self._apply(self.post, X, h, params, kw)
+        except (RuntimeError, FloatingPointError) as exc:
+            self._relabel(exc, "post-processor", y0)
+            raise
         Y[0] = y0
         if isinstance(info, dict):
             info["processed"] = {"key": self._key, "h": h, "params": params, "output": Y[-1].copy(),

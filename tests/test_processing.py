@@ -243,3 +243,31 @@ def test_bench_peers_rows_of_a_processed_family():
     rows = [r for r in wp["rows"] if r["kind"] == "methodgen" and r["order"] == 8]
     assert rows and all(r["processed"] and r["stages"] == 13 for r in rows), rows
     assert all(r["error"] < 1e-3 for r in rows)
+
+
+# --- (g) failures say where, and keep the processed rows -----------------------------------
+
+def test_a_kernel_failure_names_the_kernel_and_keeps_processed_rows(kep):
+    """From the apocentre with h = 0.3 the kernel's local error guard stops at the pericentre;
+    the error says it was the kernel of the processed composition (not "the order-4
+    composition") and its partial trajectory is post-processed rows, row 0 = y0."""
+    P = build_processed(kep, "energy-momentum", 8)
+    y0 = np.array([-1.6, 0.0, 0.0, 0.0, -0.5, 0.0])
+    with pytest.raises(P.ResolutionError) as info:
+        P.integrate(y0, 0.3, 40)
+    msg, part = str(info.value), info.value.trajectory
+    assert msg.startswith("in the kernel of the processed composition (blanes-casas-murua, order 8")
+    assert "order-4 composition" not in msg
+    assert part.ndim == 2 and len(part) > 2 and np.array_equal(part[0], y0)
+    ok = P.integrate(y0, 0.3, len(part) - 1)
+    np.testing.assert_allclose(part, ok, rtol=0, atol=1e-12)   # processed rows, not kernel states
+    # control: the kernel's own states differ from the processed rows by the processor's O(h^k)
+    ks = P.kernel.integrate(P._apply(P.pre, y0, 0.3, None, {}), 0.3, len(part) - 1)
+    assert np.abs(ks[1:] - part[1:]).max() > 1e-8
+
+
+def test_a_processor_failure_on_the_command_line(capsys):
+    code, out, err = _cli(capsys, "run", "kepler", "--order", "8", "--composition", "blanes-casas-murua",
+                          "--h", "0.5", "--steps", "100")
+    assert code == 3 and "Traceback" not in err
+    assert "in the pre-processor of the processed composition" in err and "order-4" not in err
