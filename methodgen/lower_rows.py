@@ -254,7 +254,6 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     # 1. temporaries: which read per-coordinate names, and their inlined (expanded) code
     #    (the temporaries of Δq ahead of the term loops first: they precede all others)
     temps = pre_temps + list(kern.temps)
-    tcode = dict(temps)
     rowtemp, expanded = set(), {}
     for var, code in temps:
         ids = _idents(code)
