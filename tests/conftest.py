@@ -67,6 +67,12 @@ def harmonic():
 
 
 @pytest.fixture(scope="session")
+def hh():
+    """The henon-heiles-2d scene's system (the order tests' Hénon–Heiles, from HH_Y0 to HH_T)."""
+    return mg.load_scene("henon-heiles-2d").run_system
+
+
+@pytest.fixture(scope="session")
 def modules(tmp_path_factory):
     """Generate (once per session) a module per (scene, method) into a temp folder."""
     cache = {}

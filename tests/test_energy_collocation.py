@@ -18,10 +18,6 @@ from methodgen.verify.report import NUMERICAL, PROVED, REFUTED
 
 
 
-@pytest.fixture(scope="module")
-def hh():
-    return mg.load_scene("henon-heiles-2d").system
-
 
 @pytest.fixture(scope="module")
 def module(tmp_path_factory):

@@ -32,10 +32,6 @@ STEPS = 200
 H = 0.1
 
 
-@pytest.fixture(scope="module")
-def hh():
-    return mg.load_scene("henon-heiles-2d").run_system
-
 
 @pytest.fixture(scope="module")
 def sv4(hh):

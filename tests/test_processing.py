@@ -31,14 +31,10 @@ from methodgen.processing import (PROCESSED, Processed, ProcessedIntegrator, ach
 CASES = [(f, o) for f, orders in PROCESSED.items() for o in orders]
 
 
-@pytest.fixture(scope="module")
-def hh():
-    return mg.load_scene("henon-heiles-2d").run_system
-
 
 @pytest.fixture(scope="module")
-def kep():
-    return mg.load_scene("kepler").system
+def kep(kepler):
+    return kepler
 
 
 # --- (a) order conditions ---------------------------------------------------------------

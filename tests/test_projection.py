@@ -21,10 +21,6 @@ from methodgen.errors import InputError, MethodNotApplicable
 H = 0.1
 
 
-@pytest.fixture(scope="module")
-def hh():
-    return mg.load_scene("henon-heiles-2d").run_system
-
 
 @pytest.fixture(scope="module")
 def proj2(hh):

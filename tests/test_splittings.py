@@ -36,10 +36,6 @@ from methodgen.splittings import (SPLITTING_FAMILIES, Splitting, general_order, 
 CASES = [(f, o) for f, orders in SPLITTING_FAMILIES.items() for o in orders]
 
 
-@pytest.fixture(scope="module")
-def hh():
-    return mg.load_scene("henon-heiles-2d").run_system
-
 
 # --- (a) order conditions ---------------------------------------------------------------
 
