@@ -1,0 +1,483 @@
+"""The compiled runtime of the Wisdom–Holman splittings: exact Kepler flows and interaction kicks.
+
+An ``[nbody]`` Hamiltonian splits as ``H = H_K + H_I`` where ``H_K`` is a sum of
+independent Kepler problems in Jacobi coordinates (or, about a fixed centre, in the
+coordinates themselves) and ``H_I`` depends on the positions only
+(:mod:`methodgen.wisdom_holman` derives and certifies the splitting).  This module runs
+the splitting: the flow of ``H_K`` is solved exactly (universal variables), the flow of
+``H_I`` is a kick, and the corrector of [LR01]_ is a kick by the gradient of
+``C = Σ_i |∂H_I/∂q'_i|² / m'_i``, computed exactly as ``2 Hess(H_I) M'⁻¹ ∇H_I``.
+
+Nothing here is generated per system: the masses are arrays, so the runtime is compiled
+once per machine (``numba.njit(cache=True)``, the cache stamped with this file's SHA-256 as
+:mod:`methodgen.nbruntime` is).  Without numba the same functions run as Python (correct,
+about 100× slower).  This module imports numpy (and numba when present) only.
+
+Layout: positions and momenta are ``(n, 3)`` C-contiguous arrays; Jacobi body 0 is the
+centre of mass (its momentum is the total momentum).  Constants, per body ``i``:
+``m`` (masses), ``M`` (cumulative masses ``M_i = m_0 + … + m_i``), ``mj`` (Jacobi masses
+``m'_i = m_i M_{i-1}/M_i``, ``m'_0 = M_{n-1}``), ``mu`` (``G M_i``: the Kepler parameter of
+Jacobi body i), ``KM`` (``G m_i M_{i-1}``: the Kepler term ``H_I`` subtracts back).  About a
+fixed centre (``jacobi`` false) the coordinates are the bodies' own, ``mj = m``,
+``mu = G M_centre`` and ``KM = 0``.
+
+References
+----------
+.. [WH91] J. Wisdom, M. Holman, Symplectic maps for the N-body problem, Astron. J. 102
+   (1991) 1528–1538.
+.. [LR01] J. Laskar, P. Robutel, High order symplectic integrators for perturbed
+   Hamiltonian systems, Celest. Mech. Dyn. Astron. 80 (2001) 39–62.
+.. [Danby] J. M. A. Danby, Fundamentals of Celestial Mechanics, 2nd ed., Willmann-Bell 1988,
+   §6.9 (universal variables, Stumpff functions, f and g).
+.. [Conway86] B. A. Conway, An improved algorithm due to Laguerre for the solution of
+   Kepler's equation, Celest. Mech. 39 (1986) 199–211.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+try:
+    import numba
+except ImportError:   # pragma: no cover - the runtime then runs as Python
+    numba = None
+
+__all__ = ["HAVE_NUMBA", "SOURCE_SHA256", "STATUS", "to_jacobi", "from_jacobi", "kepler_drift",
+           "interaction_gradient", "corrector_gradient", "run"]
+
+HAVE_NUMBA = numba is not None
+
+if HAVE_NUMBA:
+    from .nbcache import install_stamp_guard as _install_stamp_guard
+    from .nbcache import source_digest as _source_digest
+
+    #: SHA-256 of this file: the stamp of its cached machine code.
+    SOURCE_SHA256 = _source_digest(os.path.abspath(__file__))
+    _install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256, owner="methodgen.kepler_flow")
+    # error_model="numpy": a division by zero gives inf/nan, reported by run's finiteness
+    # check with the step, instead of an exception without one.  No fastmath (round-off
+    # stopping rule of the Kepler solve).
+    _jit = numba.njit(cache=True, error_model="numpy")
+else:   # pragma: no cover
+    SOURCE_SHA256 = None
+
+    def _jit(f):
+        return f
+
+#: run()'s status codes.
+STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state"}
+
+#: Largest number of iterations of the Kepler solve (Laguerre–Conway, then Newton); it takes
+#: 2–6 at the steps of a converged run.
+KEPLER_MAXITER = 50
+
+
+@_jit
+def to_jacobi(q, p, m, M, jacobi, qj, pj):
+    """Jacobi coordinates ``qj = A q`` and momenta ``pj = A⁻ᵀ p`` (into qj, pj; (n, 3) each).
+
+    ``qj[i] = q[i] − R_{i−1}`` (``R_{i−1}``: centre of mass of bodies 0…i−1),
+    ``pj[i] = (M_{i−1} p[i] − m_i P_{i−1})/M_i`` (``P_{i−1}``: their total momentum);
+    ``qj[0]`` is the centre of mass, ``pj[0]`` the total momentum.  The identity when
+    ``jacobi`` is false.  Also maps a gradient (``p`` slot) to Jacobi coordinates.
+    """
+    n = q.shape[0]
+    if not jacobi:
+        for i in range(n):
+            for k in range(3):
+                qj[i, k] = q[i, k]
+                pj[i, k] = p[i, k]
+        return
+    for k in range(3):
+        R = m[0] * q[0, k]
+        P = p[0, k]
+        for i in range(1, n):
+            qj[i, k] = q[i, k] - R / M[i - 1]
+            pj[i, k] = (M[i - 1] * p[i, k] - m[i] * P) / M[i]
+            R += m[i] * q[i, k]
+            P += p[i, k]
+        qj[0, k] = R / M[n - 1]
+        pj[0, k] = P
+
+
+@_jit
+def from_jacobi(qj, pj, m, M, jacobi, q, p):
+    """The inverse of :func:`to_jacobi` (into q, p)."""
+    n = qj.shape[0]
+    if not jacobi:
+        for i in range(n):
+            for k in range(3):
+                q[i, k] = qj[i, k]
+                p[i, k] = pj[i, k]
+        return
+    for k in range(3):
+        R = qj[0, k]            # R_i, from i = n-1 down
+        P = pj[0, k]            # P_i
+        for i in range(n - 1, 0, -1):
+            Rm = R - m[i] / M[i] * qj[i, k]
+            q[i, k] = qj[i, k] + Rm
+            p[i, k] = pj[i, k] + m[i] / M[i] * P
+            P -= p[i, k]
+            R = Rm
+        q[0, k] = R
+        p[0, k] = P
+
+
+@_jit
+def _positions(qj, m, M, jacobi, q):
+    """Cartesian positions of Jacobi positions (the position half of :func:`from_jacobi`)."""
+    n = qj.shape[0]
+    if not jacobi:
+        for i in range(n):
+            for k in range(3):
+                q[i, k] = qj[i, k]
+        return
+    for k in range(3):
+        R = qj[0, k]
+        for i in range(n - 1, 0, -1):
+            Rm = R - m[i] / M[i] * qj[i, k]
+            q[i, k] = qj[i, k] + Rm
+            R = Rm
+        q[0, k] = R
+
+
+@_jit
+def _gradient_to_jacobi(g, m, M, jacobi, gj):
+    """``gj = A⁻ᵀ g``: a Cartesian gradient as a gradient in Jacobi coordinates."""
+    n = g.shape[0]
+    if not jacobi:
+        for i in range(n):
+            for k in range(3):
+                gj[i, k] = g[i, k]
+        return
+    for k in range(3):
+        P = g[0, k]
+        for i in range(1, n):
+            gj[i, k] = (M[i - 1] * g[i, k] - m[i] * P) / M[i]
+            P += g[i, k]
+        gj[0, k] = P
+
+
+#: Reciprocals of the series' denominators: c3's (2k+4)(2k+5) and c2's (2k+3)(2k+4), k = 0…13.
+_R3 = np.array([1.0 / ((2 * k + 4) * (2 * k + 5)) for k in range(14)])
+_R2 = np.array([1.0 / ((2 * k + 3) * (2 * k + 4)) for k in range(14)])
+
+
+@_jit
+def _stumpff(z):
+    """Stumpff functions ``c0, c1, c2, c3`` at ``z`` (series for |z| < 1, closed forms otherwise).
+
+    The closed forms for c2 and c3 are written without the cancellation of ``1 − cos``; the
+    series stops when a term no longer changes the sums (at most 14 terms: |z|¹⁴/29! < 1e-30).
+    """
+    if abs(z) < 1.0:
+        c3 = 0.0
+        c2 = 0.0
+        t3 = 1.0 / 6.0
+        t2 = 0.5
+        for k in range(14):
+            c3 += t3
+            c2 += t2
+            t3 *= -z * _R3[k]
+            t2 *= -z * _R2[k]
+            if abs(t2) < 1e-18:     # |t3| < |t2| here; c2 ≥ 0.45, c3 ≥ 0.16 for |z| < 1
+                break
+        return 1.0 - z * c2, 1.0 - z * c3, c2, c3
+    if z > 0.0:
+        x = math.sqrt(z)
+        s = math.sin(x)
+        h = math.sin(0.5 * x)
+        return math.cos(x), s / x, 2.0 * h * h / z, (x - s) / (z * x)
+    x = math.sqrt(-z)
+    s = math.sinh(x)
+    h = math.sinh(0.5 * x)
+    return math.cosh(x), s / x, 2.0 * h * h / (-z), (s - x) / (-z * x)
+
+
+@_jit
+def kepler_drift(qj, pj, i, mj, mu, dt):
+    """Advance Jacobi body ``i`` (``qj[i]``, ``pj[i]``) along its Kepler orbit ``μ = mu`` by ``dt``.
+
+    Universal variables [Danby]_: with ``r0 = |r|``, ``η = r·v``, ``β = 2μ/r0 − v²``,
+    ``ζ = μ − β r0`` and ``G_k(s) = s^k c_k(β s²)``, the universal anomaly ``s`` solves
+    ``r0 G1 + η G2 + μ G3 = dt`` (solved by Laguerre–Conway [Conway86]_ to round-off; for a
+    bound orbit ``dt`` is first reduced by whole periods), then
+    ``r' = f r + g v``, ``v' = ḟ r + ġ v``.  Returns the number of iterations, or −1 when
+    the solve did not reach round-off in :data:`KEPLER_MAXITER` iterations.
+    """
+    x, y, z = qj[i, 0], qj[i, 1], qj[i, 2]
+    vx, vy, vz = pj[i, 0] / mj, pj[i, 1] / mj, pj[i, 2] / mj
+    r0 = math.sqrt(x * x + y * y + z * z)
+    eta = x * vx + y * vy + z * vz
+    beta = 2.0 * mu / r0 - (vx * vx + vy * vy + vz * vz)
+    zeta = mu - beta * r0
+    tau = dt
+    if beta > 0.0:
+        # a bound orbit: whole periods (2π μ/β^{3/2}) change nothing; keep the remainder
+        period = 2.0 * math.pi * mu / (beta * math.sqrt(beta))
+        if abs(tau) > 0.5 * period:
+            tau -= math.floor(tau / period + 0.5) * period
+    # start value: the Taylor series of s(t) to second order, clipped for bound orbits
+    s = tau / r0 - eta * tau * tau / (2.0 * r0 * r0 * r0)
+    if beta > 0.0:
+        lim = math.pi / math.sqrt(beta)
+        if s > lim:
+            s = lim
+        elif s < -lim:
+            s = -lim
+    it = 0
+    done = False
+    while it < KEPLER_MAXITER:
+        it += 1
+        c0, c1, c2, c3 = _stumpff(beta * s * s)
+        G1 = s * c1
+        G2 = s * s * c2
+        G3 = s * s * s * c3
+        F = r0 * G1 + eta * G2 + mu * G3 - tau
+        dF = r0 * c0 + eta * G1 + mu * G2           # r(s) > 0
+        ddF = eta * c0 + zeta * G1                   # dr/ds
+        # Laguerre–Conway step (n = 5), globally convergent for Kepler's equation
+        disc = 16.0 * dF * dF - 20.0 * F * ddF
+        den = dF + math.copysign(math.sqrt(abs(disc)), dF)
+        ds = 5.0 * F / den if den != 0.0 else F / dF
+        s -= ds
+        # Laguerre–Conway converges cubically: after a step this small s is at round-off
+        if abs(ds) <= 1e-13 * abs(s) or ds == 0.0:
+            done = True
+            break
+    if not done:
+        return -1
+    # f and g from the converged s (G functions recomputed there)
+    c0, c1, c2, c3 = _stumpff(beta * s * s)
+    G1 = s * c1
+    G2 = s * s * c2
+    G3 = s * s * s * c3
+    r = r0 * c0 + eta * G1 + mu * G2
+    f = 1.0 - mu * G2 / r0
+    g = tau - mu * G3
+    fd = -mu * G1 / (r * r0)
+    gd = 1.0 - mu * G2 / r
+    qj[i, 0] = f * x + g * vx
+    qj[i, 1] = f * y + g * vy
+    qj[i, 2] = f * z + g * vz
+    pj[i, 0] = mj * (fd * x + gd * vx)
+    pj[i, 1] = mj * (fd * y + gd * vy)
+    pj[i, 2] = mj * (fd * z + gd * vz)
+    return it
+
+
+@_jit
+def drift(qj, pj, mj, mu, jacobi, dt):
+    """The exact flow of ``H_K`` over ``dt``: every Kepler body, and the centre of mass
+    moving freely (Jacobi).  Returns the first failing body's index, or −1."""
+    n = qj.shape[0]
+    first = 1 if jacobi else 0
+    if jacobi:
+        for k in range(3):
+            qj[0, k] += dt * pj[0, k] / mj[0]
+    for i in range(first, n):
+        if kepler_drift(qj, pj, i, mj[i], mu[i], dt) < 0:
+            return i
+    return -1
+
+
+@_jit
+def interaction_gradient(qj, m, M, KM, G, jacobi, q, g, gj):
+    """``gj = ∇_{q'} H_I`` at the Jacobi positions ``qj`` (q, g: (n, 3) work arrays).
+
+    ``H_I = Σ_{i≥1} KM_i/|q'_i| − Σ_{a<b} G m_a m_b/|q_a − q_b|``: the pairs in Cartesian
+    positions, mapped with ``A⁻ᵀ``, minus the Kepler terms the splitting moved into ``H_K``.
+    """
+    n = qj.shape[0]
+    _positions(qj, m, M, jacobi, q)
+    for i in range(n):
+        for k in range(3):
+            g[i, k] = 0.0
+    for a in range(n):
+        for b in range(a + 1, n):
+            dx = q[b, 0] - q[a, 0]
+            dy = q[b, 1] - q[a, 1]
+            dz = q[b, 2] - q[a, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            w = G * m[a] * m[b] / (r2 * math.sqrt(r2))
+            g[b, 0] += w * dx
+            g[b, 1] += w * dy
+            g[b, 2] += w * dz
+            g[a, 0] -= w * dx
+            g[a, 1] -= w * dy
+            g[a, 2] -= w * dz
+    _gradient_to_jacobi(g, m, M, jacobi, gj)
+    if jacobi:
+        for k in range(3):
+            gj[0, k] = 0.0      # H_I is translation invariant (the sum is round-off)
+        for i in range(1, n):
+            x, y, z = qj[i, 0], qj[i, 1], qj[i, 2]
+            r2 = x * x + y * y + z * z
+            w = KM[i] / (r2 * math.sqrt(r2))
+            gj[i, 0] -= w * x
+            gj[i, 1] -= w * y
+            gj[i, 2] -= w * z
+
+
+@_jit
+def corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj):
+    """``hj = ∇C = 2 Hess(H_I) u'`` with ``u' = M'⁻¹ gj`` and ``gj = ∇H_I`` at ``qj``.
+
+    ``C = Σ_i |∂H_I/∂q'_i|²/m'_i`` (the double bracket ``{{H_K, H_I}, H_I}``: only the
+    kinetic part of ``H_K`` contributes, ``H_I`` depending on positions only).  The Hessian
+    is applied, not formed: pairs in Cartesian coordinates on ``w = A⁻¹ u'`` (mapped back
+    with ``A⁻ᵀ``), the Kepler terms blockwise.  ``q`` must hold the Cartesian positions of
+    ``qj`` (as :func:`interaction_gradient` leaves them); u, w, h are work arrays.
+    """
+    n = qj.shape[0]
+    first = 1 if jacobi else 0
+    for k in range(3):
+        u[0, k] = 0.0
+    for i in range(first, n):
+        for k in range(3):
+            u[i, k] = gj[i, k] / mj[i]
+    _positions(u, m, M, jacobi, w)      # u'_0 = 0, so w = A⁻¹ u'
+    for i in range(n):
+        for k in range(3):
+            h[i, k] = 0.0
+    for a in range(n):
+        for b in range(a + 1, n):
+            dx = q[b, 0] - q[a, 0]
+            dy = q[b, 1] - q[a, 1]
+            dz = q[b, 2] - q[a, 2]
+            ex = w[b, 0] - w[a, 0]
+            ey = w[b, 1] - w[a, 1]
+            ez = w[b, 2] - w[a, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            r3 = r2 * math.sqrt(r2)
+            k1 = G * m[a] * m[b] / r3
+            k3 = 3.0 * k1 * (dx * ex + dy * ey + dz * ez) / r2
+            vx = k1 * ex - k3 * dx
+            vy = k1 * ey - k3 * dy
+            vz = k1 * ez - k3 * dz
+            h[b, 0] += vx
+            h[b, 1] += vy
+            h[b, 2] += vz
+            h[a, 0] -= vx
+            h[a, 1] -= vy
+            h[a, 2] -= vz
+    _gradient_to_jacobi(h, m, M, jacobi, hj)
+    if jacobi:
+        for k in range(3):
+            hj[0, k] = 0.0
+        for i in range(1, n):
+            x, y, z = qj[i, 0], qj[i, 1], qj[i, 2]
+            r2 = x * x + y * y + z * z
+            r3 = r2 * math.sqrt(r2)
+            k1 = KM[i] / r3
+            k3 = 3.0 * k1 * (x * u[i, 0] + y * u[i, 1] + z * u[i, 2]) / r2
+            hj[i, 0] -= k1 * u[i, 0] - k3 * x
+            hj[i, 1] -= k1 * u[i, 1] - k3 * y
+            hj[i, 2] -= k1 * u[i, 2] - k3 * z
+    for i in range(n):
+        for k in range(3):
+            hj[i, k] *= 2.0
+
+
+@_jit
+def kick(qj, pj, a, b, m, M, mj, KM, G, jacobi, work):
+    """``p' −= a ∇H_I + b ∇C`` (positions unchanged): the flow of ``a H_I + b C`` over time 1.
+
+    ``work`` is an (7, n, 3) array.  ``b == 0`` skips the Hessian.
+    """
+    q, g, gj, u, w, h, hj = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
+    n = qj.shape[0]
+    interaction_gradient(qj, m, M, KM, G, jacobi, q, g, gj)
+    if b != 0.0:
+        corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj)
+        for i in range(n):
+            for k in range(3):
+                pj[i, k] -= a * gj[i, k] + b * hj[i, k]
+    else:
+        for i in range(n):
+            for k in range(3):
+                pj[i, k] -= a * gj[i, k]
+
+
+@_jit
+def _finite(qj, pj):
+    n = qj.shape[0]
+    for i in range(n):
+        for k in range(3):
+            if not (math.isfinite(qj[i, k]) and math.isfinite(pj[i, k])):
+                return False
+    return True
+
+
+@_jit
+def _emit(qj, pj, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, row):
+    """The output row of the carried state: the lagged kick ``(a, b)`` on a copy, in Cartesian."""
+    n = qj.shape[0]
+    for i in range(n):
+        for k in range(3):
+            tq[i, k] = qj[i, k]
+            tp[i, k] = pj[i, k]
+    if a != 0.0 or b != 0.0:
+        kick(tq, tp, a, b, m, M, mj, KM, G, jacobi, work)
+    q, p = work[3], work[4]
+    from_jacobi(tq, tp, m, M, jacobi, q, p)
+    for i in range(n):
+        for k in range(3):
+            row[3 * i + k] = q[i, k]
+            row[3 * n + 3 * i + k] = p[i, k]
+
+
+@_jit
+def run(qj, pj, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail):
+    """``steps`` steps of the corrected splitting from the carried state ``(qj, pj)`` (in place).
+
+    One step is ``C ∘ K_{d_s} ∘ D_{c_{s−1}} ∘ … ∘ D_{c_0} ∘ K_{d_0} ∘ C`` with ``D_c`` the
+    Kepler flow over ``c h``, ``K_d`` the kick by ``d h ∇H_I`` and ``C`` the corrector kick by
+    ``kappa ∇C`` (``kappa`` already has its ``h³``).  The carried state lags the returned
+    one by ``C ∘ K_{d_s}`` (:func:`_emit`), so consecutive steps fuse their end kicks into one
+    evaluation: ``K_{d_s+d_0}`` with ``2 kappa``.  Rows ``out[1:]`` receive every
+    ``save_every``-th state (Cartesian, q then p); ``out[0]`` is left to the caller.
+
+    Returns the number of steps done.  On failure ``fail`` holds ``(status, body)``
+    (:data:`STATUS`); the state is then the last good one.
+    """
+    n = qj.shape[0]
+    ns = c.shape[0]
+    work = np.empty((7, n, 3))
+    tq = np.empty((n, 3))
+    tp = np.empty((n, 3))
+    sq = np.empty((n, 3))
+    sp = np.empty((n, 3))
+    a0 = (d[ns] + d[0]) * h
+    b0 = 2.0 * kappa
+    row = 1
+    for step in range(steps):
+        for i in range(n):
+            for k in range(3):
+                sq[i, k] = qj[i, k]
+                sp[i, k] = pj[i, k]
+        if a0 != 0.0 or b0 != 0.0:
+            kick(qj, pj, a0, b0, m, M, mj, KM, G, jacobi, work)
+        for j in range(ns):
+            if j > 0 and d[j] != 0.0:
+                kick(qj, pj, d[j] * h, 0.0, m, M, mj, KM, G, jacobi, work)
+            body = drift(qj, pj, mj, mu, jacobi, c[j] * h)
+            if body >= 0:
+                fail[0] = 1
+                fail[1] = body
+                qj[:, :] = sq
+                pj[:, :] = sp
+                return step
+        if not _finite(qj, pj):
+            fail[0] = 2
+            fail[1] = -1
+            qj[:, :] = sq
+            pj[:, :] = sp
+            return step
+        if (step + 1) % save_every == 0:
+            _emit(qj, pj, d[ns] * h, kappa, m, M, mj, KM, G, jacobi, work, tq, tp, out[row])
+            row += 1
+    return steps

@@ -1,0 +1,616 @@
+"""Wisdom–Holman splittings for ``[nbody]`` problems: Kepler flows plus kicks, with correctors.
+
+For N bodies with one dominant mass (a star and its planets) the Hamiltonian splits as
+
+    H = H_K + H_I,
+    H_K = |P|²/(2M) + Σ_{i≥1} ( |p'_i|²/(2 m'_i) − G m_i M_{i−1}/|q'_i| ),
+    H_I = Σ_{i≥1} G m_i M_{i−1}/|q'_i| − Σ_{a<b} G m_a m_b/|q_a − q_b|,
+
+in Jacobi coordinates ``q' = A q``, ``p' = A⁻ᵀ p`` (body i relative to the centre of mass
+of bodies 0…i−1; ``M_i = m_0 + … + m_i``, ``m'_i = m_i M_{i−1}/M_i``) [WH91]_.  ``H_K`` is
+a sum of Kepler problems (``μ_i = G M_i``), solved exactly; ``H_I`` depends on positions
+only and is of the size of the planets' masses, ``ε = max m_i/m_0``.  About a fixed centre
+(``[nbody] centre_mass``) the splitting is the same with ``A = I``: the body's Kepler
+problem about the centre, ``H_I = 0`` for one body.
+
+A splitting ``Φ_h = e^{c_1 h A} e^{d_1 h B} … `` of such a near-integrable ``A + εB`` has
+error ``O(ε h^{p} + ε² h^{2})``: its ``ε`` terms vanish to order p when the kicks are a
+quadrature rule exact for polynomials of degree p − 1 on the step.  The families of
+Laskar & Robutel [LR01]_: ``saba<n>`` (kicks at the n Gauss–Legendre nodes, drifts at both
+ends), ``sbab<n>`` (kicks at the n+1 Gauss–Lobatto nodes), both ``p = 2n``;
+``"wisdom-holman"`` is ``saba1`` (drift, kick, drift).  With the corrector
+``C_h = exp(−(g/2) h³ ε² {{A,B},B})`` on both sides, ``C_h Φ_h C_h`` has error
+``O(ε h^{2n} + ε² h⁴)``; ``g`` is the coefficient of ``[B,[A,B]]`` in ``log Φ_h``.
+
+Certificates (:func:`certify`):
+
+* **exact** (SymPy, no floating point): the Jacobi map is canonical (``A_p A_qᵀ = I``), the
+  kinetic energy is ``|P|²/(2M) + Σ|p'_i|²/(2m'_i)`` for symbolic masses (so ``H_I`` depends
+  on positions only), ``μ_i m'_i = G m_i M_{i−1}``; and the scene's H equals the ``[nbody]``
+  H, symbolically or, failing that, at the scene's parameter values (as exact rationals).
+* **numerical** (50 digits): the kicks' quadrature conditions ``Σ d_j τ_j^k = 1/(k+1)`` for
+  ``k < 2n`` (and that ``k = 2n`` fails: the ε-order is exactly 2n), ``g`` from the truncated
+  BCH series, and that the ``ε h²`` term (``[A,[A,B]]``) vanishes for n ≥ 2.
+
+What is kept: symplecticity (exact flows and kicks, a linear canonical change of
+variables), symmetry (a palindromic splitting, the corrector on both sides with an odd
+power of h), total linear and angular momentum to round-off.  Not kept: the energy (bounded
+error of the size above).
+
+References
+----------
+.. [WH91] J. Wisdom, M. Holman, Symplectic maps for the N-body problem, Astron. J. 102
+   (1991) 1528–1538.
+.. [LR01] J. Laskar, P. Robutel, High order symplectic integrators for perturbed
+   Hamiltonian systems, Celest. Mech. Dyn. Astron. 80 (2001) 39–62.
+.. [WHT96] J. Wisdom, M. Holman, J. Touma, Symplectic correctors, Fields Inst. Commun. 10
+   (1996) 217–244.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import mpmath as mp
+import numpy as np
+
+from .errors import InputError, MethodNotApplicable, NumericalError
+
+__all__ = ["FAMILIES", "Splitting", "splitting", "certify", "WisdomHolman", "wisdom_holman",
+           "KeplerConvergenceError", "NonFiniteError"]
+
+#: Working precision (decimal digits) of the coefficients and their conditions.
+DPS = 50
+
+#: Splitting names: "wisdom-holman" and saba1 … saba6, sbab1 … sbab6.
+FAMILIES = ("wisdom-holman",) + tuple(f"saba{n}" for n in range(1, 7)) + tuple(f"sbab{n}" for n in range(1, 7))
+
+
+class KeplerConvergenceError(NumericalError):
+    """A Kepler drift's universal-variable solve did not reach round-off.
+
+    ``.step`` is the step that failed, ``.body`` the Jacobi body, ``.trajectory`` the rows
+    returned before it (row 0 is y0)."""
+
+
+class NonFiniteError(NumericalError):
+    """The state became inf or NaN (bodies collided: an interaction or a Kepler radius of 0)."""
+
+
+# --- coefficients ------------------------------------------------------------------------
+
+def _dlegendre(n, x):
+    """P'_n(x) = n (x P_n(x) − P_{n−1}(x)) / (x² − 1) (x ≠ ±1)."""
+    return n * (x * mp.legendre(n, x) - mp.legendre(n - 1, x)) / (x * x - 1)
+
+
+def _refined(f, df, guesses):
+    """Newton's method from float guesses to the working precision (the roots are simple)."""
+    out = []
+    for v in guesses:
+        x = mp.mpf(float(v))
+        for _ in range(200):
+            dx = f(x) / df(x)
+            x -= dx
+            if abs(dx) < mp.mpf(10) ** (-(mp.mp.dps - 5)):
+                break
+        out.append(x)
+    return sorted(out)
+
+
+def _gauss(n):
+    """Gauss–Legendre nodes and weights with n points on [0, 1] (exact for degree 2n−1)."""
+    with mp.workdps(DPS + 20):
+        xs = _refined(lambda x: mp.legendre(n, x), lambda x: _dlegendre(n, x),
+                      np.polynomial.legendre.leggauss(n)[0])
+        ws = [2 / ((1 - x ** 2) * _dlegendre(n, x) ** 2) for x in xs]
+        return [(x + 1) / 2 for x in xs], [w / 2 for w in ws]
+
+
+def _lobatto(n):
+    """Gauss–Lobatto nodes and weights with n+1 points on [0, 1] (exact for degree 2n−1)."""
+    with mp.workdps(DPS + 20):
+        inner = []
+        if n > 1:
+            # interior nodes: roots of P'_n; (P'_n)' = (2x P'_n − n(n+1) P_n)/(1 − x²)
+            guess = np.polynomial.legendre.Legendre.basis(n).deriv().roots()
+            inner = _refined(lambda x: _dlegendre(n, x),
+                             lambda x: (2 * x * _dlegendre(n, x) - n * (n + 1) * mp.legendre(n, x)) / (1 - x * x),
+                             guess)
+        xs = [mp.mpf(-1)] + inner + [mp.mpf(1)]
+        ws = [mp.mpf(2) / (n * (n + 1) * mp.legendre(n, x) ** 2) for x in xs]
+        return [(x + 1) / 2 for x in xs], [w / 2 for w in ws]
+
+
+@dataclass(frozen=True)
+class Splitting:
+    """A near-integrable splitting ``K_{d_s} D_{c_{s−1}} … K_{d_1} D_{c_0} K_{d_0}`` of one step.
+
+    Attributes
+    ----------
+    name : str
+    n : int
+        The family's index: ε-order 2n.
+    drifts : tuple of mpf, length s
+        ``c_j``: the Kepler flows' fractions of h (they add up to 1).
+    kicks : tuple of mpf, length s + 1
+        ``d_j``: the kicks' fractions of h (add up to 1); ``d_0`` before the first drift,
+        ``d_s`` after the last (0 for the saba family).
+    g : mpf
+        The corrector coefficient: ``log Φ_h = h(A + B) − g h³ [B,[A,B]] + …`` in the ε² terms.
+    source : str
+    """
+
+    name: str
+    n: int
+    drifts: tuple
+    kicks: tuple
+    g: object
+    source: str
+
+    @property
+    def stages(self) -> int:
+        """Kepler drifts per step (what a step costs, with one interaction evaluation per drift)."""
+        return len(self.drifts)
+
+    def kick_times(self):
+        """The fractions of the step at which each nonzero kick acts, with its weight."""
+        t, out = mp.mpf(0), []
+        for j, d in enumerate(self.kicks):
+            if d != 0:
+                out.append((t, d))
+            if j < len(self.drifts):
+                t += self.drifts[j]
+        return out
+
+    def c(self) -> np.ndarray:
+        return np.array([float(v) for v in self.drifts])
+
+    def d(self) -> np.ndarray:
+        return np.array([float(v) for v in self.kicks])
+
+
+def _bch3(sequence):
+    """Degree-≤3 part of ``log(Π exp(c X))`` in the free algebra of A, B (words → mpf).
+
+    ``sequence`` is ``[(letter, coefficient), …]`` in the order of application; the
+    product is formed in that order (a palindromic sequence gives the same log either way).
+    """
+    def mul(x, y):
+        out = {}
+        for u, a in x.items():
+            for v, b in y.items():
+                if len(u) + len(v) <= 3:
+                    out[u + v] = out.get(u + v, 0) + a * b
+        return out
+
+    Z = {"": mp.mpf(1)}
+    for letter, c in sequence:
+        e = {"": mp.mpf(1), letter: c, letter * 2: c ** 2 / 2, letter * 3: c ** 3 / 6}
+        Z = mul(Z, e)
+    Y = {w: v for w, v in Z.items() if w}
+    Y2 = mul(Y, Y)
+    Y3 = mul(Y2, Y)
+    out = {}
+    for k, (T, s) in enumerate(((Y, 1), (Y2, -mp.mpf(1) / 2), (Y3, mp.mpf(1) / 3))):
+        for w, v in T.items():
+            out[w] = out.get(w, 0) + s * v
+    return out
+
+
+def _sequence(drifts, kicks):
+    seq = []
+    for j, d in enumerate(kicks):
+        if d != 0:
+            seq.append(("B", d))
+        if j < len(drifts) and drifts[j] != 0:
+            seq.append(("A", drifts[j]))
+    return seq
+
+
+@lru_cache(maxsize=None)
+def splitting(name: str) -> Splitting:
+    """The splitting called ``name`` (one of :data:`FAMILIES`), coefficients at :data:`DPS` digits.
+
+    Raises
+    ------
+    InputError
+        An unknown name (the message lists the valid ones).
+    """
+    if name not in FAMILIES:
+        raise InputError(f"unknown Wisdom–Holman splitting {name!r}; valid: {', '.join(FAMILIES)}")
+    fam, n = ("saba", 1) if name == "wisdom-holman" else (name[:4], int(name[4:]))
+    with mp.workdps(DPS + 20):
+        if fam == "saba":
+            x, w = _gauss(n)
+            drifts = [x[0]] + [x[j] - x[j - 1] for j in range(1, n)] + [1 - x[-1]]
+            kicks = [mp.mpf(0)] + list(w) + [mp.mpf(0)]
+            src = f"[LR01] SABA{n}: kicks at the {n} Gauss–Legendre nodes"
+        else:
+            x, w = _lobatto(n)
+            drifts = [x[j + 1] - x[j] for j in range(n)]
+            kicks = list(w)
+            src = f"[LR01] SBAB{n}: kicks at the {n + 1} Gauss–Lobatto nodes"
+        if name == "wisdom-holman":
+            src = "[WH91] drift–kick–drift (= SABA1)"
+        log = _bch3(_sequence(drifts, kicks))
+        g = -log.get("BAB", 0) / 2            # [B,[A,B]] = 2BAB − BBA − ABB
+        return Splitting(name, n, tuple(drifts), tuple(kicks), g, src)
+
+
+def numerical_certificate(s: Splitting) -> dict:
+    """The conditions of ``s`` evaluated at :data:`DPS` digits (numerical, not exact).
+
+    Returns ``{"quadrature": [|Σ d τ^k − 1/(k+1)| for k = 0 … 2n], "epsilon_order": p,
+    "eh2": |coefficient of [A,[A,B]]|, "consistency": (|Σc − 1|, |Σd − 1|), "g": g,
+    "bch_check": how far the degree-3 log is from a Lie element}``.
+    """
+    with mp.workdps(DPS):
+        times = s.kick_times()
+        quad = [abs(sum(d * t ** k for t, d in times) - mp.mpf(1) / (k + 1)) for k in range(2 * s.n + 1)]
+        tol = mp.mpf(10) ** (-(DPS - 10))
+        order = next((k for k, e in enumerate(quad) if e > tol), len(quad))
+        log = _bch3(_sequence(s.drifts, s.kicks))
+        # [A,[A,B]] = AAB − 2ABA + BAA: its coefficient is −(ABA)/2
+        eh2 = abs(log.get("ABA", 0) / 2)
+        # a Lie element: ABB = BBA = −BAB/2 and AAB = BAA = −ABA/2
+        lie = max(abs(log.get("ABB", 0) + log.get("BAB", 0) / 2), abs(log.get("BBA", 0) + log.get("BAB", 0) / 2),
+                  abs(log.get("AAB", 0) + log.get("ABA", 0) / 2), abs(log.get("BAA", 0) + log.get("ABA", 0) / 2))
+        return {"quadrature": [float(e) for e in quad], "epsilon_order": order, "eh2": float(eh2),
+                "consistency": (float(abs(sum(s.drifts) - 1)), float(abs(sum(s.kicks) - 1))),
+                "g": float(s.g), "bch_check": float(lie)}
+
+
+# --- the splitting of H, certified exactly -------------------------------------------------
+
+def _jacobi_matrices(n: int, m):
+    """``(A_q, A_p)`` of the Jacobi map for masses ``m`` (SymPy, one coordinate axis).
+
+    Row 0 is the centre of mass / total momentum; row i ≥ 1 body i relative to the centre
+    of mass of bodies 0…i−1 and its momentum ``(M_{i−1} p_i − m_i P_{i−1})/M_i`` (the formulas
+    :func:`methodgen.kepler_flow.to_jacobi` runs)."""
+    import sympy as sp
+
+    M = [sum(m[: i + 1]) for i in range(n)]
+    Aq = sp.zeros(n, n)
+    Ap = sp.zeros(n, n)
+    for j in range(n):
+        Aq[0, j] = m[j] / M[n - 1]
+        Ap[0, j] = 1
+    for i in range(1, n):
+        Aq[i, i] = 1
+        Ap[i, i] = M[i - 1] / M[i]
+        for j in range(i):
+            Aq[i, j] = -m[j] / M[i - 1]
+            Ap[i, j] = -m[i] / M[i]
+    return Aq, Ap, M
+
+
+def _nbody_expression(system, nbody):
+    """The ``[nbody]`` H in the system's symbols (masses and G: its parameters or numbers)."""
+    import sympy as sp
+
+    def value(v):
+        if isinstance(v, str):
+            return system.symbol(v)
+        return sp.Rational(repr(float(v)))
+
+    G = value(nbody.G)
+    m = [value(v) for v in nbody.masses]
+    q, p = system.q, system.p
+    nb = len(m)
+    H = sum((p[3 * b] ** 2 + p[3 * b + 1] ** 2 + p[3 * b + 2] ** 2) / (2 * m[b]) for b in range(nb))
+    for a in range(nb):
+        for b in range(a + 1, nb):
+            H -= G * m[a] * m[b] / sp.sqrt(sum((q[3 * a + k] - q[3 * b + k]) ** 2 for k in range(3)))
+    if nbody.centre_mass is not None:
+        C = value(nbody.centre_mass)
+        H -= sum(G * C * m[b] / sp.sqrt(sum(q[3 * b + k] ** 2 for k in range(3))) for b in range(nb))
+    return H
+
+
+@lru_cache(maxsize=None)
+def _jacobi_identities(n: int) -> dict:
+    """The exact identities of the Jacobi splitting of n bodies, for symbolic positive masses.
+
+    Returns ``{"canonical": bool, "kinetic": bool, "kepler": bool}``: ``A_p A_qᵀ = I``; the
+    kinetic energy ``Σ p_b²/(2m_b) = P²/(2M) + Σ_{i≥1} p'_i²/(2m'_i)`` (one axis; the others are
+    the same polynomial); ``G M_i m'_i = G m_i M_{i−1}`` (the Kepler term put into ``H_K``
+    is the one ``H_I`` takes back).  Each is decided by ``sympy.cancel`` reducing a rational
+    function to 0: no floating point.
+    """
+    import sympy as sp
+
+    m = sp.symbols(f"m0:{n}", positive=True)
+    P = sp.symbols(f"p0:{n}", real=True)
+    Aq, Ap, M = _jacobi_matrices(n, m)
+    canonical = all(sp.cancel(e) == 0 for e in (Ap * Aq.T - sp.eye(n)))
+    pj = Ap * sp.Matrix(P)
+    mj = [M[n - 1]] + [m[i] * M[i - 1] / M[i] for i in range(1, n)]
+    kin = sum(P[b] ** 2 / (2 * m[b]) for b in range(n)) - sum(pj[i] ** 2 / (2 * mj[i]) for i in range(n))
+    kinetic = sp.cancel(sp.together(kin)) == 0
+    kepler = all(sp.cancel(M[i] * mj[i] - m[i] * M[i - 1]) == 0 for i in range(1, n))
+    return {"canonical": bool(canonical), "kinetic": bool(kinetic), "kepler": bool(kepler)}
+
+
+def certify(system, nbody) -> dict:
+    """Decide exactly that ``system``'s H is the ``[nbody]`` H and that it splits as claimed.
+
+    Returns
+    -------
+    dict
+        ``"splitting"``: the identities of :func:`_jacobi_identities` (all True for a Jacobi
+        splitting; ``"identity map"`` about a fixed centre); ``"hamiltonian"``: ``"symbolic"``
+        (H equals the declared H for every parameter value), ``"at the parameter values"``
+        (equal once the parameters take the scene's values, as exact rationals), or
+        ``False``; ``"numerical"``: :func:`numerical_certificate` is separate.
+    """
+    import sympy as sp
+
+    Hn = _nbody_expression(system, nbody)
+    diff = sp.expand(system.H - Hn)
+    if diff == 0:
+        same = "symbolic"
+    else:
+        vals = {system.symbol(k): sp.Rational(repr(float(v))) for k, v in system.param_values.items()}
+        same = "at the parameter values" if sp.expand(diff.subs(vals)) == 0 else False
+    if nbody.centre_mass is not None:
+        split = "identity map"
+    else:
+        split = _jacobi_identities(len(nbody.masses))
+    return {"hamiltonian": same, "splitting": split}
+
+
+# --- the integrator ------------------------------------------------------------------------
+
+def _check_int(value, what: str, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise InputError(f"{what} must be an integer ≥ {low}, got {value!r}")
+    return int(value)
+
+
+class WisdomHolman:
+    """A Wisdom–Holman splitting of an ``[nbody]`` problem, run by :mod:`methodgen.kepler_flow`.
+
+    Built by :func:`wisdom_holman`.  The state is the system's: ``y = (q, p)`` with body b at
+    ``q[3b:3b+3]``, momentum ``p[3b:3b+3] = m_b v_b``.
+
+    Attributes
+    ----------
+    splitting : Splitting
+    corrector : bool
+    G : float
+    masses : ndarray, shape (N,)
+    centre_mass : float or None
+    epsilon : float
+        ``max_{i≥1} m_i / m_0`` (Jacobi; about a fixed centre ``max m_i / M``): the size of
+        ``H_I`` relative to ``H_K``, on which the splitting's accuracy rests.
+    certificate : dict
+        :func:`certify` (exact) and ``"numerical"``: :func:`numerical_certificate`.
+    TRAITS : dict
+        What the method keeps (symplectic, symmetric, momenta) and its error terms.
+    METHOD : str
+    STATE_NAMES : tuple of str
+    """
+
+    KeplerConvergenceError = KeplerConvergenceError
+    NonFiniteError = NonFiniteError
+
+    def __init__(self, system, nbody, split: Splitting, corrector: bool, certificate: dict):
+        from . import kepler_flow as kf
+
+        self._kf = kf
+        self.system, self.nbody, self.splitting, self.corrector = system, nbody, split, bool(corrector)
+        self.certificate = certificate
+        G, masses, centre = nbody.values(system.param_values)
+        m = np.array(masses, dtype=float)
+        self.G, self.masses, self.centre_mass = G, m, centre
+        n = len(m)
+        self.jacobi = centre is None
+        if self.jacobi:
+            M = np.cumsum(m)
+            mj = np.empty(n)
+            mj[0] = M[-1]
+            mj[1:] = m[1:] * M[:-1] / M[1:]
+            mu = G * M
+            KM = np.zeros(n)
+            KM[1:] = G * m[1:] * M[:-1]
+            self.epsilon = float(np.max(m[1:]) / m[0]) if n > 1 else 0.0
+        else:
+            M, mj, mu, KM = m.copy(), m.copy(), np.full(n, G * centre), np.zeros(n)
+            self.epsilon = float(np.max(m) / centre)
+        self._const = (m, M, mj, mu, KM)
+        self._c, self._d = split.c(), split.d()
+        self._g = float(split.g) if corrector else 0.0
+        self.n_bodies = n
+        self.METHOD = split.name + ("-corrected" if corrector else "")
+        self.STATE_NAMES = tuple(s.name for s in system.q) + tuple(s.name for s in system.p)
+        err = f"O(ε h^{2 * split.n} + ε² h^{4 if corrector else 2})"
+        self.TRAITS = {"symplectic": True, "symmetric": True, "explicit": True,
+                       "kept": ("total linear momentum", "total angular momentum"),
+                       "energy": "not kept (bounded error)", "error": err,
+                       "drifts_per_step": split.stages,
+                       "notes": [f"{split.source}; " + ("with the corrector of [LR01] (g = %.6g)" % self._g
+                                                      if corrector else "without corrector")]}
+        self._key = (id(self), split.name, self.corrector)
+
+    # -- functions of the state --
+
+    def _bodies(self, Y):
+        Y = np.asarray(Y, dtype=float)
+        n = self.n_bodies
+        return Y[..., :3 * n].reshape(Y.shape[:-1] + (n, 3)), Y[..., 3 * n:].reshape(Y.shape[:-1] + (n, 3))
+
+    def hamiltonian(self, Y) -> np.ndarray:
+        """H at the states ``Y`` (any leading shape, last axis the 6N state)."""
+        q, p = self._bodies(Y)
+        m = self.masses
+        H = np.sum(np.sum(p * p, axis=-1) / (2 * m), axis=-1)
+        for a in range(self.n_bodies):
+            for b in range(a + 1, self.n_bodies):
+                H = H - self.G * m[a] * m[b] / np.linalg.norm(q[..., a, :] - q[..., b, :], axis=-1)
+        if self.centre_mass is not None:
+            H = H - np.sum(self.G * self.centre_mass * m / np.linalg.norm(q, axis=-1), axis=-1)
+        return H
+
+    def linear_momentum(self, Y) -> np.ndarray:
+        """Total momentum Σ p_b, shape (..., 3)."""
+        return self._bodies(Y)[1].sum(axis=-2)
+
+    def angular_momentum(self, Y) -> np.ndarray:
+        """Total angular momentum Σ q_b × p_b, shape (..., 3)."""
+        q, p = self._bodies(Y)
+        return np.cross(q, p).sum(axis=-2)
+
+    # -- integration --
+
+    def _kick(self, qj, pj, a, b):
+        m, M, mj, mu, KM = self._const
+        work = np.empty((7, self.n_bodies, 3))
+        self._kf.kick(qj, pj, a, b, m, M, mj, KM, self.G, self.jacobi, work)
+
+    def _carried(self, y0, h, kappa):
+        """Jacobi state of ``y0`` with the output's lagged kick undone."""
+        q, p = self._bodies(y0)
+        qj, pj = np.empty_like(q), np.empty_like(p)
+        m, M = self._const[:2]
+        self._kf.to_jacobi(np.ascontiguousarray(q), np.ascontiguousarray(p), m, M, self.jacobi, qj, pj)
+        a, b = self._d[-1] * h, kappa
+        if a != 0.0 or b != 0.0:
+            self._kick(qj, pj, -a, -b)
+        return qj, pj
+
+    def step(self, y0, h):
+        """One step from ``y0`` (the state after it)."""
+        return self.integrate(y0, h, 1)[-1]
+
+    def integrate(self, y0, h, steps, *, save_every: int = 1, info: dict | None = None) -> np.ndarray:
+        """``steps`` steps of size ``h`` from ``y0``: rows 0, save_every, 2·save_every, … (and the last).
+
+        Parameters
+        ----------
+        y0 : array_like, shape (6N,)
+        h : float
+            Finite and nonzero (negative: backwards in time).
+        steps : int ≥ 0
+        save_every : int ≥ 1
+            Keep every ``save_every``-th state; the final state is always the last row
+            (``steps`` need not be a multiple).
+        info : dict, optional
+            Carries the integrator's own state between calls: a call whose ``y0`` is
+            bitwise the last row of the previous call (same ``h``) continues from it, so a
+            run in chunks equals the run in one piece bitwise.
+
+        Returns
+        -------
+        ndarray, shape (rows, 6N)
+
+        Raises
+        ------
+        KeplerConvergenceError, NonFiniteError
+            With ``.step``, ``.trajectory`` (the rows up to the last good state).
+        InputError
+            A state of the wrong size or not finite, h zero or not finite, bad counts.
+        """
+        y0 = np.asarray(y0, dtype=float)
+        N = self.n_bodies
+        if y0.shape != (6 * N,):
+            raise InputError(f"y0 must have shape ({6 * N},) (q then p of {N} bodies), got {y0.shape}")
+        if not np.all(np.isfinite(y0)):
+            raise InputError("y0 has a non-finite entry")
+        if isinstance(h, bool) or not isinstance(h, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(h) or h == 0:
+            raise InputError(f"h must be a finite nonzero number, got {h!r}")
+        h = float(h)
+        steps = _check_int(steps, "steps", 0)
+        save_every = _check_int(save_every, "save_every", 1)
+        kappa = -0.5 * self._g * h ** 3
+        rec = info.get("wisdom_holman") if isinstance(info, dict) else None
+        if rec is not None and rec["key"] == self._key and rec["h"] == h and np.array_equal(rec["output"], y0):
+            qj, pj = rec["qj"].copy(), rec["pj"].copy()
+        else:
+            qj, pj = self._carried(y0, h, kappa)
+        m, M, mj, mu, KM = self._const
+        full, rest = divmod(steps, save_every)
+        rows = 1 + full + (1 if rest else 0)
+        out = np.empty((rows, 6 * N))
+        out[0] = y0
+        fail = np.zeros(2, dtype=np.int64)
+        done = self._kf.run(qj, pj, m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa,
+                            full * save_every, save_every, out, fail)
+        if done == full * save_every and rest:
+            done += self._kf.run(qj, pj, m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa,
+                                 rest, rest, out[full:], fail)
+        if fail[0]:
+            kept = 1 + done // save_every
+            traj = out[:kept].copy()
+            step = done + 1
+            if fail[0] == 1:
+                body = int(fail[1])
+                exc = KeplerConvergenceError(
+                    f"{self.METHOD}: the Kepler drift of Jacobi body {body} did not converge at step {step} "
+                    f"(h = {h:g}); its universal-variable solve took {self._kf.KEPLER_MAXITER} iterations "
+                    "without reaching round-off (a near-collision or a radius of 0?)")
+                exc.body = body
+            else:
+                exc = NonFiniteError(f"{self.METHOD}: the state became non-finite at step {step} (h = {h:g}): "
+                                     "two bodies collided or a Jacobi radius reached 0")
+            exc.step, exc.trajectory = step, traj
+            raise exc
+        if isinstance(info, dict):
+            info["wisdom_holman"] = {"key": self._key, "h": h, "output": out[-1].copy(), "qj": qj.copy(),
+                                     "pj": pj.copy()}
+        return out
+
+
+def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = True, nbody=None) -> WisdomHolman:
+    """The Wisdom–Holman splitting ``method`` of an ``[nbody]`` problem, certified.
+
+    Parameters
+    ----------
+    scene_or_system : Scene or Hamiltonian
+        A scene with an ``[nbody]`` table, or a system together with ``nbody=``.
+    method : str
+        One of :data:`FAMILIES` (``"wisdom-holman"``, ``"saba1"`` … ``"saba6"``,
+        ``"sbab1"`` … ``"sbab6"``).
+    corrector : bool
+        Apply the [LR01]_ corrector (error ``O(ε h^{2n} + ε² h⁴)`` instead of ``ε² h²``).
+    nbody : methodgen.scene.NBody, optional
+        With a system: its ``[nbody]`` declaration.
+
+    Raises
+    ------
+    MethodNotApplicable
+        No ``[nbody]`` declaration, or a Hamiltonian that is not the declared one (the
+        message says which).
+    InputError
+        An unknown ``method``.
+    """
+    split = splitting(method)
+    system = getattr(scene_or_system, "system", scene_or_system)
+    nb = nbody if nbody is not None else getattr(scene_or_system, "nbody", None)
+    name = getattr(scene_or_system, "name", None) or getattr(system, "name", None) or "this system"
+    if nb is None:
+        raise MethodNotApplicable(f"{method}: {name} declares no [nbody] table (G and the masses); the "
+                                  "Wisdom–Holman splitting applies to N-body gravitational problems only")
+    if getattr(system, "time_transform", None) is not None or getattr(system, "time", None) is not None:
+        raise MethodNotApplicable(f"{method}: {name} is time-transformed or time-dependent; the Wisdom–Holman "
+                                  "splitting applies to the [nbody] Hamiltonian itself")
+    if system.constraints:
+        raise MethodNotApplicable(f"{method}: {name} is constrained; the Wisdom–Holman splitting is for free bodies")
+    cert = certify(system, nb)
+    if not cert["hamiltonian"]:
+        raise MethodNotApplicable(
+            f"{method}: the Hamiltonian of {name} is not the one its [nbody] table declares "
+            "(Σ|p_b|²/(2m_b) − Σ G m_a m_b/|q_a − q_b|, and − Σ G M m_b/|q_b| with a fixed centre), "
+            "neither symbolically nor at its parameter values")
+    if cert["splitting"] != "identity map" and not all(cert["splitting"].values()):   # pragma: no cover
+        raise NumericalError(f"{method}: the Jacobi splitting's identities failed: {cert['splitting']}")
+    G, masses, centre = nb.values(system.param_values)
+    if not (np.isfinite(G) and G > 0) or not all(np.isfinite(v) and v > 0 for v in masses) \
+            or (centre is not None and not (np.isfinite(centre) and centre > 0)):
+        raise MethodNotApplicable(f"{method}: G and every mass must be positive and finite "
+                                  f"(G = {G!r}, masses = {masses!r}, centre = {centre!r})")
+    cert = dict(cert, numerical=numerical_certificate(split))
+    return WisdomHolman(system, nb, split, corrector, cert)
