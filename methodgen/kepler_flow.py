@@ -68,7 +68,7 @@ else:   # pragma: no cover
         return f
 
 #: run()'s status codes.
-STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state"}
+STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or a body at its centre)"}
 
 #: Largest number of iterations of the Kepler solve (Laguerre–Conway, then Newton); it takes
 #: 2–6 at the steps of a converged run.
@@ -206,13 +206,16 @@ def kepler_drift(qj, pj, i, mj, mu, dt):
     ``r0 G1 + η G2 + μ G3 = dt`` (solved by Laguerre–Conway [Conway86]_ to round-off; for a
     bound orbit ``dt`` is first reduced by whole periods), then
     ``r' = f r + g v``, ``v' = ḟ r + ġ v``.  Returns the number of iterations, or −1 when
-    the solve did not reach round-off in :data:`KEPLER_MAXITER` iterations.
+    the solve did not reach round-off in :data:`KEPLER_MAXITER` iterations, −2 when the
+    body's state is not finite or at the centre (nothing is written then).
     """
     x, y, z = qj[i, 0], qj[i, 1], qj[i, 2]
     vx, vy, vz = pj[i, 0] / mj, pj[i, 1] / mj, pj[i, 2] / mj
     r0 = math.sqrt(x * x + y * y + z * z)
     eta = x * vx + y * vy + z * vz
     beta = 2.0 * mu / r0 - (vx * vx + vy * vy + vz * vz)
+    if not (math.isfinite(beta) and math.isfinite(eta) and r0 > 0.0):
+        return -2
     zeta = mu - beta * r0
     tau = dt
     if beta > 0.0:
@@ -272,16 +275,18 @@ def kepler_drift(qj, pj, i, mj, mu, dt):
 @_jit
 def drift(qj, pj, mj, mu, jacobi, dt):
     """The exact flow of ``H_K`` over ``dt``: every Kepler body, and the centre of mass
-    moving freely (Jacobi).  Returns the first failing body's index, or −1."""
+    moving freely (Jacobi).  Returns ``(status, body)``: (0, −1), or the first failing body
+    with status 1 (no convergence) or 2 (a state not finite, or at the centre)."""
     n = qj.shape[0]
     first = 1 if jacobi else 0
     if jacobi:
         for k in range(3):
             qj[0, k] += dt * pj[0, k] / mj[0]
     for i in range(first, n):
-        if kepler_drift(qj, pj, i, mj[i], mu[i], dt) < 0:
-            return i
-    return -1
+        r = kepler_drift(qj, pj, i, mj[i], mu[i], dt)
+        if r < 0:
+            return (1 if r == -1 else 2), i
+    return 0, -1
 
 
 @_jit
@@ -464,9 +469,9 @@ def run(qj, pj, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, 
         for j in range(ns):
             if j > 0 and d[j] != 0.0:
                 kick(qj, pj, d[j] * h, 0.0, m, M, mj, KM, G, jacobi, work)
-            body = drift(qj, pj, mj, mu, jacobi, c[j] * h)
-            if body >= 0:
-                fail[0] = 1
+            st, body = drift(qj, pj, mj, mu, jacobi, c[j] * h)
+            if st != 0:
+                fail[0] = st
                 fail[1] = body
                 qj[:, :] = sq
                 pj[:, :] = sp

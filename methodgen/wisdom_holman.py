@@ -556,6 +556,7 @@ class WisdomHolman:
             else:
                 exc = NonFiniteError(f"{self.METHOD}: the state became non-finite at step {step} (h = {h:g}): "
                                      "two bodies collided or a Jacobi radius reached 0")
+                exc.body = int(fail[1])
             exc.step, exc.trajectory = step, traj
             raise exc
         if isinstance(info, dict):
