@@ -84,6 +84,12 @@ TARGET_ERROR = 1e-10
 TARGET_ENERGY = 1e-14
 #: ``wp["frontier"]``: the final-error levels of the frontier table.
 FRONTIER_LEVELS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
+#: ``--peers`` on a scene with an ``[nbody]`` table of several free bodies: the Wisdom–Holman
+#: splittings run (:mod:`methodgen.wisdom_holman`; with the corrector, except the classic one).
+WH_PEER_FAMILIES = ("wisdom-holman", "sbab3", "sbab4", "sbab5")
+#: Their step ladder: from the resolution limit (``MAX_STEP_FRACTION`` of the shortest period)
+#: down by √2 per point, at most this many points.
+WH_MAX_POINTS = 10
 
 
 def _cpu() -> float:
@@ -760,6 +766,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                 break
     if scene.transformed is not None and scene.transformed.time_transform.form == "log":
         rows += _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress, family_for)
+    rows += _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes)
     for name, fn in (("heyoka", pe.heyoka_rows), ("rebound", pe.rebound_rows)):
         if pe.import_peer(name) is None:
             notes.append(f"{name} is not installed: no {name} rows ({pe.INSTALL_HINT})")
@@ -772,6 +779,61 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
             "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "estimated_steps": estimate,
             "targets": targets(rows), "frontier": frontier(rows)}
+
+
+def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list[dict]:
+    """``--peers`` rows of the Wisdom–Holman splittings (:data:`WH_PEER_FAMILIES`) on a scene whose
+    ``[nbody]`` table has several free bodies (none about a fixed centre: one body about a centre
+    is solved exactly by the Kepler drift, which would not be a comparison).  Timed for the end
+    state (``save_every=steps``), errors from an untimed run keeping every step (the same
+    carried states, the same final row bitwise)."""
+    from . import peers as pe
+    from .errors import MethodgenError
+    from .wisdom_holman import MAX_STEP_FRACTION, wisdom_holman
+
+    nb = scene.nbody
+    if nb is None or nb.centre_mass is not None or len(nb.masses) < 2 or scene.transformed is not None:
+        return []
+    rows = []
+    for family in WH_PEER_FAMILIES:
+        corrected = family != "wisdom-holman"
+        try:
+            wh = wisdom_holman(scene, family, corrector=corrected)
+            top = MAX_STEP_FRACTION * float(np.min(wh.periods(y0)))
+        except MethodgenError as exc:
+            notes.append(f"{family}: not run ({' '.join(str(exc).split())})")
+            return rows
+        label = f"{wh.METHOD} (Wisdom–Holman)"
+        ladder = [top / 2 ** (k / 2) for k in range(2 if quick else WH_MAX_POINTS)]
+        best = math.inf
+        wh.integrate(y0, ladder[0], 1)     # load the compiled runtime outside the timed region
+        for h in ladder:
+            steps = max(1, int(math.ceil(T / h)))
+            try:
+                sec, _ = pe.min_cpu(lambda: wh.integrate(y0, T / steps, steps, save_every=steps))
+                traj = wh.integrate(y0, T / steps, steps)
+            except (RuntimeError, FloatingPointError) as exc:
+                notes.append(f"{label}, h = {T / steps:.4g}: {type(exc).__name__}: "
+                             f"{' '.join(str(exc).split())[:160]}")
+                continue
+            row = {"method": label, "kind": "methodgen", "base_method": family, "order": 2,
+                   "composition": None, "stages": wh.splitting.stages, "backend": wh.BACKEND,
+                   "h": T / steps, "steps": steps, "processed": False, "seconds": sec,
+                   "us_per_step": sec / steps * 1e6, "newton_mean": 0.0,
+                   "epsilon": wh.epsilon, **_errors(base, traj, ref.y, monitors)}
+            rows.append(row)
+            del traj
+            err = row["error"]
+            if not math.isfinite(err):
+                continue
+            if err <= PEER_ERROR_FLOOR:
+                break
+            if best < 1e-8 and err > 0.5 * best:
+                notes.append(f"{label}: stopped at h = {T / steps:.4g}, the error no longer decreases "
+                             f"({err:.1e}; round-off)")
+                break
+            best = min(best, err)
+    return rows
 
 
 def _family_stages(order: int, family: str | None) -> tuple[str | None, int, bool]:

@@ -58,7 +58,7 @@ import numpy as np
 from .errors import InputError, MethodNotApplicable, NumericalError
 
 __all__ = ["FAMILIES", "Splitting", "splitting", "certify", "WisdomHolman", "wisdom_holman",
-           "KeplerConvergenceError", "NonFiniteError"]
+           "KeplerConvergenceError", "NonFiniteError", "ResolutionError", "MAX_STEP_FRACTION"]
 
 #: Working precision (decimal digits) of the coefficients and their conditions.
 DPS = 50
@@ -76,6 +76,17 @@ class KeplerConvergenceError(NumericalError):
 
 class NonFiniteError(NumericalError):
     """The state became inf or NaN (bodies collided: an interaction or a Kepler radius of 0)."""
+
+
+class ResolutionError(NumericalError):
+    """The step is too long for the shortest Kepler period at the initial state (see
+    :data:`MAX_STEP_FRACTION`); ``check_resolution=False`` runs it anyway."""
+
+
+#: A step longer than this fraction of the shortest osculating Kepler period of a Jacobi body
+#: (bound orbits, at the initial state) is refused: beyond it the splitting resonates with the
+#: orbit (on the outer solar system, sbab4 at h = P_Jupiter/17 is 1e-5 off, at P/22 1e-9).
+MAX_STEP_FRACTION = 1 / 8
 
 
 # --- coefficients ------------------------------------------------------------------------
@@ -334,7 +345,7 @@ def _jacobi_identities(n: int) -> dict:
     return {"canonical": bool(canonical), "kinetic": bool(kinetic), "kepler": bool(kepler)}
 
 
-def certify(system, nbody) -> dict:
+def certify(system, nbody, params: dict | None = None) -> dict:
     """Decide exactly that ``system``'s H is the ``[nbody]`` H and that it splits as claimed.
 
     Returns
@@ -343,7 +354,8 @@ def certify(system, nbody) -> dict:
         ``"splitting"``: the identities of :func:`_jacobi_identities` (all True for a Jacobi
         splitting; ``"identity map"`` about a fixed centre); ``"hamiltonian"``: ``"symbolic"``
         (H equals the declared H for every parameter value), ``"at the parameter values"``
-        (equal once the parameters take the scene's values, as exact rationals), or
+        (equal once the parameters take ``params``' values — default the system's — as exact
+        rationals), or
         ``False``; ``"numerical"``: :func:`numerical_certificate` is separate.
     """
     import sympy as sp
@@ -353,7 +365,8 @@ def certify(system, nbody) -> dict:
     if diff == 0:
         same = "symbolic"
     else:
-        vals = {system.symbol(k): sp.Rational(repr(float(v))) for k, v in system.param_values.items()}
+        values = system.param_values if params is None else params
+        vals = {system.symbol(k): sp.Rational(repr(float(v))) for k, v in values.items()}
         same = "at the parameter values" if sp.expand(diff.subs(vals)) == 0 else False
     if nbody.centre_mass is not None:
         split = "identity map"
@@ -396,14 +409,24 @@ class WisdomHolman:
 
     KeplerConvergenceError = KeplerConvergenceError
     NonFiniteError = NonFiniteError
+    ResolutionError = ResolutionError
+    ConvergenceError = KeplerConvergenceError
+    #: What a generated module's ``integrate`` callers read (``methodgen run``): the monitored
+    #: quantities, the step's order in h, no composition, no Newton solver.
+    ORDER = 2
+    COMPOSITION = None
+    DEFAULT_SOLVER = None
+    EXTENDED_BITS = 53
 
-    def __init__(self, system, nbody, split: Splitting, corrector: bool, certificate: dict):
+    def __init__(self, system, nbody, split: Splitting, corrector: bool, certificate: dict,
+                 params: dict | None = None):
         from . import kepler_flow as kf
 
         self._kf = kf
         self.system, self.nbody, self.splitting, self.corrector = system, nbody, split, bool(corrector)
         self.certificate = certificate
-        G, masses, centre = nbody.values(system.param_values)
+        self.params = dict(system.param_values if params is None else params)
+        G, masses, centre = nbody.values(self.params)
         m = np.array(masses, dtype=float)
         self.G, self.masses, self.centre_mass = G, m, centre
         n = len(m)
@@ -425,10 +448,15 @@ class WisdomHolman:
         self._g = float(split.g) if corrector else 0.0
         self.n_bodies = n
         self.METHOD = split.name + ("-corrected" if corrector else "")
+        self.BACKEND = "numba" if kf.HAVE_NUMBA else "python"
+        self.__file__ = kf.__file__
         self.STATE_NAMES = tuple(s.name for s in system.q) + tuple(s.name for s in system.p)
+        self.INVARIANT_NAMES = ("H", "Lx", "Ly", "Lz", "Px", "Py", "Pz")
         err = f"O(ε h^{2 * split.n} + ε² h^{4 if corrector else 2})"
-        self.TRAITS = {"symplectic": True, "symmetric": True, "explicit": True,
+        self.TRAITS = {"symplectic": True, "symmetric": True, "explicit": True, "order": 2,
                        "kept": ("total linear momentum", "total angular momentum"),
+                       # methodgen run's claims: kept to round-off / bounded error
+                       "preserved": ("Lx", "Ly", "Lz", "Px", "Py", "Pz"), "approximate": ("H",),
                        "energy": "not kept (bounded error)", "error": err,
                        "drifts_per_step": split.stages,
                        "notes": [f"{split.source}; " + ("with the corrector of [LR01] (g = %.6g)" % self._g
@@ -463,6 +491,34 @@ class WisdomHolman:
         q, p = self._bodies(Y)
         return np.cross(q, p).sum(axis=-2)
 
+    def invariants(self, Y, params=None) -> dict:
+        """The monitored quantities at the states ``Y``: H, total angular momentum (Lx, Ly, Lz) and
+        total momentum (Px, Py, Pz) (as :data:`INVARIANT_NAMES`)."""
+        self._check_params(params)
+        L, P = self.angular_momentum(Y), self.linear_momentum(Y)
+        return {"H": self.hamiltonian(Y), "Lx": L[..., 0], "Ly": L[..., 1], "Lz": L[..., 2],
+                "Px": P[..., 0], "Py": P[..., 1], "Pz": P[..., 2]}
+
+    def periods(self, y) -> np.ndarray:
+        """Osculating Kepler periods of the Jacobi bodies at the state ``y`` (inf: unbound)."""
+        q, p = self._bodies(np.asarray(y, dtype=float))
+        m, M, mj, mu, KM = self._const
+        qj, pj = np.empty_like(q), np.empty_like(p)
+        self._kf.to_jacobi(np.ascontiguousarray(q), np.ascontiguousarray(p), m, M, self.jacobi, qj, pj)
+        first = 1 if self.jacobi else 0
+        out = []
+        for i in range(first, self.n_bodies):
+            r = float(np.linalg.norm(qj[i]))
+            v2 = float(np.sum((pj[i] / mj[i]) ** 2))
+            beta = 2 * mu[i] / r - v2
+            out.append(2 * np.pi * mu[i] / beta ** 1.5 if beta > 0 else np.inf)
+        return np.array(out)
+
+    def _check_params(self, params):
+        if params is not None and dict(params) != self.params:
+            raise InputError("this Wisdom–Holman integrator was built for the parameter values "
+                             f"{self.params}; build another (wisdom_holman(..., params=...)) for others")
+
     # -- integration --
 
     def _kick(self, qj, pj, a, b):
@@ -481,11 +537,12 @@ class WisdomHolman:
             self._kick(qj, pj, -a, -b)
         return qj, pj
 
-    def step(self, y0, h):
+    def step(self, y0, h, params=None):
         """One step from ``y0`` (the state after it)."""
-        return self.integrate(y0, h, 1)[-1]
+        return self.integrate(y0, h, 1, params)[-1]
 
-    def integrate(self, y0, h, steps, *, save_every: int = 1, info: dict | None = None) -> np.ndarray:
+    def integrate(self, y0, h, steps, params=None, *, save_every: int = 1, info: dict | None = None,
+                  check_resolution: bool = True, extended: bool = False) -> np.ndarray:
         """``steps`` steps of size ``h`` from ``y0``: rows 0, save_every, 2·save_every, … (and the last).
 
         Parameters
@@ -497,10 +554,17 @@ class WisdomHolman:
         save_every : int ≥ 1
             Keep every ``save_every``-th state; the final state is always the last row
             (``steps`` need not be a multiple).
+        params : dict, optional
+            Must be None or the values it was built with (the masses are constants of the run).
         info : dict, optional
             Carries the integrator's own state between calls: a call whose ``y0`` is
             bitwise the last row of the previous call (same ``h``) continues from it, so a
             run in chunks equals the run in one piece bitwise.
+        check_resolution : bool
+            Refuse (:class:`ResolutionError`) a step longer than :data:`MAX_STEP_FRACTION` of the
+            shortest osculating period at ``y0``.
+        extended : bool
+            Must be False (no long-double refinement).
 
         Returns
         -------
@@ -525,6 +589,19 @@ class WisdomHolman:
         h = float(h)
         steps = _check_int(steps, "steps", 0)
         save_every = _check_int(save_every, "save_every", 1)
+        self._check_params(params)
+        if extended:
+            raise InputError(f"{self.METHOD}: extended=True (long double) is not available for the "
+                             "Wisdom–Holman splittings")
+        if check_resolution and steps:
+            P = float(np.min(self.periods(y0))) if self.n_bodies > (0 if not self.jacobi else 1) else np.inf
+            if abs(h) > MAX_STEP_FRACTION * P:
+                exc = ResolutionError(
+                    f"{self.METHOD}: h = {h:g} is longer than 1/{round(1 / MAX_STEP_FRACTION)} of the shortest "
+                    f"Kepler period at y0 ({P:.6g}); the splitting resonates with the orbit there — take "
+                    f"|h| ≤ {MAX_STEP_FRACTION * P:.4g} (or pass check_resolution=False to run it anyway)")
+                exc.step, exc.trajectory = 0, y0[None].copy()
+                raise exc
         kappa = -0.5 * self._g * h ** 3
         rec = info.get("wisdom_holman") if isinstance(info, dict) else None
         if rec is not None and rec["key"] == self._key and rec["h"] == h and np.array_equal(rec["output"], y0):
@@ -565,7 +642,8 @@ class WisdomHolman:
         return out
 
 
-def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = True, nbody=None) -> WisdomHolman:
+def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = True, nbody=None,
+                  params: dict | None = None) -> WisdomHolman:
     """The Wisdom–Holman splitting ``method`` of an ``[nbody]`` problem, certified.
 
     Parameters
@@ -579,6 +657,8 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         Apply the [LR01]_ corrector (error ``O(ε h^{2n} + ε² h⁴)`` instead of ``ε² h²``).
     nbody : methodgen.scene.NBody, optional
         With a system: its ``[nbody]`` declaration.
+    params : dict, optional
+        Parameter values (default: the system's); the masses and G are read from them.
 
     Raises
     ------
@@ -600,7 +680,13 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
                                   "splitting applies to the [nbody] Hamiltonian itself")
     if system.constraints:
         raise MethodNotApplicable(f"{method}: {name} is constrained; the Wisdom–Holman splitting is for free bodies")
-    cert = certify(system, nb)
+    values = dict(system.param_values)
+    if params:
+        unknown = sorted(set(params) - set(values))
+        if unknown:
+            raise InputError(f"unknown parameter(s) {', '.join(unknown)}; the system's: {', '.join(values)}")
+        values.update({k: float(v) for k, v in params.items()})
+    cert = certify(system, nb, values)
     if not cert["hamiltonian"]:
         raise MethodNotApplicable(
             f"{method}: the Hamiltonian of {name} is not the one its [nbody] table declares "
@@ -608,10 +694,10 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
             "neither symbolically nor at its parameter values")
     if cert["splitting"] != "identity map" and not all(cert["splitting"].values()):   # pragma: no cover
         raise NumericalError(f"{method}: the Jacobi splitting's identities failed: {cert['splitting']}")
-    G, masses, centre = nb.values(system.param_values)
+    G, masses, centre = nb.values(values)
     if not (np.isfinite(G) and G > 0) or not all(np.isfinite(v) and v > 0 for v in masses) \
             or (centre is not None and not (np.isfinite(centre) and centre > 0)):
         raise MethodNotApplicable(f"{method}: G and every mass must be positive and finite "
                                   f"(G = {G!r}, masses = {masses!r}, centre = {centre!r})")
     cert = dict(cert, numerical=numerical_certificate(split))
-    return WisdomHolman(system, nb, split, corrector, cert)
+    return WisdomHolman(system, nb, split, corrector, cert, values)

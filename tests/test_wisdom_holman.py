@@ -438,3 +438,90 @@ def test_outer_solar_system_with_the_corrector():
     plain = W.wisdom_holman(sc, "sbab4", corrector=False)
     ec, ep = error(corr, y0, ref, 2.0e4, 111), error(plain, y0, ref, 2.0e4, 111)
     assert ec < 1e-9 and ep > 100 * ec, (ec, ep)
+
+
+# --- resolution, parameters, the command line, the bench ---------------------------------------------
+
+def test_a_step_beyond_the_resolution_limit_is_refused(mild):
+    system, nbody, y0 = mild
+    wh = W.wisdom_holman(system, "sbab3", nbody=nbody)
+    P = float(np.min(wh.periods(y0)))
+    with pytest.raises(W.ResolutionError, match="shortest Kepler period") as err:
+        wh.integrate(y0, 0.2 * P, 3)
+    assert err.value.step == 0 and np.array_equal(err.value.trajectory, y0[None])
+    # negative control: just inside the limit it runs, and check_resolution=False runs it anyway
+    assert wh.integrate(y0, 0.12 * P, 3).shape == (4, 18)
+    assert wh.integrate(y0, 0.2 * P, 3, check_resolution=False).shape == (4, 18)
+
+
+def test_parameters_are_the_integrators_constants(mild):
+    system, nbody, y0 = mild
+    heavy = W.wisdom_holman(system, "saba2", nbody=nbody, params={"m1": 2e-3})
+    assert heavy.masses[1] == 2e-3 and heavy.certificate["hamiltonian"] == "symbolic"
+    base = W.wisdom_holman(system, "saba2", nbody=nbody)
+    assert not np.array_equal(heavy.integrate(y0, 0.1, 5)[-1], base.integrate(y0, 0.1, 5)[-1])
+    with pytest.raises(InputError, match="built for the parameter values"):
+        base.integrate(y0, 0.1, 5, {"m1": 2e-3})
+    with pytest.raises(InputError, match="unknown parameter"):
+        W.wisdom_holman(system, "saba2", nbody=nbody, params={"mass": 1.0})
+    with pytest.raises(MethodNotApplicable, match="positive and finite"):
+        W.wisdom_holman(system, "saba2", nbody=nbody, params={"m1": -1.0})
+
+
+def test_cli_run(capsys, tmp_path):
+    from helpers import cli_main, one_line, strict_json
+
+    code, out, err = cli_main(capsys, "run", "outer-solar-system", "--method", "sbab4", "--h", "180",
+                              "--steps", "200", "--json")
+    assert code == 0, err
+    rep = strict_json(out)
+    assert rep["method"] == "sbab4" and rep["steps_done"] == 200
+    inv = rep["invariants"]
+    assert inv["Px"]["claim"] == "exact" and inv["H"]["claim"] == "approximate"
+    assert inv["Lz"]["max_rel_error"] < 1e-13 and inv["H"]["max_rel_error"] < 1e-9
+    # chunked and saved: the same final state
+    code, out, err = cli_main(capsys, "run", "outer-solar-system", "--method", "sbab4", "--h", "180",
+                              "--steps", "200", "--chunk", "30", "--save", tmp_path / "t.npz", "--json")
+    assert code == 0 and strict_json(out)["y_final"] == rep["y_final"]
+    for argv, want, status in [
+        (("--method", "sbab4", "--h", "900", "--steps", "3"), "pass --no-check-resolution", 3),
+        (("--method", "sbab4", "--order", "4"), "--order does not apply", 2),
+        (("--method", "saba9"), "unknown method 'saba9'", 2),
+        (("--method", "saba2", "--param", "m1=-1"), "positive and finite", 2),
+    ]:
+        code, out, err = cli_main(capsys, "run", "outer-solar-system", *argv)
+        assert code == status and want in one_line(err), err
+    code, out, err = cli_main(capsys, "run", "henon-heiles", "--method", "sbab4")
+    assert code == 2 and "declares no [nbody] table" in one_line(err)
+
+
+def test_bench_rows(tmp_path):
+    """bench --peers' Wisdom–Holman rows on a star with two planets (quick ladder), timed for the end
+    state, their errors from a run keeping every step; none about a fixed centre."""
+    from methodgen import bench
+    from methodgen.build import build
+    from methodgen.scene import load_scene
+
+    system, nbody, y0 = star_and_planets(1e-3)
+    text = "\n".join([
+        'name = "star2"', 'description = "a star and two planets"', "[system]",
+        f'H = "{system.source}"', f"q = {[s.name for s in system.q]}", f"p = {[s.name for s in system.p]}",
+        "[params]", *(f"{k} = {v!r}" for k, v in system.param_values.items()),
+        "[nbody]", 'G = "G"', 'masses = ["m0", "m1", "m2"]',
+        "[run]", 'method = "stormer-verlet"', "h = 0.05", "steps = 40", f"y0 = {list(map(float, y0))}"])
+    path = tmp_path / "star2.toml"
+    path.write_text(text)
+    scene = load_scene(path)
+    base = build(scene.system, "stormer-verlet", path=tmp_path / "sv.py")
+    ref = bench.reference(scene.system, y0, 2.0)
+    notes = []
+    rows = bench._wisdom_holman_rows(scene, y0, 2.0, ref, None, base, True, notes)
+    assert {r["base_method"] for r in rows} == set(bench.WH_PEER_FAMILIES) and not notes
+    for r in rows:
+        assert r["kind"] == "methodgen" and r["seconds"] >= 0 and math.isfinite(r["error"])
+        assert r["h"] <= W.MAX_STEP_FRACTION * 2 * math.pi * 1.5 ** 1.5
+    best = min(r["error"] for r in rows if r["base_method"] == "sbab4")
+    worst = min(r["error"] for r in rows if r["base_method"] == "wisdom-holman")
+    assert best < worst / 100                                  # the corrected high-order family pays
+    assert bench._wisdom_holman_rows(load_scene("kepler"), np.array(load_scene("kepler").y0), 1.0, ref,
+                                     None, base, True, notes) == []

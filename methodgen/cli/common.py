@@ -99,7 +99,7 @@ def dump_json(obj) -> str:
     return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
 
 
-NUMERICAL_ERRORS = ("ConvergenceError", "NonFiniteError", "ResolutionError")
+NUMERICAL_ERRORS = ("ConvergenceError", "NonFiniteError", "ResolutionError", "KeplerConvergenceError")
 
 
 def cli_advice(text: str) -> str:

@@ -19,11 +19,25 @@ from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
 from ..compositions import PROCESSED_FAMILIES
 from ..schemes import METHODS, composition_for, method_key, scheme_options
+from ..wisdom_holman import FAMILIES as WH_FAMILIES
 from ..stats import ErrorMax
 from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
                      apply_overrides, check_output_file, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
                      print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
+
+
+def _check_splitting_args(method, order, composition, stages, extended, scene) -> None:
+    """Refuse what a Wisdom–Holman splitting does not take (one line naming the option)."""
+    for flag, value in (("--order", order), ("--composition", composition), ("--stages", stages)):
+        if value is not None:
+            raise InputError(f"{flag} does not apply to the Wisdom–Holman splitting {method} (its accuracy is "
+                             "chosen by the family: saba1…saba6, sbab1…sbab6)")
+    if extended:
+        raise InputError(f"--extended is not available for the Wisdom–Holman splitting {method}")
+    if scene.transformed is not None:
+        raise InputError(f"the Wisdom–Holman splitting {method} integrates the [nbody] Hamiltonian itself, "
+                         "not a time transformation of it (pass --time-transform none)")
 
 
 class RunFailure(Exception):
@@ -282,13 +296,21 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         check_available()  # a missing matplotlib is reported before the run, not after
     scene = resolve_time_transform(load_scene(scene_name), time_transform)
     method = method or scene.method
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
-    order, composition = resolve_order(scene, order, composition)
-    options = scene.options(method, resolve_stages(scene, [method], stages))
+    splitting = method in WH_FAMILIES
+    if splitting:
+        # Wisdom–Holman: its own runtime (methodgen.wisdom_holman), no generated module
+        _check_splitting_args(method, order, composition, stages, extended, scene)
+        order, composition, options = 2, None, {}
+    elif method not in METHODS:
+        raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}; for an [nbody] "
+                         f"scene also the Wisdom–Holman splittings: {', '.join(WH_FAMILIES)}")
+    else:
+        order, composition = resolve_order(scene, order, composition)
+        options = scene.options(method, resolve_stages(scene, [method], stages))
     # a processed composition is three modules in the cache (methodgen.processing), no one scheme
     processed = composition in PROCESSED_FAMILIES
-    key = (method_key(method, None, scheme_options(method, options)) + f"-order{order}-{composition}"
+    key = (method if splitting else
+           method_key(method, None, scheme_options(method, options)) + f"-order{order}-{composition}"
            if processed else method_key(method, composition_for(order, composition), scheme_options(method, options)))
     h_given = h is not None
     h = scene.h if h is None else h
@@ -334,9 +356,14 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     system = scene.run_system
     if scene.transformed is not None:
         check_g_positive(system, scene.y0, params)
-    with transformed_context(scene):
-        module = build(system, method, path=None if processed else scene_module_path(scene, key, backend, system=system),
-                       backend=backend, order=order, composition=composition, **options)
+    if splitting:
+        from ..wisdom_holman import wisdom_holman
+        module = wisdom_holman(scene, method, params=params)
+        params = None    # the masses are the integrator's constants (checked against these values)
+    else:
+        with transformed_context(scene):
+            module = build(system, method, path=None if processed else scene_module_path(scene, key, backend, system=system),
+                           backend=backend, order=order, composition=composition, **options)
     if extended and getattr(module, "PROJECTED", None):
         # the projected loop has no long-double refinement (integrate() refuses extended=True)
         raise InputError(f"--extended is not available for a projected method ({method}): its "
