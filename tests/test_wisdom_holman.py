@@ -525,3 +525,26 @@ def test_bench_rows(tmp_path):
     assert best < worst / 100                                  # the corrected high-order family pays
     assert bench._wisdom_holman_rows(load_scene("kepler"), np.array(load_scene("kepler").y0), 1.0, ref,
                                      None, base, True, notes) == []
+
+
+def test_cli_verify(capsys, monkeypatch):
+    from helpers import cli_main, one_line, strict_json
+
+    code, out, err = cli_main(capsys, "verify", "outer-solar-system", "--method", "sbab4", "--json")
+    assert code == 0, err
+    rep = strict_json(out)
+    kinds = {c["claim"].split(":")[0]: (c["status"], c["kind"]) for c in rep["certificates"]}
+    assert kinds["H is the [nbody] Hamiltonian"] == ("proved", "exact")
+    assert ("proved", "numerical") in kinds.values() and ("not claimed", "argument") in kinds.values()
+    code, out, err = cli_main(capsys, "verify", "outer-solar-system", "--method", "sbab4", "--order", "4")
+    assert code == 2 and "--order does not apply" in one_line(err)
+    # negative control: a splitting whose order condition fails is reported refuted (exit 1)
+    real = W.numerical_certificate
+
+    def broken(s):
+        c = real(s)
+        return dict(c, epsilon_order=c["epsilon_order"] - 1)
+
+    monkeypatch.setattr(W, "numerical_certificate", broken)
+    code, out, err = cli_main(capsys, "verify", "outer-solar-system", "--method", "sbab4")
+    assert code == 1 and "[refuted, numerical] ε-order 8" in out

@@ -46,6 +46,10 @@ def cmd_verify(args) -> int:
     from ..schemes import composition_for, discretize
     from ..verify import verify
 
+    from ..wisdom_holman import FAMILIES as WH_FAMILIES
+
+    if args.method in WH_FAMILIES:
+        return _verify_splitting(args)
     # --time-transform over the scene's [run] time_transform: the transformed system K is verified.
     scene = resolve_time_transform(load_scene(args.scene), getattr(args, "time_transform", None))
     system = scene.run_system
@@ -108,6 +112,35 @@ def cmd_verify(args) -> int:
             else:
                 print(r)
     return {"ok": 0, "refuted": 1}.get(verdict, 3)
+
+
+def _verify_splitting(args) -> int:
+    """``verify SCENE --method saba3``: the Wisdom–Holman splitting's claims
+    (:func:`methodgen.wisdom_holman.claims`)."""
+    from .common import dump_json
+    from ..errors import InputError
+    from ..scene import load_scene
+    from ..wisdom_holman import claims, wisdom_holman
+
+    for flag, value in (("--order", args.order), ("--composition", args.composition),
+                        ("--stages", getattr(args, "stages", None)),
+                        ("--time-transform", getattr(args, "time_transform", None))):
+        if value is not None:
+            raise InputError(f"{flag} does not apply to the Wisdom–Holman splitting {args.method}")
+    scene = load_scene(args.scene)
+    wh = wisdom_holman(scene, args.method)
+    found = claims(wh)
+    ok = not any(c["status"] == "refuted" for c in found)
+    verdict = "ok" if ok else "refuted"
+    if args.json:
+        print(dump_json({"ok": ok, "verdict": verdict, "scene": scene.name, "method": wh.METHOD,
+                         "certificates": found}))
+    else:
+        print(f"{wh.METHOD} on {scene.name}: {wh.splitting.source}; ε = {wh.epsilon:.3g}")
+        for c in found:
+            print(f"  [{c['status']}, {c['kind']}] {c['claim']}: {c['detail']}")
+        print(f"verdict: {verdict}")
+    return 0 if ok else 1
 
 
 def add_parser(sub) -> None:
