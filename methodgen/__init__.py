@@ -16,6 +16,7 @@ build(system, method, path=None, backend="numpy") -> module  (reuses an up-to-da
 build_text(H, q, p, method, params=..., ...) -> module  (warm start: no SymPy when the module is cached)
 verify(scheme) -> Report                        (exact certificates of the method's claims)
 load_scene(name_or_path) -> Scene
+wisdom_holman(scene, "sbab4") -> WisdomHolman  (Wisdom–Holman splittings of [nbody] scenes)
 methods() / scenes()
 
 ``import methodgen`` imports numpy but not SymPy: the names that need SymPy
@@ -32,7 +33,7 @@ __all__ = [
     "__version__", "Hamiltonian", "PoissonSystem", "discretize", "generate", "build", "build_text",
     "Scheme", "Traits", "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
     "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
-    "GenerationError", "time_transform", "autonomise",
+    "GenerationError", "time_transform", "autonomise", "wisdom_holman",
 ]
 
 
@@ -49,7 +50,7 @@ def _lazy_names():
         "discretize": ".schemes", "method_names": ".schemes",
         "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
         "autonomise": ".timetransform", "time_transform": ".timetransform",
-        "verify": ".verify",
+        "verify": ".verify", "wisdom_holman": ".nbody",
     }
     found: list[frozenset] = []
 

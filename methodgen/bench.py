@@ -85,7 +85,7 @@ TARGET_ENERGY = 1e-14
 #: ``wp["frontier"]``: the final-error levels of the frontier table.
 FRONTIER_LEVELS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 #: ``--peers`` on a scene with an ``[nbody]`` table of several free bodies: the Wisdom–Holman
-#: splittings run (:mod:`methodgen.wisdom_holman`; with the corrector, except the classic one).
+#: splittings run (:mod:`methodgen.nbody`; with the corrector, except the classic one).
 WH_PEER_FAMILIES = ("wisdom-holman", "sbab3", "sbab4", "sbab5")
 #: Their step ladder: from the resolution limit (``MAX_STEP_FRACTION`` of the shortest period)
 #: down by √2 per point, at most this many points.
@@ -789,7 +789,7 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
     carried states, the same final row bitwise)."""
     from . import peers as pe
     from .errors import MethodgenError
-    from .wisdom_holman import MAX_STEP_FRACTION, wisdom_holman
+    from .nbody import MAX_STEP_FRACTION, wisdom_holman
 
     nb = scene.nbody
     if nb is None or nb.centre_mass is not None or len(nb.masses) < 2 or scene.transformed is not None:

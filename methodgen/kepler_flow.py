@@ -3,7 +3,7 @@
 An ``[nbody]`` Hamiltonian splits as ``H = H_K + H_I`` where ``H_K`` is a sum of
 independent Kepler problems in Jacobi coordinates (or, about a fixed centre, in the
 coordinates themselves) and ``H_I`` depends on the positions only
-(:mod:`methodgen.wisdom_holman` derives and certifies the splitting).  This module runs
+(:mod:`methodgen.nbody` derives and certifies the splitting).  This module runs
 the splitting: the flow of ``H_K`` is solved exactly (universal variables), the flow of
 ``H_I`` is a kick, and the corrector of [LR01]_ is a kick by the gradient of
 ``C = Σ_i |∂H_I/∂q'_i|² / m'_i``, computed exactly as ``2 Hess(H_I) M'⁻¹ ∇H_I``.

@@ -1,4 +1,4 @@
-"""Wisdom–Holman splittings of [nbody] problems (methodgen.wisdom_holman, methodgen.kepler_flow).
+"""Wisdom–Holman splittings of [nbody] problems (methodgen.nbody, methodgen.kepler_flow).
 
 Numerical checks are labelled as such; the exact ones are SymPy reductions to 0.
 """
@@ -14,7 +14,7 @@ import pytest
 
 import methodgen as mg
 from methodgen import kepler_flow as kf
-from methodgen import wisdom_holman as W
+from methodgen import nbody as W
 from methodgen.errors import InputError, MethodNotApplicable
 from methodgen.scene import NBody
 

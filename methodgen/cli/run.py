@@ -19,7 +19,7 @@ from ..runio import ChunkWriter
 from ..scene import check_g_positive, load_scene
 from ..compositions import PROCESSED_FAMILIES
 from ..schemes import METHODS, composition_for, method_key, scheme_options
-from ..wisdom_holman import FAMILIES as WH_FAMILIES
+from ..nbody import FAMILIES as WH_FAMILIES
 from ..stats import ErrorMax
 from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
                      apply_overrides, check_output_file, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
@@ -298,7 +298,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     method = method or scene.method
     splitting = method in WH_FAMILIES
     if splitting:
-        # Wisdom–Holman: its own runtime (methodgen.wisdom_holman), no generated module
+        # Wisdom–Holman: its own runtime (methodgen.nbody), no generated module
         _check_splitting_args(method, order, composition, stages, extended, scene)
         order, composition, options = 2, None, {}
     elif method not in METHODS:
@@ -357,7 +357,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if scene.transformed is not None:
         check_g_positive(system, scene.y0, params)
     if splitting:
-        from ..wisdom_holman import wisdom_holman
+        from ..nbody import wisdom_holman
         module = wisdom_holman(scene, method, params=params)
         params = None    # the masses are the integrator's constants (checked against these values)
     else:

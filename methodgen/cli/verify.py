@@ -46,7 +46,7 @@ def cmd_verify(args) -> int:
     from ..schemes import composition_for, discretize
     from ..verify import verify
 
-    from ..wisdom_holman import FAMILIES as WH_FAMILIES
+    from ..nbody import FAMILIES as WH_FAMILIES
 
     if args.method in WH_FAMILIES:
         return _verify_splitting(args)
@@ -116,11 +116,11 @@ def cmd_verify(args) -> int:
 
 def _verify_splitting(args) -> int:
     """``verify SCENE --method saba3``: the Wisdom–Holman splitting's claims
-    (:func:`methodgen.wisdom_holman.claims`)."""
+    (:func:`methodgen.nbody.claims`)."""
     from .common import dump_json
     from ..errors import InputError
     from ..scene import load_scene
-    from ..wisdom_holman import claims, wisdom_holman
+    from ..nbody import claims, wisdom_holman
 
     for flag, value in (("--order", args.order), ("--composition", args.composition),
                         ("--stages", getattr(args, "stages", None)),
