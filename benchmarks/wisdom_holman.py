@@ -29,7 +29,7 @@ from methodgen import peers
 from methodgen.nbody import MAX_STEP_FRACTION, wisdom_holman
 
 T = 2.0e5
-LEVELS = (1e-6, 1e-8, 1e-9, 1e-10, 1e-11)
+LEVELS = (1e-6, 1e-8, 1e-9, 1e-10, 1e-11, 4e-12)
 FAMILIES = (("wisdom-holman", False), ("saba3", True), ("saba4", True), ("sbab3", True), ("sbab4", True),
             ("sbab5", True))
 
@@ -44,8 +44,8 @@ def ours(scene, y0, ref):
         wh = wisdom_holman(scene, family, corrector=corr)
         top = MAX_STEP_FRACTION * float(np.min(wh.periods(y0)))
         wh.integrate(y0, top, 1)
-        for k in range(12):
-            steps = int(math.ceil(T / (top / 2 ** (k / 2))))
+        for k in range(12 if family == "wisdom-holman" else 24):
+            steps = int(math.ceil(T / (top / 2 ** (k / 4 if corr else k / 2))))
             h = T / steps
             cpu, Y = peers.min_cpu(lambda: wh.integrate(y0, h, steps, save_every=steps), repeats=5)
             traj = wh.integrate(y0, h, steps)
@@ -55,7 +55,7 @@ def ours(scene, y0, ref):
             rows.append(row)
             print(f"{row['method']:24s} h={h:8.2f} cpu={cpu:.4f} err={row['error']:.2e} dE={row['energy_rel']:.1e}",
                   flush=True)
-            if row["error"] < 3e-11:
+            if row["error"] < 2e-12:
                 break
     return rows
 

@@ -419,11 +419,12 @@ class WisdomHolman:
     EXTENDED_BITS = 53
 
     def __init__(self, system, nbody, split: Splitting, corrector: bool, certificate: dict,
-                 params: dict | None = None):
+                 params: dict | None = None, compensated: bool = True):
         from . import kepler_flow as kf
 
         self._kf = kf
         self.system, self.nbody, self.splitting, self.corrector = system, nbody, split, bool(corrector)
+        self.compensated = bool(compensated)
         self.certificate = certificate
         self.params = dict(system.param_values if params is None else params)
         G, masses, centre = nbody.values(self.params)
@@ -462,7 +463,7 @@ class WisdomHolman:
                        "drifts_per_step": split.stages,
                        "notes": [f"{split.source}; " + ("with the corrector of [LR01] (g = %.6g)" % self._g
                                                       if corrector else "without corrector")]}
-        self._key = (id(self), split.name, self.corrector)
+        self._key = (id(self), split.name, self.corrector, self.compensated)
 
     # -- functions of the state --
 
@@ -525,7 +526,7 @@ class WisdomHolman:
     def _kick(self, qj, pj, a, b):
         m, M, mj, mu, KM = self._const
         work = np.empty((7, self.n_bodies, 3))
-        self._kf.kick(qj, pj, a, b, m, M, mj, KM, self.G, self.jacobi, work)
+        self._kf.kick(qj, pj, np.zeros_like(pj), a, b, m, M, mj, KM, self.G, self.jacobi, work)
 
     def _carried(self, y0, h, kappa):
         """Jacobi state of ``y0`` with the output's lagged kick undone."""
@@ -606,20 +607,21 @@ class WisdomHolman:
         kappa = -0.5 * self._g * h ** 3
         rec = info.get("wisdom_holman") if isinstance(info, dict) else None
         if rec is not None and rec["key"] == self._key and rec["h"] == h and np.array_equal(rec["output"], y0):
-            qj, pj = rec["qj"].copy(), rec["pj"].copy()
+            qj, pj, cq, cp = (rec[k].copy() for k in ("qj", "pj", "cq", "cp"))
         else:
             qj, pj = self._carried(y0, h, kappa)
+            cq, cp = np.zeros_like(qj), np.zeros_like(pj)
         m, M, mj, mu, KM = self._const
         full, rest = divmod(steps, save_every)
         rows = 1 + full + (1 if rest else 0)
         out = np.empty((rows, 6 * N))
         out[0] = y0
         fail = np.zeros(2, dtype=np.int64)
-        done = self._kf.run(qj, pj, m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa,
-                            full * save_every, save_every, out, fail)
+        done = self._kf.run(qj, pj, cq, cp, m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa,
+                            full * save_every, save_every, out, fail, self.compensated)
         if done == full * save_every and rest:
-            done += self._kf.run(qj, pj, m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa,
-                                 rest, rest, out[full:], fail)
+            done += self._kf.run(qj, pj, cq, cp, m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa,
+                                 rest, rest, out[full:], fail, self.compensated)
         if fail[0]:
             kept = 1 + done // save_every
             traj = out[:kept].copy()
@@ -639,12 +641,12 @@ class WisdomHolman:
             raise exc
         if isinstance(info, dict):
             info["wisdom_holman"] = {"key": self._key, "h": h, "output": out[-1].copy(), "qj": qj.copy(),
-                                     "pj": pj.copy()}
+                                     "pj": pj.copy(), "cq": cq.copy(), "cp": cp.copy()}
         return out
 
 
 def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = True, nbody=None,
-                  params: dict | None = None) -> WisdomHolman:
+                  params: dict | None = None, compensated: bool = True) -> WisdomHolman:
     """The Wisdom–Holman splitting ``method`` of an ``[nbody]`` problem, certified.
 
     Parameters
@@ -660,6 +662,12 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         With a system: its ``[nbody]`` declaration.
     params : dict, optional
         Parameter values (default: the system's); the masses and G are read from them.
+    compensated : bool
+        Add every drift's and kick's increment to the state with compensated summation
+        (Kahan; the compensations carried from step to step and, with ``info``, chunk to
+        chunk).  Measured on the outer solar system (sbab4, T = 2·10⁵ days): the final error
+        goes on decreasing like ε² h⁴ to 1.5e-12 at h = 65 days, where plain sums stop at a
+        round-off floor of ~2e-11; it costs ~20 % per step.
 
     Raises
     ------
@@ -701,7 +709,7 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         raise MethodNotApplicable(f"{method}: G and every mass must be positive and finite "
                                   f"(G = {G!r}, masses = {masses!r}, centre = {centre!r})")
     cert = dict(cert, numerical=numerical_certificate(split))
-    return WisdomHolman(system, nb, split, corrector, cert, values)
+    return WisdomHolman(system, nb, split, corrector, cert, values, compensated)
 
 
 def claims(wh: WisdomHolman) -> list[dict]:
