@@ -575,3 +575,22 @@ def test_compensated_summation_removes_the_roundoff_floor():
     y = wh.integrate(y0, T / steps, 1000, save_every=1000, info=info)[-1]
     y = wh.integrate(y, T / steps, steps - 1000, save_every=steps - 1000, info=info)[-1]
     assert np.array_equal(y, end)
+
+
+def test_a_scene_of_splittings(capsys, tmp_path):
+    """A scene file whose [run] method is a splitting: run and verify take it; methods lists them."""
+    from helpers import cli_main, strict_json
+
+    from methodgen.scene import builtin_scene_dir
+
+    text = (builtin_scene_dir() / "outer-solar-system.toml").read_text()
+    text = text.replace('method = ["energy-momentum", "stormer-verlet"]', 'method = "sbab3"')
+    text = text.replace('name = "outer-solar-system"', 'name = "oss-splitting"')
+    path = tmp_path / "oss.toml"
+    path.write_text(text)
+    code, out, err = cli_main(capsys, "run", path, "--h", "135", "--steps", "50", "--json")
+    assert code == 0 and strict_json(out)["method"] == "sbab3", err
+    code, out, err = cli_main(capsys, "verify", path, "--json")
+    assert code == 0 and strict_json(out)["method"] == "sbab3-corrected", err
+    code, out, err = cli_main(capsys, "methods", "--json")
+    assert "sbab4" in strict_json(out)["nbody"]["splittings"]

@@ -36,8 +36,11 @@ def cmd_methods(args) -> int:
     comp = {"orders": list(ORDERS), "families": {f: list(o) for f, o in ALL_FAMILIES.items()},
             "default_family": {str(o): DEFAULT_FAMILY[o] for o in high},
             "composable": [r["name"] for r in rows if r["composable"]]}
+    from ..nbody import FAMILIES as WH_FAMILIES
+    nbody = {"splittings": list(WH_FAMILIES), "applies_to": "scenes with an [nbody] table",
+             "commands": ["run", "verify", "bench --peers"]}
     if args.json:
-        print(json.dumps({"methods": rows, "compositions": comp}))
+        print(json.dumps({"methods": rows, "compositions": comp, "nbody": nbody}))
     else:
         for r in rows:
             print(f"{r['name']:<18} {r['summary']}")
@@ -57,6 +60,8 @@ def cmd_methods(args) -> int:
         print(f"  processed (a kernel between two processors, any composable method; not symmetric, "
               f"invariants and symplecticity kept; pays off when few rows are kept): "
               f"{', '.join(PROCESSED_FAMILIES)}")
+        print(f"\n[nbody] scenes (run, verify, bench --peers): Wisdom–Holman splittings in Jacobi coordinates, "
+              f"Kepler flows solved exactly, with the Laskar–Robutel corrector: {', '.join(WH_FAMILIES)}")
     return 0
 
 

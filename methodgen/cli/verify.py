@@ -13,6 +13,7 @@ group by claim group (never to stdout).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 
 
@@ -52,6 +53,16 @@ def cmd_verify(args) -> int:
         return _verify_splitting(args)
     # --time-transform over the scene's [run] time_transform: the transformed system K is verified.
     scene = resolve_time_transform(load_scene(args.scene), getattr(args, "time_transform", None))
+    splittings = [m for m in scene.methods if m in WH_FAMILIES]
+    if splittings and not args.method:
+        others = [m for m in scene.methods if m not in WH_FAMILIES]
+        if not others:   # a scene of Wisdom–Holman splittings only: the first one's claims
+            args.method = splittings[0]
+            return _verify_splitting(args)
+        from .common import print_note
+        print_note(f"the Wisdom–Holman splitting(s) {', '.join(splittings)} of this scene are verified with "
+                   f"--method {splittings[0]}; verifying {', '.join(others)}")
+        scene = dataclasses.replace(scene, methods=tuple(others))
     system = scene.run_system
     # --order/--composition over the scene's [run] order (one-line errors, exit 2).
     order, composition = resolve_order(scene, args.order, args.composition)
