@@ -72,7 +72,8 @@ else:   # pragma: no cover
     _inline = _jit
 
 #: run()'s status codes.
-STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or a body at its centre)"}
+STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or a body at its centre)",
+          4: "a kick changed a Jacobi momentum by more than the limit (a close encounter)"}
 
 #: Largest number of iterations of the Kepler solve (Laguerre–Conway, then Newton); it takes
 #: 2–6 at the steps of a converged run.
@@ -428,6 +429,25 @@ def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
 
 
 @_jit
+def _kick_size(pj, work, a, b, first):
+    """``(max_i |Δp'_i| / |p'_i|, i)`` of the kick just made (``work`` as :func:`kick` left it)."""
+    gj, hj = work[2], work[6]
+    worst = 0.0
+    body = -1
+    for i in range(first, pj.shape[0]):
+        d2 = 0.0
+        p2 = 0.0
+        for k in range(3):
+            inc = a * gj[i, k] + (b * hj[i, k] if b != 0.0 else 0.0)
+            d2 += inc * inc
+            p2 += pj[i, k] * pj[i, k]
+        if d2 > worst * worst * p2:
+            worst = math.sqrt(d2 / p2) if p2 > 0.0 else np.inf
+            body = i
+    return worst, body
+
+
+@_jit
 def _finite(qj, pj):
     n = qj.shape[0]
     for i in range(n):
@@ -461,7 +481,8 @@ def _emit(qj, pj, cq, cp, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, tc, row, 
 
 
 @_jit
-def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail, comp):
+def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail, comp,
+        limit, peak):
     """``steps`` steps of the corrected splitting from the carried state ``(qj, pj)`` (in place;
     ``cq``, ``cp``: its compensations, in place too; ``comp`` false: plain sums, the
     compensations untouched).
@@ -474,10 +495,13 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     ``save_every``-th state (Cartesian, q then p); ``out[0]`` is left to the caller.
 
     Returns the number of steps done.  On failure ``fail`` holds ``(status, body)``
-    (:data:`STATUS`); the state is then the last good one.
+    (:data:`STATUS`); the state is then the last good one.  ``peak[0]`` (in/out) is the largest
+    relative change of a Jacobi momentum by one kick so far (``peak[1]``: that body); a kick
+    above ``limit`` stops the run with status 4 (a close encounter: H_I is no longer small).
     """
     n = qj.shape[0]
     ns = c.shape[0]
+    first = 1 if jacobi else 0
     work = np.empty((7, n, 3))
     tq = np.empty((n, 3))
     tp = np.empty((n, 3))
@@ -496,12 +520,25 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
                 sp[i, k] = pj[i, k]
                 scq[i, k] = cq[i, k]
                 scp[i, k] = cp[i, k]
+        ok = True
         if a0 != 0.0 or b0 != 0.0:
             kick(qj, pj, cp, a0, b0, m, M, mj, KM, G, jacobi, work, comp)
-        ok = True
+            size, body = _kick_size(pj, work, a0, b0, first)
+            if size > peak[0]:
+                peak[0] = size
+                peak[1] = body
         for j in range(ns):
             if j > 0 and d[j] != 0.0:
                 kick(qj, pj, cp, d[j] * h, 0.0, m, M, mj, KM, G, jacobi, work, comp)
+                size, body = _kick_size(pj, work, d[j] * h, 0.0, first)
+                if size > peak[0]:
+                    peak[0] = size
+                    peak[1] = body
+            if peak[0] > limit:
+                fail[0] = 4
+                fail[1] = int(peak[1])
+                ok = False
+                break
             st, body = drift(qj, pj, cq, cp, mj, mu, jacobi, c[j] * h, comp)
             if st != 0:
                 fail[0] = st

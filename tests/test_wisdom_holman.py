@@ -594,3 +594,20 @@ def test_a_scene_of_splittings(capsys, tmp_path):
     assert code == 0 and strict_json(out)["method"] == "sbab3-corrected", err
     code, out, err = cli_main(capsys, "methods", "--json")
     assert "sbab4" in strict_json(out)["nbody"]["splittings"]
+
+
+def test_a_close_encounter_stops_the_run(mild):
+    """Two planets 0.005 apart: the first kick changes a Jacobi momentum by far more than MAX_KICK,
+    so the run stops (ResolutionError, step 1, the rows so far); check_resolution=False runs it
+    (negative control), and a run without the encounter never comes near the limit."""
+    system, nbody, y0 = mild
+    wh = W.wisdom_holman(system, "sbab3", nbody=nbody)
+    y = y0.copy()
+    y[6:9] = y[3:6] + np.array([0.005, 0.0, 0.0])
+    with pytest.raises(W.ResolutionError, match="close encounter at step 1") as err:
+        wh.integrate(y, 0.05, 10)
+    assert err.value.step == 1 and len(err.value.trajectory) == 1 and err.value.body in (1, 2)
+    assert np.all(np.isfinite(wh.integrate(y, 0.05, 10, check_resolution=False)))
+    info = {}
+    wh.integrate(y0, 0.05, 400, info=info)
+    assert 0 < info["peak_kick"] < W.MAX_KICK / 10
