@@ -253,6 +253,7 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
             s = -lim
     it = 0
     done = False
+    c0 = G1 = G2 = G3 = ds = 0.0
     while it < KEPLER_MAXITER:
         it += 1
         c0, c1, c2, c3 = _stumpff(beta * s * s)
@@ -273,14 +274,18 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
             break
     if not done:
         return -1
-    # f and g from the converged s (G functions recomputed there)
-    c0, c1, c2, c3 = _stumpff(beta * s * s)
-    G1 = s * c1
-    G2 = s * s * c2
-    G3 = s * s * s * c3
+    # the G functions at the converged s from those at s + ds: dG_k/ds = G_{k-1}, dG_0/ds = -β G_1,
+    # to first order in ds (|ds| ≤ 1e-13 |s|: the second-order term is below round-off)
+    G0 = c0 + ds * beta * G1
+    G3 = G3 - ds * G2
+    G2 = G2 - ds * G1
+    G1 = G1 - ds * c0
+    c0 = G0
     r = r0 * c0 + eta * G1 + mu * G2
     fm1 = -mu * G2 / r0
-    g = tau - mu * G3
+    # g = τ − μG3 = r0 G1 + η G2 at the root: the latter without τ − μG3's cancellation
+    # (near pericentre of an eccentric orbit the two terms nearly cancel)
+    g = r0 * G1 + eta * G2
     fd = -mu * G1 / (r * r0)
     gdm1 = -mu * G2 / r
     qj[i, 0], cq[i, 0] = _kadd(qj[i, 0], cq[i, 0], fm1 * x + g * vx, comp)
