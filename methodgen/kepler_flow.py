@@ -75,8 +75,8 @@ else:   # pragma: no cover
 STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or a body at its centre)",
           4: "a kick changed a Jacobi momentum by more than the limit (a close encounter)"}
 
-#: Largest number of iterations of the Kepler solve (Laguerre–Conway, then Newton); it takes
-#: 2–6 at the steps of a converged run.
+#: Largest number of iterations of the Kepler solve (Laguerre–Conway); it takes 2–6 at the
+#: steps of a converged run.
 KEPLER_MAXITER = 50
 
 
@@ -243,7 +243,10 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
         period = 2.0 * math.pi * mu / (beta * math.sqrt(beta))
         if abs(tau) > 0.5 * period:
             tau -= math.floor(tau / period + 0.5) * period
-    # start value: the Taylor series of s(t) to second order, clipped for bound orbits
+    # start value: the Taylor series of s(t) to second order, clipped for bound orbits; on a
+    # hyperbolic orbit a long drift starts from the logarithmic estimate (Vallado, Fundamentals
+    # of Astrodynamics, Alg. 8, in s = χ/√μ), from which Laguerre–Conway converges in a few
+    # iterations (from the Taylor value it walks down a few units per iteration, then cosh overflows)
     s = tau / r0 - eta * tau * tau / (2.0 * r0 * r0 * r0)
     if beta > 0.0:
         lim = math.pi / math.sqrt(beta)
@@ -251,6 +254,12 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
             s = lim
         elif s < -lim:
             s = -lim
+    elif beta < 0.0 and -beta * s * s > 1.0:
+        sq = math.sqrt(-beta)
+        sgn = 1.0 if tau > 0.0 else -1.0
+        arg = (-2.0 * beta * tau) / (eta + sgn * zeta / sq)
+        if arg > 1.0:
+            s = sgn * math.log(arg) / sq
     it = 0
     done = False
     c0 = G1 = G2 = G3 = ds = 0.0
@@ -434,20 +443,29 @@ def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
 
 
 @_jit
-def _kick_size(pj, work, a, b, first):
-    """``(max_i |Δp'_i| / |p'_i|, i)`` of the kick just made (``work`` as :func:`kick` left it)."""
+def _kick_size(qj, pj, work, a, b, first, mj, mu):
+    """``(max_i |Δp'_i| / p_ref,i, i)`` of the kick just made (``work`` as :func:`kick` left it).
+
+    ``p_ref,i = max(|p'_i|, m'_i √(μ_i/|q'_i|))``: the body's momentum, or that of a circular
+    orbit at its distance when larger (a body near rest, at the apocentre of an eccentric
+    orbit, is not an encounter).
+    """
     gj, hj = work[2], work[6]
     worst = 0.0
     body = -1
     for i in range(first, pj.shape[0]):
         d2 = 0.0
         p2 = 0.0
+        r2 = 0.0
         for k in range(3):
             inc = a * gj[i, k] + (b * hj[i, k] if b != 0.0 else 0.0)
             d2 += inc * inc
             p2 += pj[i, k] * pj[i, k]
-        if d2 > worst * worst * p2:
-            worst = math.sqrt(d2 / p2) if p2 > 0.0 else np.inf
+            r2 += qj[i, k] * qj[i, k]
+        circ = mj[i] * mj[i] * mu[i] / math.sqrt(r2) if r2 > 0.0 else 0.0
+        ref2 = max(p2, circ)
+        if d2 > worst * worst * ref2:
+            worst = math.sqrt(d2 / ref2) if ref2 > 0.0 else np.inf
             body = i
     return worst, body
 
@@ -528,14 +546,14 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
         ok = True
         if a0 != 0.0 or b0 != 0.0:
             kick(qj, pj, cp, a0, b0, m, M, mj, KM, G, jacobi, work, comp)
-            size, body = _kick_size(pj, work, a0, b0, first)
+            size, body = _kick_size(qj, pj, work, a0, b0, first, mj, mu)
             if size > peak[0]:
                 peak[0] = size
                 peak[1] = body
         for j in range(ns):
             if j > 0 and d[j] != 0.0:
                 kick(qj, pj, cp, d[j] * h, 0.0, m, M, mj, KM, G, jacobi, work, comp)
-                size, body = _kick_size(pj, work, d[j] * h, 0.0, first)
+                size, body = _kick_size(qj, pj, work, d[j] * h, 0.0, first, mj, mu)
                 if size > peak[0]:
                     peak[0] = size
                     peak[1] = body

@@ -83,7 +83,8 @@ class ResolutionError(NumericalError):
     :data:`MAX_STEP_FRACTION`); ``check_resolution=False`` runs it anyway."""
 
 
-#: A kick that changes a Jacobi momentum by more than this fraction of itself stops the run
+#: A kick that changes a Jacobi momentum by more than this fraction of itself (or of a circular
+#: orbit's momentum at the body's distance, when larger) stops the run
 #: (a close encounter: H_I is no longer a small perturbation of the Kepler motion, and the
 #: splitting's error estimates no longer hold).  Measured on the outer solar system over 2·10⁵
 #: days: at most 1.1e-3 (wisdom-holman at h = 541 days, the resolution limit), 1.0e-4 (sbab4 at
@@ -92,7 +93,8 @@ MAX_KICK = 0.05
 
 #: A step longer than this fraction of the shortest osculating Kepler period of a Jacobi body
 #: (bound orbits, at the initial state) is refused: beyond it the splitting resonates with the
-#: orbit (on the outer solar system, sbab4 at h = P_Jupiter/17 is 1e-5 off, at P/22 1e-9).
+#: orbit (on the outer solar system over 2·10⁵ days, sbab4 at h = 541 days = P_Jupiter/8 is 7e-6
+#: off, at 271 days 4e-9).
 MAX_STEP_FRACTION = 1 / 8
 
 
@@ -462,10 +464,13 @@ class WisdomHolman:
         self.STATE_NAMES = tuple(s.name for s in system.q) + tuple(s.name for s in system.p)
         self.INVARIANT_NAMES = ("H", "Lx", "Ly", "Lz", "Px", "Py", "Pz")
         err = f"O(ε h^{2 * split.n} + ε² h^{4 if corrector else 2})"
-        self.TRAITS = {"symplectic": True, "symmetric": True, "explicit": True, "order": 2,
-                       "kept": ("total linear momentum", "total angular momentum"),
+        # about a fixed centre only the angular momentum about it is a first integral
+        kept = (("total linear momentum", "total angular momentum") if self.jacobi
+                else ("total angular momentum about the centre",))
+        self.TRAITS = {"symplectic": True, "symmetric": True, "explicit": True, "order": 2, "kept": kept,
                        # methodgen run's claims: kept to round-off / bounded error
-                       "preserved": ("Lx", "Ly", "Lz", "Px", "Py", "Pz"), "approximate": ("H",),
+                       "preserved": ("Lx", "Ly", "Lz") + (("Px", "Py", "Pz") if self.jacobi else ()),
+                       "approximate": ("H",),
                        "energy": "not kept (bounded error)", "error": err,
                        "drifts_per_step": split.stages,
                        "notes": [f"{split.source}; " + ("with the corrector of [LR01] (g = %.6g)" % self._g
@@ -522,6 +527,25 @@ class WisdomHolman:
             beta = 2 * mu[i] / r - v2
             out.append(2 * np.pi * mu[i] / beta ** 1.5 if beta > 0 else np.inf)
         return np.array(out)
+
+    def _check_positions(self, y0):
+        """Refuse (InputError) a y0 with two bodies at one place, or a body at the fixed centre."""
+        q = self._bodies(y0)[0]
+        for a in range(self.n_bodies):
+            if not self.jacobi and not np.any(q[a]):
+                raise InputError(f"y0 puts body {a} at the fixed centre (the origin), where H is not defined")
+            for b in range(a + 1, self.n_bodies):
+                if np.array_equal(q[a], q[b]):
+                    raise InputError(f"y0 puts bodies {a} and {b} at the same place ({', '.join(f'{float(v):g}' for v in q[a])}), "
+                                     "where H is not defined")
+        if self.jacobi:
+            m, M = self._const[:2]
+            qj, pj = np.empty_like(q), np.empty_like(q)
+            self._kf.to_jacobi(np.ascontiguousarray(q), np.zeros_like(q), m, M, True, qj, pj)
+            for i in range(1, self.n_bodies):
+                if not np.any(qj[i]):
+                    raise InputError(f"y0 puts body {i} at the centre of mass of bodies 0…{i - 1}: its Jacobi "
+                                     "Kepler term is singular there (the splitting does not apply)")
 
     def _check_params(self, params):
         if params is not None and dict(params) != self.params:
@@ -593,6 +617,7 @@ class WisdomHolman:
             raise InputError(f"y0 must have shape ({6 * N},) (q then p of {N} bodies), got {y0.shape}")
         if not np.all(np.isfinite(y0)):
             raise InputError("y0 has a non-finite entry")
+        self._check_positions(y0)
         if isinstance(h, bool) or not isinstance(h, (int, float, np.floating, np.integer)) \
                 or not np.isfinite(h) or h == 0:
             raise InputError(f"h must be a finite nonzero number, got {h!r}")
@@ -776,9 +801,16 @@ def claims(wh: WisdomHolman) -> list[dict]:
                 "kind": "argument",
                 "detail": "exact flows of H_K and H_I composed, in coordinates related by a linear canonical map "
                           "(rests on the exact certificate above; the Kepler flow is solved to round-off)"})
-    out.append({"claim": "total linear and angular momentum kept", "status": "proved", "kind": "argument",
-                "detail": "the Kepler flows keep each Jacobi body's q' × p' and the centre of mass moves freely; "
-                          "H_I is invariant under translations and rotations"})
+    if wh.jacobi:
+        out.append({"claim": "total linear and angular momentum kept", "status": "proved", "kind": "argument",
+                    "detail": "the Kepler flows keep each Jacobi body's q' × p' and the centre of mass moves "
+                              "freely; H_I is invariant under translations and rotations"})
+    else:
+        out.append({"claim": "total angular momentum about the centre kept", "status": "proved",
+                    "kind": "argument",
+                    "detail": "each Kepler flow about the centre keeps the body's q × p; H_I (the pairs) is "
+                              "invariant under rotations about the centre (the total momentum is not kept: "
+                              "the centre is fixed)"})
     if wh.epsilon == 0.0:
         out.append({"claim": "energy", "status": "proved", "kind": "argument",
                     "detail": "one body about a fixed centre: H_I = 0 and each step is the exact Kepler flow "
