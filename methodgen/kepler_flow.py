@@ -243,11 +243,12 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
         period = 2.0 * math.pi * mu / (beta * math.sqrt(beta))
         if abs(tau) > 0.5 * period:
             tau -= math.floor(tau / period + 0.5) * period
-    # start value: the Taylor series of s(t) to second order, clipped for bound orbits; on a
+    # start value: the Taylor series of s(t) to third order, clipped for bound orbits; on a
     # hyperbolic orbit a long drift starts from the logarithmic estimate (Vallado, Fundamentals
     # of Astrodynamics, Alg. 8, in s = χ/√μ), from which Laguerre–Conway converges in a few
     # iterations (from the Taylor value it walks down a few units per iteration, then cosh overflows)
-    s = tau / r0 - eta * tau * tau / (2.0 * r0 * r0 * r0)
+    s = tau / r0 * (1.0 + tau / r0 * (-eta / (2.0 * r0) + tau * (3.0 * eta * eta - r0 * zeta)
+                                       / (6.0 * r0 * r0 * r0)))
     if beta > 0.0:
         lim = math.pi / math.sqrt(beta)
         if s > lim:
@@ -277,18 +278,20 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
         den = dF + math.copysign(math.sqrt(abs(disc)), dF)
         ds = 5.0 * F / den if den != 0.0 else F / dF
         s -= ds
-        # Laguerre–Conway converges cubically: after a step this small s is at round-off
-        if abs(ds) <= 1e-13 * abs(s) or ds == 0.0:
+        # Laguerre–Conway converges cubically (error after a step ~ (its size)³ in units of s):
+        # after a step of ≤ 1e-7 |s| the error is ~1e-21 |s|, below round-off
+        if abs(ds) <= 1e-7 * abs(s) or ds == 0.0:
             done = True
             break
     if not done:
         return -1
     # the G functions at the converged s from those at s + ds: dG_k/ds = G_{k-1}, dG_0/ds = -β G_1,
-    # to first order in ds (|ds| ≤ 1e-13 |s|: the second-order term is below round-off)
-    G0 = c0 + ds * beta * G1
-    G3 = G3 - ds * G2
-    G2 = G2 - ds * G1
-    G1 = G1 - ds * c0
+    # to second order in ds (the third-order term, ~|ds|³ ≤ 1e-21 |s|³, is below round-off)
+    h2 = 0.5 * ds * ds
+    G0 = c0 + ds * beta * G1 - h2 * beta * c0
+    G3 = G3 - ds * G2 + h2 * G1
+    G2 = G2 - ds * G1 + h2 * c0
+    G1 = G1 - ds * c0 - h2 * beta * G1
     c0 = G0
     r = r0 * c0 + eta * G1 + mu * G2
     fm1 = -mu * G2 / r0
