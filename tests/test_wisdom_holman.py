@@ -714,3 +714,12 @@ def test_kepler_drift_random_cases():
         dv = np.max(np.abs((pj[0] - cp[0]) / 2.0 - vw)) / np.max(np.abs(vw))
         worst = max(worst, dq, dv)
     assert worst < 1e-13, worst
+
+
+def test_splitting_names_elsewhere_say_where_they_belong(capsys, tmp_path):
+    from helpers import cli_main, one_line
+
+    with pytest.raises(InputError, match="is a Wisdom–Holman splitting of \\[nbody\\] scenes"):
+        mg.discretize(mg.load_scene("outer-solar-system").system, "sbab4")
+    code, out, err = cli_main(capsys, "bench", "outer-solar-system", "--methods", "sbab4", "--quick")
+    assert code == 2 and "benchmarked by --peers" in one_line(err)

@@ -13,7 +13,7 @@ from ..limits import check_memory, check_steps
 from ..scene import load_scene
 from ..schemes import METHODS
 from ..stats import max_value
-from .common import check_output_file, cli_advice, dump_json, fmt, parse_params, parse_y0, positive_int, step_size
+from .common import check_output_file, cli_advice, print_note, dump_json, fmt, parse_params, parse_y0, positive_int, step_size
 
 
 def _print_bench(rep: dict) -> None:
@@ -207,6 +207,16 @@ def cmd_bench(args) -> int:
     if solver is not None and not args.peers:
         raise InputError("--solver applies to the --peers rows; without --peers the solver table compares them")
     methods = args.methods or list(scene.methods)
+    from ..nbody import FAMILIES as WH_FAMILIES
+    splittings = [m for m in methods if m in WH_FAMILIES]
+    if splittings:
+        # no generated module to time against scipy; --peers adds the splittings' own rows
+        methods = [m for m in methods if m not in WH_FAMILIES]
+        if not methods:
+            raise InputError(f"{', '.join(splittings)}: Wisdom–Holman splittings are benchmarked by --peers on a "
+                             "scene of several free [nbody] bodies (it adds their rows); pass --methods with "
+                             "generated methods for the rest of the bench")
+        print_note(f"{', '.join(splittings)} left out: Wisdom–Holman splittings have their rows with --peers")
     for m in methods:
         if m not in METHODS:
             raise InputError(f"unknown method {m!r}; known methods: {', '.join(METHODS)}")

@@ -93,7 +93,10 @@ def discretize(system: Hamiltonian, method: str, *, order: int = 2, composition:
         raise InputError(f"discretize expects a methodgen.Hamiltonian or PoissonSystem, got "
                          f"{type(system).__name__}")
     if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}")
+        from ..nbody import FAMILIES as WH_FAMILIES
+        hint = (f" ({method!r} is a Wisdom–Holman splitting of [nbody] scenes: methodgen.wisdom_holman(scene, "
+                f"{method!r}), methodgen run SCENE --method {method})" if method in WH_FAMILIES else "")
+        raise InputError(f"unknown method {method!r}; known methods: {', '.join(METHODS)}{hint}")
     from ..timetransform import autonomise
 
     system = autonomise(system)
