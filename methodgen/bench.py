@@ -750,16 +750,9 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                 row["solver"] = use
             rows.append(row)
             del traj
-            err = row["error"]
-            if not math.isfinite(err):
-                continue
-            if err <= PEER_ERROR_FLOOR:
+            stop, best_error = _ladder_stop(row["error"], best_error, order > 2, label, T / steps, notes)
+            if stop:
                 break
-            if order > 2 and best_error < 1e-8 and err > 0.5 * best_error:
-                notes.append(f"{label}: stopped at h = {T / steps:.4g}, the error no longer decreases "
-                             f"({err:.1e}; round-off)")
-                break
-            best_error = min(best_error, err)
             if sec > PEER_RUN_BUDGET and h != ladder[-1]:
                 notes.append(f"{label}: step sizes below h = {T / steps:.4g} skipped "
                              f"(that run took {sec:.0f} s CPU)")
@@ -779,6 +772,23 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
     return {"scene": scene.name, "T": T, "reference": ref.kind, "backend": used, "peers": pe.versions(),
             "orders": list(orders), "solver": solver, "rows": rows, "notes": notes, "estimated_steps": estimate,
             "targets": targets(rows), "frontier": frontier(rows)}
+
+
+def _ladder_stop(err: float, best: float, plateau: bool, label: str, h: float, notes: list) -> tuple[bool, float]:
+    """``(stop, best)`` after a ``--peers`` row of final error ``err`` on a step-size ladder.
+
+    Stop below :data:`PEER_ERROR_FLOOR`, or (``plateau``) once the error no longer decreases
+    below 1e-8 — round-off (said in ``notes``); a non-finite error neither stops nor counts.
+    ``best`` is the smallest error so far.
+    """
+    if not math.isfinite(err):
+        return False, best
+    if err <= PEER_ERROR_FLOOR:
+        return True, best
+    if plateau and best < 1e-8 and err > 0.5 * best:
+        notes.append(f"{label}: stopped at h = {h:.4g}, the error no longer decreases ({err:.1e}; round-off)")
+        return True, best
+    return False, min(best, err)
 
 
 def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list[dict]:
@@ -823,16 +833,9 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
                    "epsilon": wh.epsilon, **_errors(base, traj, ref.y, monitors)}
             rows.append(row)
             del traj
-            err = row["error"]
-            if not math.isfinite(err):
-                continue
-            if err <= PEER_ERROR_FLOOR:
+            stop, best = _ladder_stop(row["error"], best, True, label, T / steps, notes)
+            if stop:
                 break
-            if best < 1e-8 and err > 0.5 * best:
-                notes.append(f"{label}: stopped at h = {T / steps:.4g}, the error no longer decreases "
-                             f"({err:.1e}; round-off)")
-                break
-            best = min(best, err)
     return rows
 
 
@@ -1148,8 +1151,12 @@ def solver_variants(scene: Scene, methods=None, *, steps: int = 2000, check_reso
 
 # --- generation cost ----------------------------------------------------------------------
 
-def nbody_system(n_bodies: int, G: float = 1.0):
-    """N bodies in 3D with pairwise gravity, unit masses: ``H = Σ|p_b|²/(2m_b) - Σ G m_a m_b / r_ab``."""
+def nbody_system(n_bodies: int, G: float = 1.0, masses=None, name: str | None = None):
+    """N bodies in 3D with pairwise gravity: ``H = Σ|p_b|²/(2m_b) - Σ G m_a m_b / r_ab``.
+
+    Parameters ``G`` and ``m0`` … (``masses``, default all 1); body b is ``(xb, yb, zb)``,
+    ``(pxb, pyb, pzb)``, as the ``[nbody]`` table expects.
+    """
     from .problem import Hamiltonian
 
     q, p = [], []
@@ -1159,8 +1166,9 @@ def nbody_system(n_bodies: int, G: float = 1.0):
     T = " + ".join(f"(px{b}**2 + py{b}**2 + pz{b}**2)/(2*m{b})" for b in range(n_bodies))
     U = " - ".join(f"G*m{a}*m{b}/sqrt((x{a} - x{b})**2 + (y{a} - y{b})**2 + (z{a} - z{b})**2)"
                    for a in range(n_bodies) for b in range(a + 1, n_bodies))
-    params = {"G": G, **{f"m{b}": 1.0 for b in range(n_bodies)}}
-    return Hamiltonian(f"{T} - {U}", q=q, p=p, params=params, name=f"nbody{n_bodies}")
+    masses = [1.0] * n_bodies if masses is None else list(masses)
+    params = {"G": G, **{f"m{b}": float(masses[b]) for b in range(n_bodies)}}
+    return Hamiltonian(f"{T} - {U}", q=q, p=p, params=params, name=name or f"nbody{n_bodies}")
 
 
 def nbody_initial(n_bodies: int) -> np.ndarray:

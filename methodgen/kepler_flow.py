@@ -81,65 +81,58 @@ KEPLER_MAXITER = 50
 
 
 @_jit
+def _copy(src, dst):
+    """``dst[:] = src`` for (n, 3) arrays (the identity map about a fixed centre)."""
+    for i in range(src.shape[0]):
+        for k in range(3):
+            dst[i, k] = src[i, k]
+
+
+@_jit
 def to_jacobi(q, p, m, M, jacobi, qj, pj):
     """Jacobi coordinates ``qj = A q`` and momenta ``pj = A⁻ᵀ p`` (into qj, pj; (n, 3) each).
 
     ``qj[i] = q[i] − R_{i−1}`` (``R_{i−1}``: centre of mass of bodies 0…i−1),
     ``pj[i] = (M_{i−1} p[i] − m_i P_{i−1})/M_i`` (``P_{i−1}``: their total momentum);
     ``qj[0]`` is the centre of mass, ``pj[0]`` the total momentum.  The identity when
-    ``jacobi`` is false.  Also maps a gradient (``p`` slot) to Jacobi coordinates.
+    ``jacobi`` is false.
     """
-    n = q.shape[0]
+    _gradient_to_jacobi(p, m, M, jacobi, pj)     # momenta map like gradients: A⁻ᵀ
     if not jacobi:
-        for i in range(n):
-            for k in range(3):
-                qj[i, k] = q[i, k]
-                pj[i, k] = p[i, k]
+        _copy(q, qj)
         return
+    n = q.shape[0]
     for k in range(3):
         R = m[0] * q[0, k]
-        P = p[0, k]
         for i in range(1, n):
             qj[i, k] = q[i, k] - R / M[i - 1]
-            pj[i, k] = (M[i - 1] * p[i, k] - m[i] * P) / M[i]
             R += m[i] * q[i, k]
-            P += p[i, k]
         qj[0, k] = R / M[n - 1]
-        pj[0, k] = P
 
 
 @_jit
 def from_jacobi(qj, pj, m, M, jacobi, q, p):
     """The inverse of :func:`to_jacobi` (into q, p)."""
-    n = qj.shape[0]
+    _positions(qj, m, M, jacobi, q)
     if not jacobi:
-        for i in range(n):
-            for k in range(3):
-                q[i, k] = qj[i, k]
-                p[i, k] = pj[i, k]
+        _copy(pj, p)
         return
+    n = qj.shape[0]
     for k in range(3):
-        R = qj[0, k]            # R_i, from i = n-1 down
-        P = pj[0, k]            # P_i
+        P = pj[0, k]            # P_i, the total momentum of bodies 0…i, from i = n-1 down
         for i in range(n - 1, 0, -1):
-            Rm = R - m[i] / M[i] * qj[i, k]
-            q[i, k] = qj[i, k] + Rm
             p[i, k] = pj[i, k] + m[i] / M[i] * P
             P -= p[i, k]
-            R = Rm
-        q[0, k] = R
         p[0, k] = P
 
 
 @_jit
 def _positions(qj, m, M, jacobi, q):
     """Cartesian positions of Jacobi positions (the position half of :func:`from_jacobi`)."""
-    n = qj.shape[0]
     if not jacobi:
-        for i in range(n):
-            for k in range(3):
-                q[i, k] = qj[i, k]
+        _copy(qj, q)
         return
+    n = qj.shape[0]
     for k in range(3):
         R = qj[0, k]
         for i in range(n - 1, 0, -1):
@@ -151,13 +144,11 @@ def _positions(qj, m, M, jacobi, q):
 
 @_jit
 def _gradient_to_jacobi(g, m, M, jacobi, gj):
-    """``gj = A⁻ᵀ g``: a Cartesian gradient as a gradient in Jacobi coordinates."""
-    n = g.shape[0]
+    """``gj = A⁻ᵀ g``: a Cartesian gradient (or momentum) as one in Jacobi coordinates."""
     if not jacobi:
-        for i in range(n):
-            for k in range(3):
-                gj[i, k] = g[i, k]
+        _copy(g, gj)
         return
+    n = g.shape[0]
     for k in range(3):
         P = g[0, k]
         for i in range(1, n):

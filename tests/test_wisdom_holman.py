@@ -23,16 +23,10 @@ pytest.importorskip("numba")   # the runtime runs as Python without it: too slow
 
 def star_and_planets(eps: float, n_planets: int = 2):
     """A star (mass 1) and planets of mass ``eps`` (G = 1), with an initial state near circular orbits."""
+    from methodgen.bench import nbody_system
+
     nb = n_planets + 1
-    q, p = [], []
-    for b in range(nb):
-        q += [f"x{b}", f"y{b}", f"z{b}"]
-        p += [f"px{b}", f"py{b}", f"pz{b}"]
-    T = " + ".join(f"(px{b}**2 + py{b}**2 + pz{b}**2)/(2*m{b})" for b in range(nb))
-    U = " - ".join(f"G*m{a}*m{b}/sqrt((x{a} - x{b})**2 + (y{a} - y{b})**2 + (z{a} - z{b})**2)"
-                   for a in range(nb) for b in range(a + 1, nb))
-    params = {"G": 1.0, "m0": 1.0, **{f"m{b}": eps for b in range(1, nb)}}
-    system = mg.Hamiltonian(f"{T} - {U}", q=q, p=p, params=params, name=f"star{n_planets}")
+    system = nbody_system(nb, 1.0, [1.0] + [eps] * n_planets, name=f"star{n_planets}")
     nbody = NBody(G="G", masses=tuple(f"m{b}" for b in range(nb)))
     m = np.array([1.0] + [eps] * n_planets)
     Q = np.zeros((nb, 3))
