@@ -717,3 +717,28 @@ def test_splitting_names_elsewhere_say_where_they_belong(capsys, tmp_path):
         mg.discretize(mg.load_scene("outer-solar-system").system, "sbab4")
     code, out, err = cli_main(capsys, "bench", "outer-solar-system", "--methods", "sbab4", "--quick")
     assert code == 2 and "benchmarked by --peers" in one_line(err)
+
+
+def test_without_numba_the_runtime_runs_as_python_bitwise(tmp_path):
+    """In a process where numba cannot be imported the runtime runs as Python (a RuntimeWarning
+    says so) and gives the compiled run's numbers bitwise (no fastmath, the same operations)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "nonumba.py"
+    script.write_text(
+        "import sys\n"
+        "sys.modules['numba'] = None\n"
+        "import warnings, numpy as np, methodgen as mg\n"
+        "sc = mg.load_scene('outer-solar-system')\n"
+        "with warnings.catch_warnings(record=True) as w:\n"
+        "    warnings.simplefilter('always')\n"
+        "    wh = mg.wisdom_holman(sc, 'sbab3')\n"
+        "assert any('runs as Python' in str(x.message) for x in w), w\n"
+        "assert wh.BACKEND == 'python'\n"
+        f"np.save({str(tmp_path / 'y.npy')!r}, wh.integrate(np.array(sc.y0), 135.0, 12))\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    sc = mg.load_scene("outer-solar-system")
+    Y = W.wisdom_holman(sc, "sbab3").integrate(np.array(sc.y0), 135.0, 12)
+    assert np.array_equal(np.load(tmp_path / "y.npy"), Y)
