@@ -91,6 +91,10 @@ class ResolutionError(NumericalError):
 #: h = 135 days).
 MAX_KICK = 0.05
 
+#: Above this ε (the largest planet/star mass ratio) a RuntimeWarning says that the splitting's
+#: accuracy, which rests on ε being small, is not to be expected (a triple star, equal masses).
+MAX_EPSILON = 0.1
+
 #: A step longer than this fraction of the shortest osculating Kepler period of a Jacobi body
 #: (bound orbits, at the initial state) is refused: beyond it the splitting resonates with the
 #: orbit (on the outer solar system over 2·10⁵ days, sbab4 at h = 541 days = P_Jupiter/8 is 7e-6
@@ -455,6 +459,12 @@ class WisdomHolman:
             # one body about a fixed centre: H_I = 0, the splitting is the exact flow
             self.epsilon = float(np.max(m) / centre) if n > 1 else 0.0
         self._const = (m, M, mj, mu, KM)
+        if self.epsilon > MAX_EPSILON:
+            import warnings
+            warnings.warn(f"{split.name}: the largest mass ratio to the dominant body is ε = {self.epsilon:.3g}; the "
+                          "Wisdom–Holman splitting's accuracy rests on ε being small (a star and its planets). Its "
+                          "error terms ε h^k are not small here: prefer energy-momentum or Störmer–Verlet "
+                          "compositions", RuntimeWarning, stacklevel=3)
         self._c, self._d = split.c(), split.d()
         self._g = float(split.g) if corrector else 0.0
         self.n_bodies = n

@@ -742,3 +742,16 @@ def test_without_numba_the_runtime_runs_as_python_bitwise(tmp_path):
     sc = mg.load_scene("outer-solar-system")
     Y = W.wisdom_holman(sc, "sbab3").integrate(np.array(sc.y0), 135.0, 12)
     assert np.array_equal(np.load(tmp_path / "y.npy"), Y)
+
+
+def test_comparable_masses_are_warned():
+    """ε = 0.5 (no dominant body): a RuntimeWarning; ε = 1e-3 (negative control): none."""
+    import warnings
+
+    system, nbody, y0 = star_and_planets(0.5)
+    with pytest.warns(RuntimeWarning, match="ε = 0.5"):
+        W.wisdom_holman(system, "saba2", nbody=nbody)
+    system, nbody, y0 = star_and_planets(1e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        W.wisdom_holman(system, "saba2", nbody=nbody)
