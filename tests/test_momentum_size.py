@@ -140,3 +140,19 @@ def test_above_the_limit_a_candidate_not_shown_by_families_is_not_detected(monke
     assert [inv.name for inv in derive.detected_momenta(ring(10))] == ["P"]
     monkeypatch.setattr(derive, "DETECT_MAX_DIM", 1000)
     assert [inv.name for inv in derive.detected_momenta(ring(62))] == ["P"]
+
+
+def test_bilinear_invariants_quick_rejection():
+    """bilinear_invariants rejects an invariant with a squared variable before building its Poly
+    (H of an FPU chain of 64: half of the derivation went there); what it returns is unchanged:
+    Kepler's angular momenta are bilinear, H and the Toda ring's P are not (P is linear)."""
+    from methodgen.schemes.base import _second_power, bilinear_invariants
+
+    kepler = mg.load_scene("kepler").system
+    names = bilinear_invariants(kepler)
+    assert set(names) >= {"Lx", "Ly", "Lz"} and "H" not in names
+    assert bilinear_invariants(_toda_ring(12)) == ()
+    x, y, px, py = kepler.q[0], kepler.q[1], kepler.p[0], kepler.p[1]
+    assert not _second_power(x * py - y * px, kepler.y)                     # bilinear: not rejected
+    assert not _second_power((x + y) * (px - py), kepler.y)
+    assert _second_power(px**2 / 2 + x * py, kepler.y)                       # negative control
