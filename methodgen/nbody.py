@@ -57,7 +57,8 @@ import numpy as np
 
 from .errors import InputError, MethodNotApplicable, NumericalError
 
-__all__ = ["FAMILIES", "Splitting", "splitting", "certify", "WisdomHolman", "wisdom_holman",
+__all__ = ["FAMILIES", "Splitting", "splitting", "certify", "WisdomHolman", "wisdom_holman", "nbody_energy",
+           "nbody_momenta",
            "KeplerConvergenceError", "NonFiniteError", "ResolutionError", "MAX_STEP_FRACTION"]
 
 #: Working precision (decimal digits) of the coefficients and their conditions.
@@ -390,6 +391,38 @@ def certify(system, nbody, params: dict | None = None) -> dict:
 
 # --- the integrator ------------------------------------------------------------------------
 
+def _split_bodies(Y, n: int):
+    Y = np.asarray(Y, dtype=float)
+    shape = Y.shape[:-1] + (n, 3)
+    return Y[..., :3 * n].reshape(shape), Y[..., 3 * n:].reshape(shape)
+
+
+def nbody_energy(Y, G: float, masses, centre: float | None = None) -> np.ndarray:
+    """The ``[nbody]`` Hamiltonian at the states ``Y`` (any leading shape, last axis q then p).
+
+    ``Σ|p_b|²/(2m_b) − Σ_{a<b} G m_a m_b/|q_a − q_b|`` and, with a fixed centre of mass
+    ``centre``, ``− Σ_b G·centre·m_b/|q_b|``.
+    """
+    m = np.asarray(masses, dtype=float)
+    n = len(m)
+    q, p = _split_bodies(Y, n)
+    H = np.sum(np.sum(p * p, axis=-1) / (2 * m), axis=-1)
+    for a in range(n):
+        for b in range(a + 1, n):
+            H = H - G * m[a] * m[b] / np.linalg.norm(q[..., a, :] - q[..., b, :], axis=-1)
+    if centre is not None:
+        H = H - np.sum(G * centre * m / np.linalg.norm(q, axis=-1), axis=-1)
+    return H
+
+
+def nbody_momenta(Y, n: int) -> dict:
+    """Total angular momentum ``Lx, Ly, Lz`` (Σ q_b × p_b) and momentum ``Px, Py, Pz`` of n bodies."""
+    q, p = _split_bodies(Y, n)
+    L = np.sum(np.cross(q, p), axis=-2)
+    P = np.sum(p, axis=-2)
+    return {"Lx": L[..., 0], "Ly": L[..., 1], "Lz": L[..., 2], "Px": P[..., 0], "Py": P[..., 1], "Pz": P[..., 2]}
+
+
 def _check_int(value, what: str, low: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
         raise InputError(f"{what} must be an integer ≥ {low}, got {value!r}")
@@ -461,10 +494,13 @@ class WisdomHolman:
         self._const = (m, M, mj, mu, KM)
         if self.epsilon > MAX_EPSILON:
             import warnings
-            warnings.warn(f"{split.name}: the largest mass ratio to the dominant body is ε = {self.epsilon:.3g}; the "
-                          "Wisdom–Holman splitting's accuracy rests on ε being small (a star and its planets). Its "
-                          "error terms ε h^k are not small here: prefer energy-momentum or Störmer–Verlet "
-                          "compositions", RuntimeWarning, stacklevel=3)
+            heaviest = int(np.argmax(m))
+            order = ("" if heaviest == 0 or not self.jacobi else
+                     f" Body {heaviest} is the heaviest: list it first in [nbody].masses (and the state).")
+            warnings.warn(f"{split.name}: the largest mass ratio to body 0 is ε = {self.epsilon:.3g}; the "
+                          "Wisdom–Holman splitting's accuracy rests on ε being small (a star and its planets, the "
+                          "star first). Its error terms ε h^k are not small here: prefer energy-momentum or "
+                          f"Störmer–Verlet compositions.{order}", RuntimeWarning, stacklevel=3)
         self._c, self._d = split.c(), split.d()
         self._g = float(split.g) if corrector else 0.0
         self.n_bodies = n
@@ -494,21 +530,11 @@ class WisdomHolman:
     # -- functions of the state --
 
     def _bodies(self, Y):
-        Y = np.asarray(Y, dtype=float)
-        n = self.n_bodies
-        return Y[..., :3 * n].reshape(Y.shape[:-1] + (n, 3)), Y[..., 3 * n:].reshape(Y.shape[:-1] + (n, 3))
+        return _split_bodies(Y, self.n_bodies)
 
     def hamiltonian(self, Y) -> np.ndarray:
         """H at the states ``Y`` (any leading shape, last axis the 6N state)."""
-        q, p = self._bodies(Y)
-        m = self.masses
-        H = np.sum(np.sum(p * p, axis=-1) / (2 * m), axis=-1)
-        for a in range(self.n_bodies):
-            for b in range(a + 1, self.n_bodies):
-                H = H - self.G * m[a] * m[b] / np.linalg.norm(q[..., a, :] - q[..., b, :], axis=-1)
-        if self.centre_mass is not None:
-            H = H - np.sum(self.G * self.centre_mass * m / np.linalg.norm(q, axis=-1), axis=-1)
-        return H
+        return nbody_energy(Y, self.G, self.masses, self.centre_mass)
 
     def linear_momentum(self, Y) -> np.ndarray:
         """Total momentum Σ p_b, shape (..., 3)."""
@@ -523,9 +549,7 @@ class WisdomHolman:
         """The monitored quantities at the states ``Y``: H, total angular momentum (Lx, Ly, Lz) and
         total momentum (Px, Py, Pz) (as :data:`INVARIANT_NAMES`)."""
         self._check_params(params)
-        L, P = self.angular_momentum(Y), self.linear_momentum(Y)
-        return {"H": self.hamiltonian(Y), "Lx": L[..., 0], "Ly": L[..., 1], "Lz": L[..., 2],
-                "Px": P[..., 0], "Py": P[..., 1], "Pz": P[..., 2]}
+        return {"H": self.hamiltonian(Y), **nbody_momenta(Y, self.n_bodies)}
 
     def periods(self, y) -> np.ndarray:
         """Osculating Kepler periods of the Jacobi bodies at the state ``y`` (inf: unbound)."""

@@ -282,18 +282,10 @@ def _nbody_numbers(scene):
 
 def nbody_hamiltonian(scene, Y) -> np.ndarray:
     """The Hamiltonian that the ``[nbody]`` declaration describes, at the states ``Y`` (n, 2d)."""
+    from .nbody import nbody_energy
+
     G, m, centre = _nbody_numbers(scene)
-    Y = np.atleast_2d(np.asarray(Y, dtype=float))
-    nb = len(m)
-    q = Y[:, :3 * nb].reshape(-1, nb, 3)
-    p = Y[:, 3 * nb:].reshape(-1, nb, 3)
-    H = np.sum(np.sum(p * p, axis=2) / (2 * m), axis=1)
-    for a in range(nb):
-        for b in range(a + 1, nb):
-            H -= G * m[a] * m[b] / np.linalg.norm(q[:, a] - q[:, b], axis=1)
-    if centre is not None:
-        H -= np.sum(G * centre * m / np.linalg.norm(q, axis=2), axis=1)
-    return H
+    return nbody_energy(np.atleast_2d(np.asarray(Y, dtype=float)), G, m, centre)
 
 
 def nbody_mismatch(scene, module, samples: int = 8, seed: int = 0) -> float:
@@ -326,13 +318,9 @@ def nbody_monitors(scene):
     nb = len(scene.nbody.masses)
 
     def monitors(traj):
-        traj = np.asarray(traj, dtype=float)
-        q = traj[..., :3 * nb].reshape(traj.shape[:-1] + (nb, 3))
-        p = traj[..., 3 * nb:].reshape(traj.shape[:-1] + (nb, 3))
-        L = np.sum(np.cross(q, p), axis=-2)
-        P = np.sum(p, axis=-2)
-        return {"Lx": L[..., 0], "Ly": L[..., 1], "Lz": L[..., 2],
-                "Px": P[..., 0], "Py": P[..., 1], "Pz": P[..., 2]}
+        from .nbody import nbody_momenta
+
+        return nbody_momenta(traj, nb)
 
     return monitors
 

@@ -751,6 +751,12 @@ def test_comparable_masses_are_warned():
     system, nbody, y0 = star_and_planets(0.5)
     with pytest.warns(RuntimeWarning, match="ε = 0.5"):
         W.wisdom_holman(system, "saba2", nbody=nbody)
+    # the star listed last: the warning says which body to list first
+    from methodgen.bench import nbody_system
+
+    last = nbody_system(3, 1.0, [1e-3, 1e-3, 1.0])
+    with pytest.warns(RuntimeWarning, match="Body 2 is the heaviest: list it first"):
+        W.wisdom_holman(last, "saba2", nbody=NBody(G="G", masses=("m0", "m1", "m2")))
     system, nbody, y0 = star_and_planets(1e-3)
     with warnings.catch_warnings():
         warnings.simplefilter("error")

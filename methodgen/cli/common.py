@@ -99,6 +99,18 @@ def dump_json(obj) -> str:
     return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
 
 
+def refuse_for_splitting(method: str, **flags) -> None:
+    """One-line InputError for the first option given (not None) that a Wisdom–Holman splitting
+    does not take: ``flags`` maps option names (``order`` → ``--order``) to their values."""
+    why = {"order": "its accuracy is chosen by the family: saba1…saba6, sbab1…sbab6",
+           "extended": "no long-double refinement: the compensated sums already reach 1e-12 on the outer "
+                       "solar system", "time_transform": "it integrates the [nbody] Hamiltonian itself"}
+    for name, value in flags.items():
+        if value is not None and value is not False:
+            raise InputError(f"--{name.replace('_', '-')} does not apply to the Wisdom–Holman splitting {method} "
+                             f"({why.get(name, why['order'])})")
+
+
 NUMERICAL_ERRORS = ("ConvergenceError", "NonFiniteError", "ResolutionError", "KeplerConvergenceError")
 
 

@@ -22,19 +22,14 @@ from ..schemes import METHODS, composition_for, method_key, scheme_options
 from ..nbody import FAMILIES as WH_FAMILIES
 from ..stats import ErrorMax
 from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
-                     apply_overrides, check_output_file, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
+                     apply_overrides, check_output_file, refuse_for_splitting, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
                      print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
 
 
 def _check_splitting_args(method, order, composition, stages, extended, scene) -> None:
     """Refuse what a Wisdom–Holman splitting does not take (one line naming the option)."""
-    for flag, value in (("--order", order), ("--composition", composition), ("--stages", stages)):
-        if value is not None:
-            raise InputError(f"{flag} does not apply to the Wisdom–Holman splitting {method} (its accuracy is "
-                             "chosen by the family: saba1…saba6, sbab1…sbab6)")
-    if extended:
-        raise InputError(f"--extended is not available for the Wisdom–Holman splitting {method}")
+    refuse_for_splitting(method, order=order, composition=composition, stages=stages, extended=extended)
     if scene.transformed is not None:
         raise InputError(f"the Wisdom–Holman splitting {method} integrates the [nbody] Hamiltonian itself, "
                          "not a time transformation of it (pass --time-transform none)")

@@ -128,16 +128,12 @@ def cmd_verify(args) -> int:
 def _verify_splitting(args) -> int:
     """``verify SCENE --method saba3``: the Wisdom–Holman splitting's claims
     (:func:`methodgen.nbody.claims`)."""
-    from .common import dump_json
-    from ..errors import InputError
+    from .common import dump_json, refuse_for_splitting
     from ..scene import load_scene
     from ..nbody import claims, wisdom_holman
 
-    for flag, value in (("--order", args.order), ("--composition", args.composition),
-                        ("--stages", getattr(args, "stages", None)),
-                        ("--time-transform", getattr(args, "time_transform", None))):
-        if value is not None:
-            raise InputError(f"{flag} does not apply to the Wisdom–Holman splitting {args.method}")
+    refuse_for_splitting(args.method, order=args.order, composition=args.composition,
+                         stages=getattr(args, "stages", None), time_transform=getattr(args, "time_transform", None))
     scene = load_scene(args.scene)
     wh = wisdom_holman(scene, args.method)
     found = claims(wh)
