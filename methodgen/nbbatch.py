@@ -138,9 +138,20 @@ _BLOCK_SIG = _t.void(
 )
 
 
-@numba.njit(_BLOCK_SIG, **_OPTS)
 def run_block(post_block, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b,
               traj, n0, n1, Y, C, FRC, h, p, check_resolution, compensated, fstat, fval, every, lanes):
+    """Steps ``n0 .. n1-1`` of every trajectory of an explicit method in lock-step (see
+    :func:`_run_block`); the kernels are passed as :func:`methodgen.nbruntime.handle` s, their
+    addresses resolved once per process rather than at every call."""
+    _run_block(_rt.handle(post_block, KERNEL_TYPES["post_block"]), _rt.handle(hs, _rt.KERNEL_TYPES["hs"]),
+               _rt.handle(check, _rt.KERNEL_TYPES["check"]), cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+               kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, check_resolution, compensated, fstat, fval,
+               every, lanes)
+
+
+@numba.njit(_BLOCK_SIG, **_OPTS)
+def _run_block(post_block, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b,
+               traj, n0, n1, Y, C, FRC, h, p, check_resolution, compensated, fstat, fval, every, lanes):
     """Steps ``n0 .. n1-1`` of every trajectory of an explicit method, ``lanes`` trajectories
     in lock-step: the arguments and their meaning are those of
     :func:`methodgen.nbruntime.run` (without the Newton solver's), ``Y``, ``C``, ``FRC``

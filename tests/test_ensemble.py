@@ -114,7 +114,7 @@ def _interpreted_block_run(mod, Y0, h, steps):
     traj[0] = Y
     fstat = np.zeros((Bn, 4), dtype=np.int64)
     fval = np.zeros(Bn)
-    nbbatch.run_block.py_func(
+    nbbatch._run_block.py_func(
         mod._py_post_block, mod._nb_hs, nbruntime.no_kernel("check"), mod._CFG, mod._FCFG, mod._LERR_INDEX,
         mod._DOMAIN_POSITIVE, mod._STAGE_GAMMAS, mod._STAGE_RATIOS, mod._KICK_A, mod._DRIFT, mod._KICK_B,
         traj, 0, steps, Y, C, FRC, h, np.array([1.0, 1.0]), True, True, fstat, fval, 1, mod._BLOCK_LANES)
@@ -130,7 +130,7 @@ def test_block_remainder_fault_is_detected(modules, monkeypatch):
     ref = run(mod, "block", Y0, 0.01, 3)
     good, _ = _interpreted_block_run(mod, Y0, 0.01, 3)
     assert np.allclose(good, ref, rtol=1e-13, atol=1e-15)
-    monkeypatch.setitem(nbbatch.run_block.py_func.__globals__, "min",
+    monkeypatch.setitem(nbbatch._run_block.py_func.__globals__, "min",
                         lambda a, b: b - 1 if b < a else a)
     bad, _ = _interpreted_block_run(mod, Y0, 0.01, 3)
     assert np.allclose(bad[:, :B - 1], ref[:, :B - 1], rtol=1e-13, atol=1e-15)
@@ -191,7 +191,7 @@ def test_unrecorded_lane_failure_would_go_silent(modules, monkeypatch):
     Y0 = plunging_batch(bad_lane)
     _, fstat = _interpreted_block_run(mod, Y0, 0.01, 120)
     assert fstat[bad_lane, 0] != 0 and (np.delete(fstat[:, 0], bad_lane) == 0).all()
-    monkeypatch.setitem(nbbatch.run_block.py_func.__globals__, "_lane_status",
+    monkeypatch.setitem(nbbatch._run_block.py_func.__globals__, "_lane_status",
                         lambda *a: (0, 0, 0.0))
     traj, fstat = _interpreted_block_run(mod, Y0, 0.01, 120)
     assert (fstat[:, 0] == 0).all()  # nothing reported ...

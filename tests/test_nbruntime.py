@@ -471,3 +471,38 @@ def test_stage_kernels_keep_their_work_arrays_on_the_stack(tmp_path):
         a = nb.integrate(y0, scene.h, 200, solver=solver)
         assert np.array_equal(a, heap.integrate(y0, scene.h, 200, solver=solver)), solver
         assert not np.array_equal(a, heap.integrate(y0, np.nextafter(scene.h, 1.0), 200, solver=solver)), solver
+
+
+# --- kernel handles: addresses resolved once -------------------------------------------------
+
+def test_kernels_are_unboxed_without_looking_up_their_overloads(tmp_path, monkeypatch):
+    """A module's kernels reach the compiled loop as nbruntime.KernelHandle objects whose
+    machine-code address was resolved once: a later integrate call looks up no compiled
+    overload (numba would otherwise do it for each of the seven kernels at every call, about
+    0.3 ms), and the trajectory is bitwise the one with the dispatchers passed as they are."""
+    from numba.core.dispatcher import Dispatcher
+
+    scene, mod = _module(tmp_path, "henon-heiles-2d", "energy-momentum")
+    y0 = np.array(scene.y0, float)
+    ref = mod.integrate(y0, 0.05, 40)               # compiles, makes the handles
+    calls = []
+    real = Dispatcher.get_compile_result
+
+    def counting(self, sig):
+        calls.append(self)
+        return real(self, sig)
+
+    monkeypatch.setattr(Dispatcher, "get_compile_result", counting)
+    again = mod.integrate(y0, 0.05, 40)
+    assert calls == []
+    assert np.array_equal(again, ref)
+    # the handle of a kernel is made once and reused
+    sig = nbruntime.KERNEL_TYPES["post"]
+    assert nbruntime.handle(mod._nb_post, sig) is nbruntime.handle(mod._nb_post, sig)
+    assert isinstance(nbruntime.handle(mod._nb_post, sig), nbruntime.KernelHandle)
+    # control: with the dispatchers passed as they are, numba looks each kernel's overload up
+    # at the call (for its addresses); the numbers are the same
+    monkeypatch.setattr(nbruntime, "handle", lambda kernel, sig: kernel)
+    raw = mod.integrate(y0, 0.05, 40)
+    assert len(calls) >= 7
+    assert np.array_equal(raw, ref)
