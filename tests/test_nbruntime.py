@@ -482,6 +482,7 @@ def test_kernels_are_unboxed_without_looking_up_their_overloads(tmp_path, monkey
     0.3 ms), and the trajectory is bitwise the one with the dispatchers passed as they are."""
     from numba.core.dispatcher import Dispatcher
 
+    monkeypatch.setenv("METHODGEN_KERNELS", "numba")   # (kernels through LLVM are handles already)
     scene, mod = _module(tmp_path, "henon-heiles-2d", "energy-momentum")
     y0 = np.array(scene.y0, float)
     ref = mod.integrate(y0, 0.05, 40)               # compiles, makes the handles

@@ -265,16 +265,30 @@ def test_emitted_source_is_deterministic_and_self_contained(kepler):
             imported |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom):
             imported |= {f"{node.module}.{a.name}" for a in node.names}
-    # numpy, numba and, of methodgen, only its compiled runtime (never SymPy or the generator)
-    assert imported <= {"math", "operator", "numba", "numpy", "methodgen.nbruntime"}
+    # numpy, numba and, of methodgen, only its compiled runtime and the LLVM kernel compiler
+    # (never SymPy or the generator)
+    assert imported <= {"math", "operator", "numba", "numpy", "methodgen.nbruntime", "methodgen.llvmkernels"}
 
 
-def test_compiled_code_is_cached_on_disk(pair):
-    _, nb_mod = pair("kepler", "energy-momentum")
-    nb_mod.integrate(np.array(mg.load_scene("kepler").y0), 0.01, 2)
-    cache = os.path.join(os.path.dirname(nb_mod.__file__), "__pycache__")
-    stem = os.path.basename(nb_mod.__file__)[:-3]
-    assert any(f.startswith(stem) and f.endswith(".nbi") for f in os.listdir(cache))
+def test_compiled_code_is_cached_on_disk(tmp_path, monkeypatch):
+    """Kernels numba compiles are cached next to the module; straight-line kernels compiled
+    through LLVM IR (methodgen.llvmkernels, milliseconds) are compiled in each process."""
+    from methodgen import llvmkernels
+
+    scheme = mg.discretize(mg.load_scene("kepler").system, "energy-momentum")
+    y0 = np.array(mg.load_scene("kepler").y0)
+    monkeypatch.setenv("METHODGEN_KERNELS", "numba")
+    nb_mod = mg.generate(scheme, tmp_path / "kep_em_numba.py", backend="numba")
+    nb_mod.integrate(y0, 0.01, 2)
+    cache = tmp_path / "__pycache__"
+    assert any(f.startswith("kep_em_numba") and f.endswith(".nbi") for f in os.listdir(cache))
+    # the default route: the same module's kernels through LLVM, nothing of them on disk
+    monkeypatch.setenv("METHODGEN_KERNELS", "llvm")
+    ll_mod = mg.generate(scheme, tmp_path / "sub" / "kep_em_numba.py", backend="numba")
+    assert isinstance(ll_mod._nb_res, llvmkernels.LLVMKernel)
+    assert np.array_equal(ll_mod.integrate(y0, 0.01, 2), nb_mod.integrate(y0, 0.01, 2))
+    sub = tmp_path / "sub" / "__pycache__"
+    assert not sub.exists() or not any(f.endswith(".nbi") and "_nb_res" in f for f in os.listdir(sub))
 
 
 def test_more_than_three_unknowns_uses_gaussian_elimination(tmp_path):

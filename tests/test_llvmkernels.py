@@ -1,0 +1,190 @@
+"""Straight-line kernels compiled through LLVM IR (methodgen.llvmkernels).
+
+A numba module's kernels for the shared runtime are translated from their Python source
+to LLVM IR and compiled by LLVM directly (numba's typing of a large kernel took seconds).
+They must compute bitwise what numba compiles from the same source, fall back to numba for
+anything the translator does not know, and never translate a construct wrongly.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import textwrap
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from methodgen.emit import module_filename
+
+numba = pytest.importorskip("numba")
+
+from methodgen import llvmkernels as lk  # noqa: E402
+from methodgen import nbruntime as rt  # noqa: E402
+
+RES = rt.KERNEL_TYPES["res"]
+
+
+def _load(tmp_path, name, source):
+    """A module of kernels written to a file (the translator reads a kernel's source)."""
+    path = tmp_path / f"{name}.py"
+    path.write_text("import math\nimport numba\nimport numpy\n\n" + textwrap.dedent(source))
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _rows(kernel, Y, n_out):
+    """The kernel (signature ``res``) at each row of Y, called from compiled code (the shared
+    runtime's res_rows: a first-class function call, as the integration loop makes)."""
+    R = np.zeros((Y.shape[0], n_out))
+    rt.res_rows(kernel, np.zeros_like(Y), Y, 0.1, np.array([2.0, -3.0]), R)
+    return R
+
+
+def _numba(fn):
+    return numba.njit(RES, error_model="numpy")(fn)
+
+
+ARITH = """
+def arith(_z, _y, _c, _h, _p, _r):
+    a = _y[0]
+    b = _y[1]
+    _c0 = (1/2)*a - b/3 + _p[0]*_h
+    _r[0] = _c0**2
+    _r[1] = a**3 - b**5
+    _r[2] = a**-2 + 1/b**7
+    _r[3] = abs(b)**0.5 + a**(1/3)
+    _r[4] = math.sqrt(a*a + b*b) - math.exp(-a) + math.log(abs(b) + 1)
+    _r[5] = math.sin(a) * math.cos(b) + math.tan(a/7) + math.atan2(a, b) + math.tanh(b)
+    _r[6] = -(a - b) + +a
+    _r[7] = math.expm1(a/9) - math.log1p(abs(b)) + math.asinh(a) + math.copysign(1.0, b)
+    _r[8] = 0
+"""
+
+
+def test_arithmetic_and_math_functions_are_bitwise_numbas(tmp_path):
+    mod = _load(tmp_path, "k_arith", ARITH)
+    ll = lk.compile_kernel(mod.arith, RES)
+    assert isinstance(ll, lk.LLVMKernel)
+    rng = np.random.default_rng(1)
+    Y = np.concatenate([rng.normal(size=(200, 2)) * 10.0 ** rng.integers(-3, 4, size=(200, 1)),
+                        [[1e300, 1e-300], [np.inf, 1.0], [np.nan, 1.0], [-1e-3, 3.0]]])
+    with np.errstate(all="ignore"):
+        a = _rows(ll, Y, 9)
+        b = _rows(_numba(mod.arith), Y, 9)
+    assert np.array_equal(a, b, equal_nan=True)
+    # A negative integer power of 0 is inf, as the modules' error model promises (numba's own
+    # x**-n raises ZeroDivisionError there, inside the kernel, with no usable result)
+    with np.errstate(all="ignore"):
+        z = _rows(ll, np.array([[0.0, 1.0], [-0.0, 2.0]]), 9)
+    assert z[0, 2] == np.inf and z[1, 2] == np.inf
+    # control: the translated code is not numba's by construction -- one changed operation shows
+    mod2 = _load(tmp_path, "k_arith2", ARITH.replace("_c0**2", "_c0*_c0*1.0000000001"))
+    with np.errstate(all="ignore"):
+        assert not np.array_equal(_rows(lk.compile_kernel(mod2.arith, RES), Y, 9), b, equal_nan=True)
+
+
+LOOPS = """
+_IDX0 = numpy.array([[0, 1], [1, 2], [2, 0]], dtype=numpy.int64)
+
+
+def loops(_z, _y, _c, _h, _p, _r):
+    _sA = _r[0:3]
+    _sA[:] = 0.0
+    for _k in range(3):
+        _u0 = _y[_IDX0[_k, 0]]
+        _u1 = _y[_IDX0[_k, 1]]
+        _t0 = (_u0 - _u1)**3
+        _sA[_IDX0[_k, 0]] += _t0
+        _sA[_IDX0[_k, 1]] += -_t0
+    _w = numpy.zeros((2, 2))
+    for _i in range(0, 2):
+        for _b in range(2):
+            _w[_i, _b] = _y[_i + _b] * 2.0
+    _k = 0
+    _red = _y[_k] * 0.5
+    for _e in (9, 16, 1):
+        _k = _e >> 3
+        if _e & 7 == 0:
+            _red = _red + _y[_k]
+        elif _e & 7 == 1:
+            _red = _red - _w[_k, 1]
+    _r[3] = _red
+    _r[4] = _w[1, 0] + _w[0, 1]
+"""
+
+
+def test_loops_tables_views_and_unrolled_sums_are_bitwise_numbas(tmp_path):
+    mod = _load(tmp_path, "k_loops", LOOPS)
+    ll = lk.compile_kernel(mod.loops, RES)
+    Y = np.random.default_rng(2).normal(size=(50, 3))
+    assert np.array_equal(_rows(ll, Y, 5), _rows(_numba(mod.loops), Y, 5))
+
+
+@pytest.mark.parametrize("body, why", [
+    # a value carried from one iteration to the next: refused, not translated as the first value
+    ("    s = 0.0\n    for i in range(3):\n        s = s + _y[i]\n    _r[0] = s\n", "carried"),
+    ("    if _y[0] > 0.0:\n        _r[0] = 1.0\n", "branch"),
+    ("    _r[0] = _helper(_y[0])\n", "call"),
+    ("    _r[0] = _y[0] % 2.0\n", "operator"),
+    ("    _r[0] = max(_y[0], _y[1])\n", "call"),
+])
+def test_what_is_not_translated_falls_back_to_numba(tmp_path, body, why):
+    src = "@numba.njit\ndef _helper(x):\n    return 2.0 * x\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
+    mod = _load(tmp_path, f"k_{why}_{abs(hash(body)) % 10**6}", src)
+    with pytest.raises(lk.Unsupported):
+        lk.compile_kernel(mod.k, RES)
+    got = lk.kernel(RES)(mod.k)
+    assert not isinstance(got, lk.LLVMKernel)          # numba compiled it
+    Y = np.array([[1.5, 2.5, 3.5], [-1.0, 0.5, 0.25]])
+    assert np.array_equal(_rows(got, Y, 1), _rows(_numba(mod.k), Y, 1))
+    # control: a straight-line kernel takes the LLVM route
+    ok = _load(tmp_path, f"k_ok_{why}", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] + _y[1]\n")
+    assert isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
+
+
+def test_the_numba_route_can_be_forced(tmp_path, monkeypatch):
+    ok = _load(tmp_path, "k_forced", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] + _y[1]\n")
+    monkeypatch.setenv("METHODGEN_KERNELS", "numba")
+    assert not isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
+    monkeypatch.setenv("METHODGEN_KERNELS", "llvm")
+    assert isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
+
+
+def _chain(n):
+    H = (f"Sum(p[i]**2/2, i, 1, {n}) + q[1]**2/2 + Sum((q[i+1] - q[i])**2/2 + beta*(q[i+1] - q[i])**4/4, "
+         f"i, 1, {n - 1}) + q[{n}]**2/2")
+    system = mg.Hamiltonian(H, q=[f"q{i}" for i in range(1, n + 1)], p=[f"p{i}" for i in range(1, n + 1)],
+                            params={"beta": 1.0}, name=f"chain{n}")
+    y0 = np.array([math.sin(math.pi * i / (n + 1)) for i in range(1, n + 1)] + [0.0] * n)
+    return system, y0
+
+
+@pytest.mark.parametrize("case", ["kepler-sv8", "hh-em2", "oss-em2", "chain24-em2"])
+def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, monkeypatch, case):
+    """Every straight-line kernel of the module takes the LLVM route (straight-line code, loops
+    over like terms, like rows, unrolled sums); the trajectory is bitwise the numba route's."""
+    if case == "chain24-em2":
+        system, y0 = _chain(24)            # 48 state components: like rows (lower_rows)
+        method, opts, h, steps = "energy-momentum", {}, 0.05, 60
+    else:
+        name, method, opts = {"kepler-sv8": ("kepler", "stormer-verlet", {"order": 8}),
+                              "hh-em2": ("henon-heiles-2d", "energy-momentum", {}),
+                              "oss-em2": ("outer-solar-system", "energy-momentum", {})}[case]
+        scene = mg.load_scene(name)
+        system, y0, h, steps = scene.system, np.array(scene.y0, float), scene.h, 60
+    scheme = mg.discretize(system, method, **opts)
+    runs = {}
+    for route in ("llvm", "numba"):
+        monkeypatch.setenv("METHODGEN_KERNELS", route)
+        mod = mg.generate(scheme, tmp_path / module_filename(system.name, f"{case}_{route}", "numba"),
+                          backend="numba")
+        kernels = {k: getattr(mod, k) for k in ("_nb_guess", "_nb_res", "_nb_resjac", "_nb_post", "_nb_check",
+                                                "_nb_hs") if hasattr(mod, k)}
+        assert kernels
+        assert all(isinstance(k, lk.LLVMKernel) == (route == "llvm") for k in kernels.values()), kernels
+        runs[route] = mod.integrate(y0, h, steps)
+    assert np.array_equal(runs["llvm"], runs["numba"])
