@@ -1,0 +1,136 @@
+"""Issue 25's first-use targets: a new Hamiltonian to its first compiled step, beside heyoka.
+
+Not a test: run it and read the table (wall seconds; compare only rows of one run).
+
+    python benchmarks/build_targets.py [--only kepler,henon-heiles-2d,...] [--kernels llvm|numba]
+                                       [--json FILE]
+
+Each configuration runs in a fresh process with a fresh ``METHODGEN_CACHE`` (numba's cache
+keeps the shared runtime, compiled once per machine: run once to warm it).  Measured: process
+start → ``mg.build(system, method, backend="numba", ...)`` → the first step, the build alone
+(``build→step``), which kernels took the LLVM route (``llvm/numba`` counts) and the peak
+resident memory of the process.  heyoka's ``taylor_adaptive`` construction (tol 1e-15; for the
+outer solar system also ``compact_mode=True``) is timed in its own fresh process in the same run.
+``--kernels numba`` sets ``METHODGEN_KERNELS=numba`` (every kernel compiled by numba: the route
+before methodgen.llvmkernels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+
+SMALL = ["stormer-verlet:2", "stormer-verlet:10", "energy-momentum:2", "energy-momentum:8", "midpoint:2",
+         "avf:2", "gauss:3", "gauss:6", "energy-collocation:3", "energy-collocation:4"]
+CONFIGS = ([f"kepler:{m}" for m in SMALL] + [f"henon-heiles-2d:{m}" for m in SMALL if not m.startswith("avf")]
+           + [f"outer-solar-system:{m}" for m in ("stormer-verlet:2", "stormer-verlet:4", "stormer-verlet:8",
+                                                    "stormer-verlet:10", "energy-momentum:2", "energy-momentum:4",
+                                                    "energy-momentum:8", "energy-momentum:10", "gauss:3")]
+           + ["fpu64:energy-momentum:2", "toda200:energy-momentum:2"])
+TARGET = {"kepler": 2.0, "henon-heiles-2d": 2.0, "outer-solar-system": 3.0, "fpu64": 5.0, "toda200": None,
+          ("outer-solar-system", "gauss"): 10.0}
+
+PROBE = textwrap.dedent(r"""
+    import sys, time, json, resource
+    t0 = time.perf_counter()
+    import numpy as np
+    import methodgen as mg
+    from methodgen import llvmkernels
+    name, method, k = sys.argv[1], sys.argv[2], int(sys.argv[3])
+    if name.startswith("fpu"):
+        n = int(name[3:])
+        H = (f"Sum(p[i]**2/2, i, 1, {n}) + q[1]**2/2 + beta*q[1]**4/4 + Sum((q[i+1] - q[i])**2/2 "
+             f"+ beta*(q[i+1] - q[i])**4/4, i, 1, {n - 1}) + q[{n}]**2/2 + beta*q[{n}]**4/4")
+        system = mg.Hamiltonian(H, q=[f"q{i}" for i in range(1, n + 1)], p=[f"p{i}" for i in range(1, n + 1)],
+                                params={"beta": 1.0}, name=name)
+        y0 = np.array([np.sin(np.pi * i / (n + 1)) for i in range(1, n + 1)] + [0.0] * n); h = 0.05
+    elif name.startswith("toda"):
+        n = int(name[4:])
+        H = f"Sum(p[i]**2/2, i, 1, {n}) + Sum(exp(q[i] - q[i % {n} + 1]), i, 1, {n})"
+        system = mg.Hamiltonian(H, q=[f"q{i}" for i in range(1, n + 1)], p=[f"p{i}" for i in range(1, n + 1)],
+                                name=name)
+        y0 = np.array([0.1 * np.sin(2 * np.pi * i / n) for i in range(n)]
+                      + [0.2 * np.cos(2 * np.pi * i / n) for i in range(n)]); h = 0.05
+    else:
+        sc = mg.load_scene(name); system, y0, h = sc.system, np.array(sc.y0, dtype=float), sc.h
+    opts = {"stages": k} if method in ("gauss", "energy-collocation") else {"order": k}
+    if method in ("midpoint", "avf"):
+        opts = {}
+    t1 = time.perf_counter()
+    m = mg.build(system, method, backend="numba", **opts)
+    m.integrate(y0, h, 1)
+    t2 = time.perf_counter()
+    kinds = [type(getattr(m, a)).__name__ for a in dir(m) if a.startswith("_nb_") and not a.endswith("_rows")
+             and callable(getattr(m, a))]
+    print(json.dumps({"first": t2 - t0, "build": t2 - t1, "llvm": kinds.count("LLVMKernel"),
+                      "numba": kinds.count("CPUDispatcher"),
+                      "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+HEYOKA = textwrap.dedent(r"""
+    import sys, time, json
+    import numpy as np
+    import methodgen as mg
+    from methodgen.peers import heyoka_system, import_peer
+    hy = import_peer("heyoka")
+    sc = mg.load_scene(sys.argv[1])
+    _, sys_ = heyoka_system(sc.system)
+    t = time.perf_counter()
+    ta = hy.taylor_adaptive(sys_, [float(v) for v in sc.y0], tol=1e-15, compact_mode=sys.argv[2] == "1")
+    print(json.dumps({"build": time.perf_counter() - t}))
+""")
+
+
+def run(code, args, env):
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env)
+    if out.returncode:
+        return {"error": out.stderr.strip().splitlines()[-1][:120]}
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", help="comma-separated system names")
+    ap.add_argument("--kernels", default="llvm", choices=("llvm", "numba"))
+    ap.add_argument("--json")
+    a = ap.parse_args()
+    only = set(a.only.split(",")) if a.only else None
+    rows = []
+    print(f"{'system':<20} {'method':<22} {'first use':>9} {'build→step':>10} {'target':>6} {'llvm/numba':>10} "
+          f"{'RSS MB':>7}")
+    for cfg in CONFIGS:
+        name, method, k = cfg.split(":")
+        if only and name not in only:
+            continue
+        env = dict(os.environ, METHODGEN_CACHE=tempfile.mkdtemp(), METHODGEN_KERNELS=a.kernels)
+        r = run(PROBE, [name, method, k], env)
+        r.update(system=name, method=f"{method} {k}", kernels=a.kernels)
+        rows.append(r)
+        t = TARGET.get((name, method), TARGET.get(name))
+        if "error" in r:
+            print(f"{name:<20} {method + ' ' + k:<22} error: {r['error']}")
+        else:
+            ok = "" if t is None else ("  met" if r["build"] <= t else "  MISSED")
+            print(f"{name:<20} {method + ' ' + k:<22} {r['first']:9.2f} {r['build']:10.2f} {t or '-':>6}"
+                  f" {r['llvm']:>4}/{r['numba']:<5} {r['rss_mb']:7.0f}{ok}", flush=True)
+    for name, compact in (("kepler", "0"), ("henon-heiles-2d", "0"), ("outer-solar-system", "0"),
+                          ("outer-solar-system", "1")):
+        if only and name not in only:
+            continue
+        r = run(HEYOKA, [name, compact], dict(os.environ))
+        r.update(system=name, method="heyoka taylor_adaptive" + (" compact" if compact == "1" else ""))
+        rows.append(r)
+        print(f"{name:<20} {r['method']:<30} " + (f"build {r['build']:.2f} s" if "build" in r else r["error"]),
+              flush=True)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rows, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
