@@ -1,28 +1,36 @@
-"""Straight-line kernels compiled to machine code through LLVM IR (llvmlite), not numba.
+"""A numba module's kernels compiled to machine code through LLVM IR (llvmlite), not numba.
 
-numba spends seconds typing and lowering a kernel of a few hundred straight-line
-statements (the outer solar system's energy-momentum Newton matrix: 3.4 s of a 9.5 s
-first use; most of it is numba's type inference trying overloads per operation, not
-LLVM).  The kernels of a numba module are straight-line float arithmetic on arrays
-whose shape is known, so this module writes their LLVM IR directly from the kernel's
-Python source -- as heyoka does from its expression graph -- and compiles it with LLVM
-in milliseconds.  The result is a :class:`methodgen.nbruntime.KernelHandle` (numba's
-wrapper-address protocol) with the signature of numba's C-ABI wrapper for the same
-kernel type, so the shared runtime calls it exactly as it calls a numba kernel.
+numba spends seconds typing and lowering a kernel of a few hundred statements (the outer
+solar system's energy-momentum Newton matrix: 3.4 s of a 9.5 s first use; most of it is
+numba's type inference trying overloads per operation, not LLVM).  The kernels of a numba
+module are float arithmetic on arrays of known shape, so this module writes their LLVM IR
+directly from the kernel's Python source -- as heyoka does from its expression graph -- and
+compiles it with LLVM in milliseconds.  The result is a
+:class:`methodgen.nbruntime.KernelHandle` (numba's wrapper-address protocol) with the
+signature of numba's C-ABI wrapper for the same kernel type, so the shared runtime calls it
+exactly as it calls a numba kernel.
+
+What is translated: assignments (scalar names live in stack slots that LLVM promotes to
+registers, so a value may be carried across iterations or branches), stores and ``+=``,
+``-=`` … to array elements, ``for`` over ``range`` with bounds known at translation time
+(a loop in the machine code) and over constant tuples (unrolled: a sum kept in its printed
+order), ``if``/``else`` on run-time or translation-time conditions, ``return``; views of
+the arguments (``X[a:b]``, rows ``A[i]``), stack buffers (``numba.carray(_rt.stack_buffer(n),
+shape)``) and ``numpy.zeros``; the module's constant tables (numpy arrays of indices or
+weights) and integer constants; calls of the module's scalar helpers (translated once,
+inlined by LLVM) and of its array kernels (inlined here); the arithmetic, comparisons and
+the math functions below.  Anything else (``while``, ``%`` of floats, an unknown function)
+raises :class:`Unsupported`, and :func:`kernel` then compiles the kernel with numba as
+before.  ``METHODGEN_KERNELS=numba`` forces numba for every kernel (the control the tests use).
 
 Same arithmetic, same bits: every operation is the one numba emits for the same source
-without fastmath (IEEE add, sub, mul, div and negation; ``x**n`` for a constant integer
-n by repeated squaring from 1.0, then ``1.0/…`` for negative n, as
-``numba.cpython.numbers.static_power_impl``; other powers through ``llvm.pow``;
-``math.sqrt``, ``math.sin`` … through the same intrinsics or libm functions).  LLVM
-optimises without fast-math flags, so it does not reassociate.
-
-Only what this module knows is translated: assignments to names, stores to array
-elements at constant indices, ``return``, the arithmetic above, the math functions in
-:data:`_UNARY` / :data:`_BINARY`, ``abs``.  Anything else (loops, branches, helper
-calls, stack buffers) raises :class:`Unsupported`, and :func:`kernel` then compiles the
-kernel with numba as before.  ``METHODGEN_KERNELS=numba`` forces numba for every kernel
-(the control the tests use).
+without fastmath (IEEE add, sub, mul, div and negation; ``x**n`` for a constant integer n
+by repeated squaring from 1.0, then ``1.0/…`` for negative n, as
+``numba.cpython.numbers.static_power_impl``; other powers through ``llvm.pow``; ordered
+comparisons but ``!=``; ``max``/``min`` as numba's ``do_minmax``; ``math.sqrt``,
+``math.sin`` … through the same intrinsics or libm functions).  LLVM optimises without
+fast-math flags, so it does not reassociate.  One difference: ``x**-n`` at x = 0 is inf
+here (the modules' error model); numba's raises ``ZeroDivisionError`` inside the kernel.
 
 The kernels' source is the generated module's own text (``inspect.getsource``), parsed
 with :mod:`ast` -- generated code, never user text.
@@ -125,243 +133,359 @@ _UNARY = {"sqrt": ("intr", "llvm.sqrt"), "fabs": ("intr", "llvm.fabs"), "exp": (
 _BINARY = {"atan2": ("extern", "atan2"), "copysign": ("intr", "llvm.copysign")}
 
 
+class _Function:
+    """The state of one LLVM function being written: its builder and entry block, and the
+    slots of its scalar names (allocas, which LLVM's mem2reg turns into registers)."""
+
+    def __init__(self, translator, fn):
+        self.fn = fn
+        self.entry = fn.append_basic_block("entry")
+        self.builder = ir.IRBuilder(self.entry)
+        self.alloca_at = None           # the last alloca in the entry block
+
+
+class _Scope:
+    """Names visible in the body being translated (a kernel, or a kernel inlined into it)."""
+
+    def __init__(self, func: _Function, globals_: dict):
+        self.func = func
+        self.globals = globals_
+        self.slots: dict = {}           # scalar name -> (kind "f" | "i", alloca)
+        self.arrays: dict = {}          # name -> (data pointer, [extent values]) of a float view
+        self.consts: dict = {}          # name -> int known at translation time
+        self.fconsts: dict = {}         # name -> float known at translation time (unrolled tuple)
+
+
+_CMP = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=", ast.Eq: "==", ast.NotEq: "!="}
+
+
 class _Translator:
-    """One kernel function (an ``ast.FunctionDef``) into an LLVM function of ``module``."""
+    """One kernel (an ``ast.FunctionDef``) into an LLVM function of ``module``: straight-line
+    arithmetic, loops over ``range`` with constant bounds (and over constant tuples, unrolled),
+    branches, scalar variables of any flow (stack slots), array views, the module's constant
+    tables, and calls of the module's helpers (scalar ones as functions, array kernels inlined)."""
+
+    _CONST_OPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+                  ast.RShift: lambda a, b: a >> b, ast.LShift: lambda a, b: a << b,
+                  ast.BitAnd: lambda a, b: a & b, ast.BitOr: lambda a, b: a | b,
+                  ast.FloorDiv: lambda a, b: a // b, ast.Mod: lambda a, b: a % b}
 
     def __init__(self, module: ir.Module, fdef: ast.FunctionDef, sig, name: str, globals_: dict):
         self.module = module
+        self.globals = globals_
+        self.tables: dict = {}
+        self.helpers: dict = {}
+        self.inline_depth = 0
         argnames = [a.arg for a in fdef.args.args]
         if len(argnames) != len(sig.args):
             raise Unsupported("argument count differs from the signature")
-        self.void = sig.return_type == _t.none
-        if not self.void and sig.return_type != _t.float64:
+        void = sig.return_type == _t.none
+        if not void and sig.return_type != _t.float64:
             raise Unsupported(f"return type {sig.return_type}")
-        fnty = ir.FunctionType(_PTR if self.void else _DBL, [_llvm_type(t) for t in sig.args])
-        self.fn = ir.Function(module, fnty, name=name)
-        self.values: dict = {}          # name -> double (or i64 loop index) value
-        self.arrays: dict = {}          # name -> (data pointer, [extent values]) of a float view
-        self.tables: dict = {}          # name -> (LLVM global, shape) of a constant int table
-        self.globals = globals_
-        self.entry = self.fn.append_basic_block("entry")
-        self.builder = ir.IRBuilder(self.entry)
-        for a, t, v in zip(argnames, sig.args, self.fn.args):
+        fnty = ir.FunctionType(_PTR if void else _DBL, [_llvm_type(t) for t in sig.args])
+        fn = ir.Function(module, fnty, name=name)
+        self.name = name
+        self.ret = "void" if void else "f"
+        self.f = _Function(self, fn)
+        self.scope = _Scope(self.f, globals_)
+        self.loop_assigned = self._assigned_in_loops(fdef.body)
+        for a, t, v in zip(argnames, sig.args, fn.args):
             if isinstance(t, _t.Array):
-                data = self.builder.extract_value(v, 4)
-                shape = [self.builder.extract_value(v, (5, i)) for i in range(t.ndim)]
-                self.arrays[a] = (data, shape)
+                b = self.b
+                data = b.extract_value(v, 4)
+                shape = [b.extract_value(v, (5, i)) for i in range(t.ndim)]
+                self.scope.arrays[a] = (data, shape)
+            elif t == _t.float64:
+                self.store_name(a, v, "f")
             else:
-                self.values[a] = v
+                self.store_name(a, v, "i")
         self.body = fdef.body
-        self.returned = False
-        self.loop_vars: dict = {}       # loop index name -> i64 value
-        self.loop_defs = None           # names assigned in the innermost loop body
-        self.consts: dict = {}          # name -> Python int (an unrolled loop's element, …)
 
-    # statements
+    @property
+    def b(self):
+        return self.f.builder
+
+    @staticmethod
+    def _assigned_in_loops(body) -> set:
+        """Names assigned anywhere inside a ``for … in range`` loop (never translation-time
+        constants: their value changes from one iteration to the next)."""
+        out = set()
+        for node in ast.walk(ast.Module(body=list(body), type_ignores=[])):
+            if isinstance(node, ast.For) and not isinstance(node.iter, (ast.Tuple, ast.Name)):
+                for sub in ast.walk(node):
+                    if isinstance(sub, (ast.Assign, ast.AugAssign)):
+                        for t in (sub.targets if isinstance(sub, ast.Assign) else [sub.target]):
+                            if isinstance(t, ast.Name):
+                                out.add(t.id)
+                    elif isinstance(sub, ast.For) and isinstance(sub.target, ast.Name):
+                        out.add(sub.target.id)
+        return out
+
+    # --- names --------------------------------------------------------------------------
+    def slot(self, name, kind):
+        sc = self.scope
+        got = sc.slots.get(name)
+        if got is not None:
+            if got[0] != kind:
+                raise Unsupported(f"{name} holds both an integer and a float")
+            return got[1]
+        f = self.f
+        saved = f.builder.block
+        with f.builder.goto_block(f.entry):
+            if f.alloca_at is None:
+                f.builder.position_at_start(f.entry)
+            else:
+                f.builder.position_after(f.alloca_at)
+            a = f.builder.alloca(_DBL if kind == "f" else _I64, name=name)
+        f.alloca_at = a
+        assert f.builder.block is saved
+        sc.slots[name] = (kind, a)
+        return a
+
+    def store_name(self, name, value, kind):
+        sc = self.scope
+        if name in sc.arrays:
+            raise Unsupported(f"{name} rebound")
+        sc.consts.pop(name, None)
+        sc.fconsts.pop(name, None)
+        self.b.store(value, self.slot(name, kind))
+
+    # --- statements ---------------------------------------------------------------------
     def run(self):
-        for st in self.body:
-            if self.returned:
-                raise Unsupported("statement after return")
-            self.statement(st)
-        if not self.returned:
-            if not self.void:
+        self.block(self.body)
+        if not self.b.block.is_terminated:
+            if self.ret != "void":
                 raise Unsupported("no return value")
-            self.builder.ret(ir.Constant(_PTR, None))
+            self.b.ret(ir.Constant(_PTR, None))
+
+    def block(self, stmts):
+        for st in stmts:
+            if self.b.block.is_terminated:
+                return                        # after a return: not executed
+            self.statement(st)
 
     def statement(self, st):
-        b = self.builder
+        b = self.b
+        sc = self.scope
         if isinstance(st, ast.Expr) and isinstance(st.value, ast.Constant):
             return                                   # a docstring or a bare constant
         if isinstance(st, ast.Pass):
+            return
+        if isinstance(st, ast.Expr) and isinstance(st.value, ast.Call):
+            self.call_inline(st.value)
             return
         if isinstance(st, ast.Assign) and len(st.targets) == 1:
             tgt = st.targets[0]
             if isinstance(tgt, ast.Name) and self.view(tgt.id, st.value):
                 return
             if isinstance(tgt, ast.Subscript) and self.is_full_slice(tgt.slice):
-                # X[:] = 0.0 / X[:, :] = 0.0 (an accumulator cleared)
                 if not (isinstance(st.value, ast.Constant) and st.value.value == 0.0):
                     raise Unsupported("slice assignment of a non-zero")
                 self.zero(tgt.value)
                 return
             if isinstance(tgt, ast.Name):
                 c = self.const_eval(st.value)
-                if c is not None:                    # an integer known now (_k = _e >> 3)
-                    if self.loop_defs is not None or tgt.id in self.values:
-                        raise Unsupported(f"{tgt.id}: an integer assigned in a loop")
-                    self.consts[tgt.id] = c
+                if (c is not None and tgt.id not in self.loop_assigned and self.inline_depth == 0
+                        and tgt.id not in sc.slots):
+                    sc.consts[tgt.id] = c
                     return
-                self.consts.pop(tgt.id, None)
-            val = self.expr(st.value)
-            if isinstance(tgt, ast.Name):
-                if tgt.id in self.arrays or tgt.id in self.loop_vars:
-                    raise Unsupported(f"{tgt.id} rebound")
-                if self.loop_defs is not None:
-                    if tgt.id in self.values and tgt.id not in self.loop_defs:
-                        raise Unsupported(f"{tgt.id}: a value carried across iterations")
-                    self.loop_defs.add(tgt.id)
-                self.values[tgt.id] = val
-            elif isinstance(tgt, ast.Subscript):
-                b.store(val, self.address(tgt))
-            else:
-                raise Unsupported("assignment target")
-            return
-        if isinstance(st, ast.For) and isinstance(st.iter, ast.Tuple):
-            self.unrolled(st)
-            return
+                kind, val = self.any_expr(st.value)
+                self.store_name(tgt.id, val, kind)
+                return
+            if isinstance(tgt, ast.Subscript):
+                b.store(self.expr(st.value), self.address(tgt))
+                return
+            raise Unsupported("assignment target")
+        if isinstance(st, ast.AugAssign) and type(st.op) in (ast.Add, ast.Sub, ast.Mult, ast.Div):
+            op = {ast.Add: b.fadd, ast.Sub: b.fsub, ast.Mult: b.fmul, ast.Div: b.fdiv}[type(st.op)]
+            if isinstance(st.target, ast.Subscript):
+                addr = self.address(st.target)
+                b.store(op(b.load(addr), self.expr(st.value)), addr)
+                return
+            if isinstance(st.target, ast.Name) and st.target.id in sc.slots and sc.slots[st.target.id][0] == "f":
+                a = sc.slots[st.target.id][1]
+                b.store(op(b.load(a), self.expr(st.value)), a)
+                return
+            raise Unsupported("augmented assignment")
         if isinstance(st, ast.For):
-            self.loop(st)
+            if isinstance(st.iter, (ast.Tuple, ast.Name)):
+                self.unrolled(st)
+            else:
+                self.loop(st)
             return
         if isinstance(st, ast.If):
             c = self.const_eval(st.test)
-            if c is None:
-                raise Unsupported("a branch on a run-time value")
-            for s in (st.body if c else st.orelse):
-                self.statement(s)
-            return
-        if isinstance(st, ast.AugAssign) and isinstance(st.target, ast.Subscript) and isinstance(st.op, ast.Add):
-            addr = self.address(st.target)
-            b.store(b.fadd(b.load(addr), self.expr(st.value)), addr)
+            if c is not None:
+                self.block(st.body if c else st.orelse)
+                return
+            cond = self.bool_expr(st.test)
+            then = self.f.fn.append_basic_block("then")
+            other = self.f.fn.append_basic_block("else")
+            merge = self.f.fn.append_basic_block("endif")
+            b.cbranch(cond, then, other)
+            reached = False
+            for blk, body in ((then, st.body), (other, st.orelse)):
+                b.position_at_end(blk)
+                self.block(body)
+                if not b.block.is_terminated:
+                    b.branch(merge)
+                    reached = True
+            b.position_at_end(merge)
+            if not reached:                  # both branches returned
+                b.unreachable()
             return
         if isinstance(st, ast.Return):
-            if self.void:
+            if self.inline_depth:
+                raise Unsupported("return from an inlined kernel")
+            if self.ret == "void":
                 if st.value is not None:
                     raise Unsupported("a value returned from a void kernel")
                 b.ret(ir.Constant(_PTR, None))
             else:
                 b.ret(self.expr(st.value))
-            self.returned = True
             return
         raise Unsupported(type(st).__name__)
 
+    # --- arrays ---------------------------------------------------------------------------
     def address(self, sub: ast.Subscript):
-        if not isinstance(sub.value, ast.Name) or sub.value.id not in self.arrays:
-            raise Unsupported("subscript of a non-argument")
-        data, shape = self.arrays[sub.value.id]
+        if not isinstance(sub.value, ast.Name) or sub.value.id not in self.scope.arrays:
+            raise Unsupported("subscript of a non-array")
+        data, shape = self.scope.arrays[sub.value.id]
         idx = sub.slice
         parts = idx.elts if isinstance(idx, ast.Tuple) else [idx]
         if len(parts) != len(shape):
             raise Unsupported("index rank")
-        ints = [self.int_expr(p) for p in parts]
-        b = self.builder
+        return self.element(data, shape, [self.int_expr(p) for p in parts])
+
+    def element(self, data, shape, ints):
+        b = self.b
         # C order: ((i0 * n1) + i1) * n2 + ...  (the extents are run-time values)
         flat = ints[0]
         for n, i in zip(shape[1:], ints[1:]):
             flat = b.add(b.mul(flat, n), i)
         return b.gep(data, [flat])
 
-    _CONST_OPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
-                  ast.RShift: lambda a, b: a >> b, ast.LShift: lambda a, b: a << b,
-                  ast.BitAnd: lambda a, b: a & b, ast.BitOr: lambda a, b: a | b}
-
-    def const_eval(self, node):
-        """The Python int value of an integer expression known at translation time (constants
-        and the elements of a loop over a constant tuple), else None."""
-        if isinstance(node, ast.Constant) and type(node.value) is int:
-            return node.value
-        if isinstance(node, ast.Name):
-            return self.consts.get(node.id)
-        if isinstance(node, ast.BinOp) and type(node.op) in self._CONST_OPS:
-            a, b = self.const_eval(node.left), self.const_eval(node.right)
-            return None if a is None or b is None else self._CONST_OPS[type(node.op)](a, b)
-        if (isinstance(node, ast.Compare) and len(node.ops) == 1 and len(node.comparators) == 1
-                and type(node.ops[0]) in (ast.Eq, ast.NotEq)):
-            a, b = self.const_eval(node.left), self.const_eval(node.comparators[0])
-            if a is None or b is None:
-                return None
-            return int((a == b) if isinstance(node.ops[0], ast.Eq) else (a != b))
+    def array_arg(self, node):
+        """An array argument of an inlined call: a name or a row ``A[i]`` of a 2-D view."""
+        sc = self.scope
+        if isinstance(node, ast.Name) and node.id in sc.arrays:
+            return sc.arrays[node.id]
+        if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in sc.arrays
+                and not isinstance(node.slice, (ast.Tuple, ast.Slice))):
+            data, shape = sc.arrays[node.value.id]
+            if len(shape) != 2:
+                return None                   # an element, not a view
+            row = self.b.mul(self.int_expr(node.slice), shape[1])
+            return self.b.gep(data, [row]), [shape[1]]
         return None
 
-    def unrolled(self, st: ast.For):
-        """``for e in (c0, c1, …)``: the body once per constant, in order (a sum kept in its
-        printed order; its branches on e are decided here)."""
-        if st.orelse or not isinstance(st.target, ast.Name):
-            raise Unsupported("loop")
-        items = [self.const_eval(e) for e in st.iter.elts]
-        if any(v is None for v in items) or self.loop_defs is not None:
-            raise Unsupported("loop over a tuple")
-        name = st.target.id
-        for v in items:
-            self.consts[name] = v
-            for s in st.body:
-                self.statement(s)
-        self.consts.pop(name, None)
-
     def int_expr(self, node):
-        """An index: an integer constant, a loop index, a sum or product of those, or an
-        entry of one of the module's constant integer tables."""
-        b = self.builder
-        if isinstance(node, ast.Constant) and type(node.value) is int:
-            return ir.Constant(_I64, node.value)
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
-            return b.sub(ir.Constant(_I64, 0), self.int_expr(node.operand))
-        if isinstance(node, ast.Name) and node.id in self.loop_vars:
-            return self.loop_vars[node.id]
+        """An integer: a constant, a loop index or integer variable, a sum or product of those,
+        or an entry of one of the module's constant integer tables."""
+        b = self.b
         c = self.const_eval(node)
         if c is not None:
             return ir.Constant(_I64, c)
+        sc = self.scope
+        if isinstance(node, ast.Name) and node.id in sc.slots and sc.slots[node.id][0] == "i":
+            return b.load(sc.slots[node.id][1])
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            return b.sub(ir.Constant(_I64, 0), self.int_expr(node.operand))
         if isinstance(node, ast.BinOp) and type(node.op) in (ast.Add, ast.Sub, ast.Mult):
             x, y = self.int_expr(node.left), self.int_expr(node.right)
             return {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(node.op)](x, y)
         if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
-            gv, shape = self.table(node.value.id)
-            idx = node.slice
-            parts = idx.elts if isinstance(idx, ast.Tuple) else [idx]
-            if len(parts) != len(shape):
-                raise Unsupported("table index rank")
-            flat = self.int_expr(parts[0])
-            for n, p in zip(shape[1:], parts[1:]):
-                flat = b.add(b.mul(flat, ir.Constant(_I64, n)), self.int_expr(p))
-            return b.load(b.gep(gv, [ir.Constant(_I64, 0), flat]))
+            if node.value.id in sc.arrays:
+                raise Unsupported("a float element as an index")
+            gv, shape, kind = self.table(node.value.id)
+            if kind != "i":
+                raise Unsupported("float table as an index")
+            return b.load(self.table_address(gv, shape, node.slice))
         raise Unsupported("index expression")
 
+    def table_address(self, gv, shape, idx):
+        b = self.b
+        parts = idx.elts if isinstance(idx, ast.Tuple) else [idx]
+        if len(parts) != len(shape):
+            raise Unsupported("table index rank")
+        flat = self.int_expr(parts[0])
+        for n, p in zip(shape[1:], parts[1:]):
+            flat = b.add(b.mul(flat, ir.Constant(_I64, n)), self.int_expr(p))
+        return b.gep(gv, [ir.Constant(_I64, 0), flat])
+
     def table(self, name):
-        """A module-level integer array (the loops' index tables) as an LLVM constant."""
+        """A module-level numpy array (index tables, quadrature weights) as an LLVM constant."""
         got = self.tables.get(name)
         if got is None:
             import numpy
-            arr = self.globals.get(name)
-            if not isinstance(arr, numpy.ndarray) or arr.dtype.kind not in "iu" or arr.size == 0:
-                raise Unsupported(f"{name} is not an integer table")
-            flat = [int(v) for v in arr.ravel()]
-            ty = ir.ArrayType(_I64, len(flat))
-            gv = ir.GlobalVariable(self.module, ty, name=f"{self.fn.name}.{name}")
+            arr = self.scope.globals.get(name)
+            if not isinstance(arr, numpy.ndarray) or arr.size == 0 or arr.dtype.kind not in "iuf":
+                raise Unsupported(f"{name} is not a constant table")
+            if arr.dtype.kind == "f":
+                if arr.dtype != numpy.float64:
+                    raise Unsupported(f"{name}: {arr.dtype}")
+                kind, ety, flat = "f", _DBL, [float(v) for v in arr.ravel()]
+            else:
+                kind, ety, flat = "i", _I64, [int(v) for v in arr.ravel()]
+            ty = ir.ArrayType(ety, len(flat))
+            gv = ir.GlobalVariable(self.module, ty, name=f"{self.name}.{name}")
             gv.global_constant = True
             gv.linkage = "private"
             gv.initializer = ir.Constant(ty, flat)
-            got = self.tables[name] = (gv, arr.shape)
+            got = self.tables[name] = (gv, arr.shape, kind)
         return got
 
     def view(self, name, value) -> bool:
-        """``name = X`` or ``name = X[a:b]`` (constant bounds) of an array argument: a view."""
-        if isinstance(value, ast.Name) and value.id in self.arrays:
-            self.arrays[name] = self.arrays[value.id]
+        """``name`` bound to an array: another array, ``X[a:b]`` (constant bounds), a row of a
+        matrix, a stack buffer (``numba.carray(_rt.stack_buffer(n), shape)``) or ``numpy.zeros``."""
+        sc = self.scope
+        arr = self.array_arg(value)
+        if arr is not None:
+            sc.arrays[name] = arr
             return True
         if (isinstance(value, ast.Subscript) and isinstance(value.value, ast.Name)
-                and value.value.id in self.arrays and isinstance(value.slice, ast.Slice)):
-            data, shape = self.arrays[value.value.id]
+                and value.value.id in sc.arrays and isinstance(value.slice, ast.Slice)):
+            data, shape = sc.arrays[value.value.id]
             sl = value.slice
             if len(shape) != 1 or sl.step is not None or sl.lower is None or sl.upper is None:
                 raise Unsupported("slice")
             lo, hi = self.const_int(sl.lower), self.const_int(sl.upper)
-            self.arrays[name] = (self.builder.gep(data, [ir.Constant(_I64, lo)]), [ir.Constant(_I64, hi - lo)])
+            sc.arrays[name] = (self.b.gep(data, [ir.Constant(_I64, lo)]), [ir.Constant(_I64, hi - lo)])
             return True
-        if (isinstance(value, ast.Call) and isinstance(value.func, ast.Attribute)
-                and isinstance(value.func.value, ast.Name) and value.func.value.id == "numpy"
-                and value.func.attr == "zeros" and len(value.args) == 1 and not value.keywords):
-            dims = value.args[0].elts if isinstance(value.args[0], ast.Tuple) else [value.args[0]]
-            shape = [self.const_int(d) for d in dims]
-            total = 1
-            for n in shape:
-                total *= n
-            # a work array on the stack (alloca in the entry block), cleared
-            with self.builder.goto_block(self.entry):
-                self.builder.position_at_start(self.entry)
-                buf = self.builder.alloca(_DBL, size=ir.Constant(_I64, max(total, 1)))
-            self.arrays[name] = (buf, [ir.Constant(_I64, n) for n in shape])
-            self.zero(ast.Name(id=name))
-            return True
+        if isinstance(value, ast.Call) and isinstance(value.func, ast.Attribute) and not value.keywords:
+            owner = value.func.value.id if isinstance(value.func.value, ast.Name) else None
+            if owner == "numpy" and value.func.attr == "zeros" and len(value.args) == 1:
+                shape = self.const_shape(value.args[0])
+                sc.arrays[name] = self.buffer(shape)
+                self.zero(ast.Name(id=name))
+                return True
+            if owner == "numba" and value.func.attr == "carray" and len(value.args) == 2:
+                inner = value.args[0]
+                if not (isinstance(inner, ast.Call) and isinstance(inner.func, ast.Attribute)
+                        and inner.func.attr == "stack_buffer"):
+                    raise Unsupported("carray of something else than a stack buffer")
+                sc.arrays[name] = self.buffer(self.const_shape(value.args[1]))
+                return True
         return False
+
+    def const_shape(self, node):
+        dims = node.elts if isinstance(node, ast.Tuple) else [node]
+        return [self.const_int(d) for d in dims]
+
+    def buffer(self, shape):
+        """A work array on the stack (an alloca in the entry block)."""
+        total = 1
+        for n in shape:
+            total *= n
+        f = self.f
+        with f.builder.goto_block(f.entry):
+            if f.alloca_at is None:
+                f.builder.position_at_start(f.entry)
+            else:
+                f.builder.position_after(f.alloca_at)
+            buf = f.builder.alloca(_DBL, size=ir.Constant(_I64, max(total, 1)))
+        f.alloca_at = buf
+        return buf, [ir.Constant(_I64, n) for n in shape]
 
     @staticmethod
     def is_full_slice(idx) -> bool:
@@ -370,10 +494,10 @@ class _Translator:
                    for p in parts)
 
     def zero(self, node):
-        if not isinstance(node, ast.Name) or node.id not in self.arrays:
+        if not isinstance(node, ast.Name) or node.id not in self.scope.arrays:
             raise Unsupported("clearing a non-array")
-        b = self.builder
-        data, shape = self.arrays[node.id]
+        b = self.b
+        data, shape = self.scope.arrays[node.id]
         n = shape[0]
         for e in shape[1:]:
             n = b.mul(n, e)
@@ -381,8 +505,74 @@ class _Translator:
         b.call(fn, [b.bitcast(data, _PTR), ir.Constant(ir.IntType(8), 0), b.mul(n, ir.Constant(_I64, 8)),
                     ir.Constant(ir.IntType(1), 0)])
 
+    # --- loops ----------------------------------------------------------------------------
+    def const_int(self, node):
+        c = self.const_eval(node)
+        if c is None:
+            raise Unsupported("non-constant integer")
+        return c
+
+    def const_eval(self, node):
+        """The Python int value of an integer expression known at translation time (constants,
+        the module's integer constants, the elements of a loop over a constant tuple), else None."""
+        if isinstance(node, ast.Constant) and type(node.value) is int:
+            return node.value
+        if isinstance(node, ast.Name):
+            sc = self.scope
+            if node.id in sc.consts:
+                return sc.consts[node.id]
+            if node.id in sc.slots or node.id in sc.arrays or node.id in sc.fconsts:
+                return None
+            v = sc.globals.get(node.id)
+            return v if type(v) is int and node.id.startswith("_") else None
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            v = self.const_eval(node.operand)
+            return None if v is None else -v
+        if isinstance(node, ast.BinOp) and type(node.op) in self._CONST_OPS:
+            a, b = self.const_eval(node.left), self.const_eval(node.right)
+            if a is None or b is None or (type(node.op) in (ast.FloorDiv, ast.Mod) and b == 0):
+                return None
+            return self._CONST_OPS[type(node.op)](a, b)
+        if isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _CMP:
+            a, b = self.const_eval(node.left), self.const_eval(node.comparators[0])
+            if a is None or b is None:
+                return None
+            import operator
+            fn = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
+                  ast.Eq: operator.eq, ast.NotEq: operator.ne}[type(node.ops[0])]
+            return int(fn(a, b))
+        return None
+
+    def unrolled(self, st: ast.For):
+        """``for e in (c0, c1, …)`` (a literal tuple or a module-level tuple of numbers): the
+        body once per element, in order (a sum kept in its printed order)."""
+        if st.orelse or not isinstance(st.target, ast.Name):
+            raise Unsupported("loop")
+        if isinstance(st.iter, ast.Tuple):
+            items = [self.const_eval(e) if not (isinstance(e, ast.Constant) and type(e.value) is float)
+                     else e.value for e in st.iter.elts]
+        else:
+            items = self.scope.globals.get(st.iter.id)
+            if not isinstance(items, tuple):
+                raise Unsupported("loop over a non-tuple")
+            items = list(items)
+        if any(type(v) not in (int, float) for v in items):
+            raise Unsupported("loop over a tuple of non-numbers")
+        name = st.target.id
+        if name in self.loop_assigned and any(type(v) is int for v in items):
+            raise Unsupported("unrolled integer loop inside a run-time loop")
+        sc = self.scope
+        for v in items:
+            if type(v) is int:
+                sc.consts[name] = v
+            else:
+                sc.fconsts[name] = v
+            self.block(st.body)
+        sc.consts.pop(name, None)
+        sc.fconsts.pop(name, None)
+
     def loop(self, st: ast.For):
-        """``for i in range(a, b)`` (constant bounds) over straight-line statements."""
+        """``for i in range(a, b)`` (bounds known now) as a loop in the machine code."""
         it = st.iter
         if (st.orelse or not isinstance(st.target, ast.Name) or not isinstance(it, ast.Call)
                 or not isinstance(it.func, ast.Name) or it.func.id != "range" or it.keywords
@@ -390,56 +580,69 @@ class _Translator:
             raise Unsupported("loop")
         bounds = [self.const_int(a) for a in it.args]
         lo, hi = (0, bounds[0]) if len(bounds) == 1 else bounds
+        name = st.target.id
+        sc = self.scope
+        sc.consts.pop(name, None)
         if hi <= lo:
             return
-        name = st.target.id
-        if name in self.values or name in self.loop_vars or name in self.consts:
-            raise Unsupported("loop index reused")
-        b = self.builder
-        pre = b.block
-        body = self.fn.append_basic_block(f"loop.{name}")
-        after = self.fn.append_basic_block(f"after.{name}")
+        b = self.b
+        var = self.slot(name, "i")
+        b.store(ir.Constant(_I64, lo), var)
+        fn = self.f.fn
+        body = fn.append_basic_block(f"loop.{name}")
+        after = fn.append_basic_block(f"after.{name}")
         b.branch(body)
         b.position_at_end(body)
-        phi = b.phi(_I64, name=name)
-        phi.add_incoming(ir.Constant(_I64, lo), pre)
-        saved = dict(self.values)
-        outer_defs = self.loop_defs
-        self.loop_vars[name] = phi
-        self.loop_defs = set()
-        for s in st.body:
-            self.statement(s)
-        nxt = b.add(phi, ir.Constant(_I64, 1))
-        phi.add_incoming(nxt, b.block)
+        self.block(st.body)
+        if b.block.is_terminated:
+            raise Unsupported("return inside a loop")
+        nxt = b.add(b.load(var), ir.Constant(_I64, 1))
+        b.store(nxt, var)
         b.cbranch(b.icmp_signed("<", nxt, ir.Constant(_I64, hi)), body, after)
         b.position_at_end(after)
-        # the body's names are its own: after the loop only what was defined before
-        self.values = saved
-        del self.loop_vars[name]
-        self.loop_defs = outer_defs
+        # Python leaves the index at its last value
+        b.store(ir.Constant(_I64, hi - 1), var)
 
-    @staticmethod
-    def const_int(node):
-        neg = False
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
-            neg, node = True, node.operand
-        if isinstance(node, ast.Constant) and type(node.value) is int:
-            return -node.value if neg else node.value
-        raise Unsupported("non-constant index")
+    # --- expressions ----------------------------------------------------------------------
+    def any_expr(self, node):
+        """``(kind, value)`` of an expression assigned to a name: an integer (index arithmetic)
+        or a float."""
+        try:
+            return "i", self.int_expr(node)
+        except Unsupported:
+            return "f", self.expr(node)
 
-    # expressions
     def expr(self, node):
-        b = self.builder
+        b = self.b
+        sc = self.scope
         if isinstance(node, ast.Constant):
             if type(node.value) in (int, float):
                 return ir.Constant(_DBL, float(node.value))
             raise Unsupported(f"constant {node.value!r}")
         if isinstance(node, ast.Name):
-            v = self.values.get(node.id)
-            if v is None:
-                raise Unsupported(f"name {node.id}")
-            return v
+            if node.id in sc.fconsts:
+                return ir.Constant(_DBL, sc.fconsts[node.id])
+            got = sc.slots.get(node.id)
+            if got is not None:
+                v = b.load(got[1])
+                return v if got[0] == "f" else b.sitofp(v, _DBL)
+            c = self.const_eval(node)
+            if c is not None:
+                return ir.Constant(_DBL, float(c))
+            v = sc.globals.get(node.id)
+            if type(v) is float and node.id.startswith("_"):
+                return ir.Constant(_DBL, v)
+            raise Unsupported(f"name {node.id}")
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "math":
+            if node.attr in ("inf", "nan", "pi", "e", "tau"):
+                import math
+                return ir.Constant(_DBL, getattr(math, node.attr))
+            raise Unsupported(f"math.{node.attr}")
         if isinstance(node, ast.Subscript):
+            if isinstance(node.value, ast.Name) and node.value.id not in sc.arrays:
+                gv, shape, kind = self.table(node.value.id)
+                v = b.load(self.table_address(gv, shape, node.slice))
+                return v if kind == "f" else b.sitofp(v, _DBL)
             return b.load(self.address(node))
         if isinstance(node, ast.UnaryOp):
             if isinstance(node.op, ast.USub):
@@ -450,21 +653,56 @@ class _Translator:
         if isinstance(node, ast.BinOp):
             if isinstance(node.op, ast.Pow):
                 return self.power(node)
+            c = self.const_eval(node)
+            if c is not None:                     # integer arithmetic, then a float (as numba)
+                return ir.Constant(_DBL, float(c))
             x, y = self.expr(node.left), self.expr(node.right)
             op = {ast.Add: b.fadd, ast.Sub: b.fsub, ast.Mult: b.fmul, ast.Div: b.fdiv}.get(type(node.op))
             if op is None:
                 raise Unsupported("binary operator")
             return op(x, y)
+        if isinstance(node, (ast.Compare, ast.BoolOp)) or (isinstance(node, ast.UnaryOp)
+                                                             and isinstance(node.op, ast.Not)):
+            return b.uitofp(self.bool_expr(node), _DBL)       # a truth value stored as 1.0 / 0.0
+        if isinstance(node, ast.IfExp):
+            cond = self.bool_expr(node.test)
+            return b.select(cond, self.expr(node.body), self.expr(node.orelse))
         if isinstance(node, ast.Call):
             return self.call(node)
         raise Unsupported(type(node).__name__)
 
+    def bool_expr(self, node):
+        b = self.b
+        c = self.const_eval(node)
+        if c is not None:
+            return ir.Constant(ir.IntType(1), int(bool(c)))
+        if isinstance(node, ast.Constant) and type(node.value) is bool:
+            return ir.Constant(ir.IntType(1), int(node.value))
+        if isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _CMP:
+            op = _CMP[type(node.ops[0])]
+            try:
+                x, y = self.int_expr(node.left), self.int_expr(node.comparators[0])
+                return b.icmp_signed(op, x, y)
+            except Unsupported:
+                pass
+            x, y = self.expr(node.left), self.expr(node.comparators[0])
+            # numba: ordered comparisons, except != (unordered: NaN != x)
+            return b.fcmp_unordered(op, x, y) if op == "!=" else b.fcmp_ordered(op, x, y)
+        if isinstance(node, ast.BoolOp):
+            vals = [self.bool_expr(v) for v in node.values]
+            out = vals[0]
+            for v in vals[1:]:
+                out = b.and_(out, v) if isinstance(node.op, ast.And) else b.or_(out, v)
+            return out
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+            return b.not_(self.bool_expr(node.operand))
+        raise Unsupported("condition")
+
     def power(self, node):
-        b = self.builder
-        try:
-            n = self.const_int(node.right)
-        except Unsupported:
-            n = None
+        b = self.b
+        n = self.const_eval(node.right)
+        if n is not None and self.const_eval(node.left) is not None:
+            raise Unsupported("integer power of an integer")
         x = self.expr(node.left)
         if n is None or abs(n) > 0x10000:
             fn = self.module.declare_intrinsic("llvm.pow", [_DBL])
@@ -481,12 +719,20 @@ class _Translator:
     def call(self, node):
         if node.keywords:
             raise Unsupported("keyword arguments")
+        b = self.b
         f = node.func
+        if isinstance(f, ast.Name) and f.id in ("max", "min") and len(node.args) == 2:
+            acc, v = self.expr(node.args[0]), self.expr(node.args[1])
+            # numba's do_minmax: v replaces the accumulator where v > acc (max) / v < acc (min)
+            pred = b.fcmp_ordered(">" if f.id == "max" else "<", v, acc)
+            return b.select(pred, v, acc)
         if isinstance(f, ast.Name) and f.id == "abs" and len(node.args) == 1:
             name, table = "fabs", _UNARY
         elif (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "math"
               and (f.attr in _UNARY or f.attr in _BINARY)):
             name, table = f.attr, (_UNARY if f.attr in _UNARY else _BINARY)
+        elif isinstance(f, ast.Name):
+            return self.call_helper(node)
         else:
             raise Unsupported("call")
         args = [self.expr(a) for a in node.args]
@@ -499,7 +745,67 @@ class _Translator:
             fn = self.module.globals.get(sym)
             if fn is None:
                 fn = ir.Function(self.module, ir.FunctionType(_DBL, [_DBL] * len(args)), name=sym)
-        return self.builder.call(fn, args)
+        return b.call(fn, args)
+
+    def _py_function(self, name):
+        obj = self.scope.globals.get(name)
+        py = getattr(obj, "py_func", obj)
+        if not callable(py) or not hasattr(py, "__code__"):
+            raise Unsupported(f"call of {name}")
+        return py
+
+    def call_helper(self, node):
+        """A call of one of the module's scalar helpers (floats in, a float out): the helper
+        translated once into a function of this module, called."""
+        name = node.func.id
+        fn = self.helpers.get(name)
+        if fn is None:
+            py = self._py_function(name)
+            fdef = _function_def(py)
+            n = len(fdef.args.args)
+            sig = _t.float64(*([_t.float64] * n))
+            sub = _Translator(self.module, fdef, sig, f"{self.name}.{name}", getattr(py, "__globals__", {}))
+            sub.tables = self.tables
+            sub.helpers = self.helpers
+            sub.run()
+            fn = self.helpers[name] = sub.f.fn
+            fn.linkage = "private"
+            fn.attributes.add("alwaysinline")
+        if len(node.args) != len(fn.args):
+            raise Unsupported("argument count of a helper")
+        return self.b.call(fn, [self.expr(a) for a in node.args])
+
+    def call_inline(self, node):
+        """A call statement of one of the module's array kernels (``_nb_field(_u, _p, _F[_k])``):
+        its body translated here, its parameters bound to the arguments."""
+        if node.keywords or not isinstance(node.func, ast.Name):
+            raise Unsupported("call statement")
+        py = self._py_function(node.func.id)
+        fdef = _function_def(py)
+        params = [a.arg for a in fdef.args.args]
+        if len(params) != len(node.args) or self.inline_depth > 4:
+            raise Unsupported("call statement")
+        outer = self.scope
+        inner = _Scope(self.f, getattr(py, "__globals__", {}))
+        for p, a in zip(params, node.args):
+            arr = self.array_arg(a)
+            if arr is not None:
+                inner.arrays[p] = arr
+            else:
+                v = self.expr(a)
+                self.scope = inner
+                self.store_name(f"{p}", v, "f")
+                self.scope = outer
+        saved_assigned = self.loop_assigned
+        self.scope = inner
+        self.inline_depth += 1
+        self.loop_assigned = self._assigned_in_loops(fdef.body)
+        try:
+            self.block(fdef.body)
+        finally:
+            self.scope = outer
+            self.inline_depth -= 1
+            self.loop_assigned = saved_assigned
 
 
 def _function_def(py_func) -> ast.FunctionDef:

@@ -124,23 +124,75 @@ def test_loops_tables_views_and_unrolled_sums_are_bitwise_numbas(tmp_path):
     assert np.array_equal(_rows(ll, Y, 5), _rows(_numba(mod.loops), Y, 5))
 
 
+FLOW = """
+@numba.njit
+def _helper(a, b):
+    d = b - a
+    if abs(d) < 1.0:
+        return 0.5 * d * d
+    hi = max(a, b)
+    return hi - min(a, b) + (1.0 if d > 0.0 else -1.0)
+
+
+@numba.njit
+def _field(_y, _p, _out):
+    _out[0] = _y[0] * _p[0]
+    _out[1] = _y[1] - _p[1]
+
+
+def flow(_z, _y, _c, _h, _p, _r):
+    s = 0.0
+    for i in range(3):
+        s = s + _y[i] * (i + 1)
+        s += 0.5
+    _r[0] = s
+    if _y[0] > 0.0:
+        _r[1] = 1.0
+    elif _y[0] != _y[0]:
+        _r[1] = 2.0
+    else:
+        _r[1] = _y[1] if _y[1] <= _y[2] else -_y[2]
+    _r[2] = _helper(_y[0], _y[1]) + _helper(_y[2], _y[0])
+    _r[3] = max(_y[0], _y[1]) - min(_y[1], _y[2])
+    _F = numba.carray(_rt.stack_buffer(4), (2, 2))
+    for _k in range(2):
+        _field(_y, _p, _F[_k])
+    _r[4] = _F[0, 0] + _F[1, 1]
+    _r[5] = _y[0] > 0.5 and _y[1] < 0.5 or not _y[2] >= 0.0
+"""
+
+
+def test_control_flow_helpers_and_stack_buffers_are_bitwise_numbas(tmp_path):
+    """Variables carried across iterations, branches on run-time values (NaN compares false,
+    except !=), the module's scalar helpers (called) and array kernels (inlined into a stack
+    buffer's rows): translated, and bitwise numba's on random inputs with NaN and inf."""
+    mod = _load(tmp_path, "k_flow", "from methodgen import nbruntime as _rt\n" + FLOW)
+    ll = lk.compile_kernel(mod.flow, RES)
+    assert isinstance(ll, lk.LLVMKernel)
+    rng = np.random.default_rng(3)
+    Y = np.concatenate([rng.normal(size=(300, 3)) * 2.0,
+                        [[np.nan, 1.0, 2.0], [1.0, np.nan, 0.0], [np.inf, -np.inf, np.nan], [0.3, 0.3, 0.3]]])
+    with np.errstate(all="ignore"):
+        assert np.array_equal(_rows(ll, Y, 6), _rows(_numba(mod.flow), Y, 6), equal_nan=True)
+
+
 @pytest.mark.parametrize("body, why", [
-    # a value carried from one iteration to the next: refused, not translated as the first value
-    ("    s = 0.0\n    for i in range(3):\n        s = s + _y[i]\n    _r[0] = s\n", "carried"),
-    ("    if _y[0] > 0.0:\n        _r[0] = 1.0\n", "branch"),
-    ("    _r[0] = _helper(_y[0])\n", "call"),
     ("    _r[0] = _y[0] % 2.0\n", "operator"),
-    ("    _r[0] = max(_y[0], _y[1])\n", "call"),
+    ("    _r[0] = math.hypot(_y[0], _y[1])\n", "function"),
+    ("    i = 0\n    while i < 2:\n        _r[i] = 1.0\n        i += 1\n", "while"),
+    ("    _r[0] = _helper(_y[0])\n", "python-call"),
 ])
 def test_what_is_not_translated_falls_back_to_numba(tmp_path, body, why):
-    src = "@numba.njit\ndef _helper(x):\n    return 2.0 * x\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
-    mod = _load(tmp_path, f"k_{why}_{abs(hash(body)) % 10**6}", src)
+    src = "def _helper(x):\n    return 2.0 * x\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
+    if why == "python-call":     # a helper numba can call but that is not a compiled kernel here
+        src = "_helper = numba.njit(lambda x: 2.0 * x)\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
+    mod = _load(tmp_path, f"k_{why}", src)
     with pytest.raises(lk.Unsupported):
         lk.compile_kernel(mod.k, RES)
     got = lk.kernel(RES)(mod.k)
     assert not isinstance(got, lk.LLVMKernel)          # numba compiled it
     Y = np.array([[1.5, 2.5, 3.5], [-1.0, 0.5, 0.25]])
-    assert np.array_equal(_rows(got, Y, 1), _rows(_numba(mod.k), Y, 1))
+    assert np.array_equal(_rows(got, Y, 2), _rows(_numba(mod.k), Y, 2))
     # control: a straight-line kernel takes the LLVM route
     ok = _load(tmp_path, f"k_ok_{why}", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] + _y[1]\n")
     assert isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
