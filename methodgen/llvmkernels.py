@@ -721,11 +721,14 @@ class _Translator:
             raise Unsupported("keyword arguments")
         b = self.b
         f = node.func
-        if isinstance(f, ast.Name) and f.id in ("max", "min") and len(node.args) == 2:
-            acc, v = self.expr(node.args[0]), self.expr(node.args[1])
-            # numba's do_minmax: v replaces the accumulator where v > acc (max) / v < acc (min)
-            pred = b.fcmp_ordered(">" if f.id == "max" else "<", v, acc)
-            return b.select(pred, v, acc)
+        if isinstance(f, ast.Name) and f.id in ("max", "min") and len(node.args) >= 2:
+            # numba's do_minmax, left to right: v replaces the accumulator where v > acc (max)
+            # / v < acc (min)
+            acc = self.expr(node.args[0])
+            for a in node.args[1:]:
+                v = self.expr(a)
+                acc = b.select(b.fcmp_ordered(">" if f.id == "max" else "<", v, acc), v, acc)
+            return acc
         if isinstance(f, ast.Name) and f.id == "abs" and len(node.args) == 1:
             name, table = "fabs", _UNARY
         elif (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "math"

@@ -153,7 +153,7 @@ def flow(_z, _y, _c, _h, _p, _r):
     else:
         _r[1] = _y[1] if _y[1] <= _y[2] else -_y[2]
     _r[2] = _helper(_y[0], _y[1]) + _helper(_y[2], _y[0])
-    _r[3] = max(_y[0], _y[1]) - min(_y[1], _y[2])
+    _r[3] = max(_y[0], _y[1]) - min(_y[1], _y[2]) + max(abs(_y[0]), _y[1], -_y[2])
     _F = numba.carray(_rt.stack_buffer(4), (2, 2))
     for _k in range(2):
         _field(_y, _p, _F[_k])
