@@ -44,6 +44,7 @@ import ctypes.util
 import inspect
 import os
 import textwrap
+import threading
 
 import llvmlite.binding as llvm
 from llvmlite import ir
@@ -70,6 +71,7 @@ _I64 = ir.IntType(64)
 _PTR = ir.PointerType(ir.IntType(8))
 _DPTR = ir.PointerType(_DBL)
 _STATE: dict = {}
+_LOCK = threading.RLock()
 
 
 def _target_machine():
@@ -826,6 +828,11 @@ def compile_kernel(py_func, sig) -> "LLVMKernel":
     """``py_func`` (a straight-line kernel of a generated module) compiled through LLVM IR
     for the numba signature ``sig``.  Raises :class:`Unsupported` when its source uses
     anything the translator does not know."""
+    with _LOCK:     # one engine per process: modules are added to it one at a time
+        return _compile_kernel(py_func, sig)
+
+
+def _compile_kernel(py_func, sig):
     engine = _engine()
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)

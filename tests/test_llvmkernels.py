@@ -240,3 +240,24 @@ def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, 
         assert all(isinstance(k, lk.LLVMKernel) == (route == "llvm") for k in kernels.values()), kernels
         runs[route] = mod.integrate(y0, h, steps)
     assert np.array_equal(runs["llvm"], runs["numba"])
+
+
+def test_kernels_compile_from_several_threads(tmp_path):
+    """One LLVM engine per process: kernels compiled from several threads at once (a dask
+    worker's threads importing modules) are added one at a time and all run right."""
+    import threading
+
+    mods = [_load(tmp_path, f"k_thread{i}", f"def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] * {i + 1}.0 + _y[1]\n")
+            for i in range(6)]
+    got = [None] * 6
+
+    def work(i):
+        got[i] = lk.compile_kernel(mods[i].k, RES)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(6)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    Y = np.array([[1.0, 0.5, 0.0]])
+    assert [float(_rows(k, Y, 1)[0, 0]) for k in got] == [1.0 * (i + 1) + 0.5 for i in range(6)]
