@@ -580,30 +580,41 @@ class _Translator:
                 or not isinstance(it.func, ast.Name) or it.func.id != "range" or it.keywords
                 or not 1 <= len(it.args) <= 2):
             raise Unsupported("loop")
-        bounds = [self.const_int(a) for a in it.args]
-        lo, hi = (0, bounds[0]) if len(bounds) == 1 else bounds
+        bounds = [self.const_eval(a) for a in it.args]
         name = st.target.id
         sc = self.scope
         sc.consts.pop(name, None)
-        if hi <= lo:
-            return
         b = self.b
+        if all(v is not None for v in bounds):
+            lo, hi = (0, bounds[0]) if len(bounds) == 1 else bounds
+            if hi <= lo:
+                return
+            lo, hi = ir.Constant(_I64, lo), ir.Constant(_I64, hi)
+            known = True
+        else:
+            # bounds known at run time only (evaluated once, as range() does)
+            vals = [self.int_expr(a) for a in it.args]
+            lo, hi = (ir.Constant(_I64, 0), vals[0]) if len(vals) == 1 else vals
+            known = False
         var = self.slot(name, "i")
-        b.store(ir.Constant(_I64, lo), var)
         fn = self.f.fn
         body = fn.append_basic_block(f"loop.{name}")
         after = fn.append_basic_block(f"after.{name}")
-        b.branch(body)
+        b.store(lo, var)
+        if known:
+            b.branch(body)
+        else:
+            b.cbranch(b.icmp_signed("<", lo, hi), body, after)
         b.position_at_end(body)
         self.block(st.body)
         if b.block.is_terminated:
-            raise Unsupported("return inside a loop")
+            raise Unsupported("a loop body that always returns")
         nxt = b.add(b.load(var), ir.Constant(_I64, 1))
         b.store(nxt, var)
-        b.cbranch(b.icmp_signed("<", nxt, ir.Constant(_I64, hi)), body, after)
+        b.cbranch(b.icmp_signed("<", nxt, hi), body, after)
         b.position_at_end(after)
-        # Python leaves the index at its last value
-        b.store(ir.Constant(_I64, hi - 1), var)
+        if known:                # Python leaves the index at its last value
+            b.store(b.sub(hi, ir.Constant(_I64, 1)), var)
 
     # --- expressions ----------------------------------------------------------------------
     def any_expr(self, node):
@@ -824,22 +835,23 @@ def _function_def(py_func) -> ast.FunctionDef:
     return tree.body[0]
 
 
-def compile_kernel(py_func, sig) -> "LLVMKernel":
-    """``py_func`` (a straight-line kernel of a generated module) compiled through LLVM IR
-    for the numba signature ``sig``.  Raises :class:`Unsupported` when its source uses
-    anything the translator does not know."""
+def compile_kernel(py_func, sig, globals_=None) -> "LLVMKernel":
+    """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the numba
+    signature ``sig``, its names resolved in ``globals_`` (default: its module's).  Raises
+    :class:`Unsupported` when its source uses anything the translator does not know."""
     with _LOCK:     # one engine per process: modules are added to it one at a time
-        return _compile_kernel(py_func, sig)
+        return _compile_kernel(py_func, sig, globals_)
 
 
-def _compile_kernel(py_func, sig):
+def _compile_kernel(py_func, sig, globals_=None):
     engine = _engine()
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
     module.triple = _STATE["triple"]
     _STATE["count"] += 1
     name = f"mg{_STATE['count']}_{py_func.__name__}"   # unique in the engine
-    tr = _Translator(module, fdef, sig, name, getattr(py_func, "__globals__", {}))
+    tr = _Translator(module, fdef, sig, name,
+                     getattr(py_func, "__globals__", {}) if globals_ is None else globals_)
     tr.run()
     mod = llvm.parse_assembly(str(module))
     mod.verify()

@@ -856,6 +856,13 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     optimised (no faster than the generic one).  Same arithmetic, so bitwise the same
     results whichever copy runs.
     """
+    if int(cfg[_C_KIND]) == 2:
+        # An explicit module whose post kernel was compiled through LLVM IR: its loop with the
+        # kernel inlined (methodgen.fused), which hands back to the loop below on any failure.
+        from . import fused
+        if fused.run_fused(post_k, hs, cfg, fcfg, domain_pos, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC,
+                           h, p, check_resolution, compensated, fstat, every):
+            return
     kt = KERNEL_TYPES
     guess, res, resjac, scale = (handle(guess, kt["guess"]), handle(res, kt["res"]), handle(resjac, kt["resjac"]),
                                  handle(scale, kt["scale"]))
