@@ -32,7 +32,11 @@ from numba import types as _t
 from . import llvmkernels as _lk
 from . import nbruntime as _rt
 
-__all__ = ["run_fused", "enabled"]
+__all__ = ["run_fused", "enabled", "SOURCE_SHA256"]
+
+#: SHA-256 of this file: the stamp of the cached driver (as the shared runtime's).
+SOURCE_SHA256 = _rt._source_digest(os.path.abspath(__file__))
+_rt._install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
 
 _f8 = _t.float64
 _i8 = _t.int64
