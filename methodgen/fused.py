@@ -38,10 +38,7 @@ __all__ = ["run_fused", "enabled", "SOURCE_SHA256"]
 SOURCE_SHA256 = _rt._source_digest(os.path.abspath(__file__))
 _rt._install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
 
-_f8 = _t.float64
-_i8 = _t.int64
-_V = _t.float64[::1]
-_M = _t.float64[:, ::1]
+_f8, _i8, _V, _M = _rt._f8, _rt._i8, _rt._V, _rt._M
 _T3 = _t.float64[:, :, ::1]
 
 #: signature of the compiled loop: Y, C, G (B, ·), traj (rows, B, DIM), p, kick_a, drift,

@@ -139,11 +139,24 @@ class _Function:
     """The state of one LLVM function being written: its builder and entry block, and the
     slots of its scalar names (allocas, which LLVM's mem2reg turns into registers)."""
 
-    def __init__(self, translator, fn):
+    def __init__(self, fn):
         self.fn = fn
         self.entry = fn.append_basic_block("entry")
         self.builder = ir.IRBuilder(self.entry)
         self.alloca_at = None           # the last alloca in the entry block
+
+    def alloca(self, ty, size=None, name=""):
+        """A stack slot in the entry block (after the slots made before it, so that every
+        slot dominates its uses, and LLVM's mem2reg promotes the scalar ones)."""
+        b = self.builder
+        with b.goto_block(self.entry):
+            if self.alloca_at is None:
+                b.position_at_start(self.entry)
+            else:
+                b.position_after(self.alloca_at)
+            a = b.alloca(ty, size=size, name=name)
+        self.alloca_at = a
+        return a
 
 
 class _Scope:
@@ -188,7 +201,7 @@ class _Translator:
         fn = ir.Function(module, fnty, name=name)
         self.name = name
         self.ret = "void" if void else "f"
-        self.f = _Function(self, fn)
+        self.f = _Function(fn)
         self.scope = _Scope(self.f, globals_)
         self.loop_assigned = self._assigned_in_loops(fdef.body)
         for a, t, v in zip(argnames, sig.args, fn.args):
@@ -231,16 +244,7 @@ class _Translator:
             if got[0] != kind:
                 raise Unsupported(f"{name} holds both an integer and a float")
             return got[1]
-        f = self.f
-        saved = f.builder.block
-        with f.builder.goto_block(f.entry):
-            if f.alloca_at is None:
-                f.builder.position_at_start(f.entry)
-            else:
-                f.builder.position_after(f.alloca_at)
-            a = f.builder.alloca(_DBL if kind == "f" else _I64, name=name)
-        f.alloca_at = a
-        assert f.builder.block is saved
+        a = self.f.alloca(_DBL if kind == "f" else _I64, name=name)
         sc.slots[name] = (kind, a)
         return a
 
@@ -479,14 +483,7 @@ class _Translator:
         total = 1
         for n in shape:
             total *= n
-        f = self.f
-        with f.builder.goto_block(f.entry):
-            if f.alloca_at is None:
-                f.builder.position_at_start(f.entry)
-            else:
-                f.builder.position_after(f.alloca_at)
-            buf = f.builder.alloca(_DBL, size=ir.Constant(_I64, max(total, 1)))
-        f.alloca_at = buf
+        buf = self.f.alloca(_DBL, size=ir.Constant(_I64, max(total, 1)))
         return buf, [ir.Constant(_I64, n) for n in shape]
 
     @staticmethod
@@ -801,19 +798,19 @@ class _Translator:
         params = [a.arg for a in fdef.args.args]
         if len(params) != len(node.args) or self.inline_depth > 4:
             raise Unsupported("call statement")
-        outer = self.scope
-        inner = _Scope(self.f, getattr(py, "__globals__", {}))
-        for p, a in zip(params, node.args):
+        # the arguments, evaluated in the caller's scope: array views or float values
+        args = []
+        for a in node.args:
             arr = self.array_arg(a)
-            if arr is not None:
-                inner.arrays[p] = arr
-            else:
-                v = self.expr(a)
-                self.scope = inner
-                self.store_name(f"{p}", v, "f")
-                self.scope = outer
+            args.append(("a", arr) if arr is not None else ("f", self.expr(a)))
+        outer = self.scope
         saved_assigned = self.loop_assigned
-        self.scope = inner
+        self.scope = _Scope(self.f, getattr(py, "__globals__", {}))
+        for p, (kind, v) in zip(params, args):
+            if kind == "a":
+                self.scope.arrays[p] = v
+            else:
+                self.store_name(p, v, "f")
         self.inline_depth += 1
         self.loop_assigned = self._assigned_in_loops(fdef.body)
         try:
