@@ -191,6 +191,7 @@ class _Translator:
         self.tables: dict = {}
         self.helpers: dict = {}
         self.inline_depth = 0
+        self.loops: list = []           # (continue target, break target) of the enclosing loops
         argnames = [a.arg for a in fdef.args.args]
         if len(argnames) != len(sig.args):
             raise Unsupported("argument count differs from the signature")
@@ -226,7 +227,8 @@ class _Translator:
         constants: their value changes from one iteration to the next)."""
         out = set()
         for node in ast.walk(ast.Module(body=list(body), type_ignores=[])):
-            if isinstance(node, ast.For) and not isinstance(node.iter, (ast.Tuple, ast.Name)):
+            if isinstance(node, ast.While) or (isinstance(node, ast.For)
+                                               and not isinstance(node.iter, (ast.Tuple, ast.Name))):
                 for sub in ast.walk(node):
                     if isinstance(sub, (ast.Assign, ast.AugAssign)):
                         for t in (sub.targets if isinstance(sub, ast.Assign) else [sub.target]):
@@ -312,12 +314,27 @@ class _Translator:
                 a = sc.slots[st.target.id][1]
                 b.store(op(b.load(a), self.expr(st.value)), a)
                 return
+            if (isinstance(st.target, ast.Name) and st.target.id in sc.slots and sc.slots[st.target.id][0] == "i"
+                    and type(st.op) in (ast.Add, ast.Sub, ast.Mult)):
+                a = sc.slots[st.target.id][1]
+                iop = {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(st.op)]
+                b.store(iop(b.load(a), self.int_expr(st.value)), a)
+                return
             raise Unsupported("augmented assignment")
         if isinstance(st, ast.For):
             if isinstance(st.iter, (ast.Tuple, ast.Name)):
                 self.unrolled(st)
             else:
                 self.loop(st)
+            return
+        if isinstance(st, ast.While):
+            self.while_loop(st)
+            return
+        if isinstance(st, (ast.Break, ast.Continue)):
+            if not self.loops:
+                raise Unsupported(f"{type(st).__name__.lower()} outside a loop")
+            cont, brk = self.loops[-1]
+            b.branch(brk if isinstance(st, ast.Break) else cont)
             return
         if isinstance(st, ast.If):
             c = self.const_eval(st.test)
@@ -400,6 +417,14 @@ class _Translator:
         if isinstance(node, ast.BinOp) and type(node.op) in (ast.Add, ast.Sub, ast.Mult):
             x, y = self.int_expr(node.left), self.int_expr(node.right)
             return {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(node.op)](x, y)
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("min", "max")
+                and len(node.args) >= 2 and not node.keywords):
+            # integer min / max, left to right as numba's do_minmax
+            acc = self.int_expr(node.args[0])
+            for a in node.args[1:]:
+                v = self.int_expr(a)
+                acc = b.select(b.icmp_signed("<" if node.func.id == "min" else ">", v, acc), v, acc)
+            return acc
         if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
             if node.value.id in sc.arrays:
                 raise Unsupported("a float element as an index")
@@ -596,6 +621,8 @@ class _Translator:
         var = self.slot(name, "i")
         fn = self.f.fn
         body = fn.append_basic_block(f"loop.{name}")
+        latch = fn.append_basic_block(f"next.{name}")
+        done = fn.append_basic_block(f"done.{name}")       # the normal exit (not a break)
         after = fn.append_basic_block(f"after.{name}")
         b.store(lo, var)
         if known:
@@ -603,15 +630,44 @@ class _Translator:
         else:
             b.cbranch(b.icmp_signed("<", lo, hi), body, after)
         b.position_at_end(body)
-        self.block(st.body)
-        if b.block.is_terminated:
-            raise Unsupported("a loop body that always returns")
+        self.loops.append((latch, after))
+        try:
+            self.block(st.body)
+        finally:
+            self.loops.pop()
+        if not b.block.is_terminated:
+            b.branch(latch)
+        b.position_at_end(latch)
         nxt = b.add(b.load(var), ir.Constant(_I64, 1))
         b.store(nxt, var)
-        b.cbranch(b.icmp_signed("<", nxt, hi), body, after)
-        b.position_at_end(after)
-        if known:                # Python leaves the index at its last value
+        b.cbranch(b.icmp_signed("<", nxt, hi), body, done)
+        b.position_at_end(done)
+        if known:                # Python leaves the index at its last value (a break: where it broke)
             b.store(b.sub(hi, ir.Constant(_I64, 1)), var)
+        b.branch(after)
+        b.position_at_end(after)
+
+    def while_loop(self, st: ast.While):
+        """``while <condition>:`` (no ``else``), with ``break`` and ``continue``."""
+        if st.orelse:
+            raise Unsupported("while … else")
+        b = self.b
+        fn = self.f.fn
+        head = fn.append_basic_block("while")
+        body = fn.append_basic_block("while.body")
+        after = fn.append_basic_block("while.after")
+        b.branch(head)
+        b.position_at_end(head)
+        b.cbranch(self.bool_expr(st.test), body, after)
+        b.position_at_end(body)
+        self.loops.append((head, after))
+        try:
+            self.block(st.body)
+        finally:
+            self.loops.pop()
+        if not b.block.is_terminated:
+            b.branch(head)
+        b.position_at_end(after)
 
     # --- expressions ----------------------------------------------------------------------
     def any_expr(self, node):

@@ -856,12 +856,15 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     optimised (no faster than the generic one).  Same arithmetic, so bitwise the same
     results whichever copy runs.
     """
-    if int(cfg[_C_KIND]) == 2:
-        # An explicit module whose post kernel was compiled through LLVM IR: its loop with the
-        # kernel inlined (methodgen.fused), which hands back to the loop below on any failure.
+    handed_back = None
+    if isinstance(post_k, KernelHandle):
+        # A module whose kernels were compiled through LLVM IR: its loop with the kernels
+        # inlined (methodgen.fused), which hands back to the loop below on any failure.
         from . import fused
-        if fused.run_fused(post_k, hs, cfg, fcfg, domain_pos, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC,
-                           h, p, check_resolution, compensated, fstat, every):
+        handed_back = fused.run_fused((guess, res, resjac, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
+                                      gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
+                                      check_resolution, solver, use_tol, tol, compensated, its, fstat, every, smode)
+        if handed_back is True:
             return
     kt = KERNEL_TYPES
     guess, res, resjac, scale = (handle(guess, kt["guess"]), handle(res, kt["res"]), handle(resjac, kt["resjac"]),
@@ -871,6 +874,8 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
                               gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
                               check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
                               slu_ok, sLU, spiv)
+    if handed_back is not None and (fstat[:, 0] == _OK).all():
+        fused.false_alarm(handed_back)
 
 
 def _res_rows(res, Z, Y, h, p, R):

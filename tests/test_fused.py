@@ -86,3 +86,105 @@ def test_a_failing_step_is_reported_by_the_runtime_as_before(monkeypatch):
     calls = _counting(monkeypatch)
     assert np.all(np.isfinite(mod.integrate(APO, 0.2, 200, check_resolution=False)))
     assert calls == []
+
+
+def _state_bytes(info):
+    """What a chunk leaves for the next: iterations, compensation, solver state (as bytes)."""
+    out = [np.asarray(info["newton_iterations"]).tobytes(), np.asarray(info["compensation"]).tobytes()]
+    st = info.get("solver_state")
+    if st is not None:
+        out.append(repr(st[:3]))
+        out += [np.asarray(a).tobytes() for a in (st[3] if isinstance(st[3], (tuple, list)) else [st[3]])]
+    return out
+
+
+@pytest.mark.parametrize("case", ["kepler-em2", "hh2d-em8", "hh-kahan", "kepler-gauss3", "hh2d-ec3"])
+def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
+    """Newton's method inlined with the kernels (solvers "newton" and "auto", the carried
+    local-error estimate, Gauss' stage system, energy collocation) and the linearly implicit
+    step (Kahan: its resolution verdict from the closed-form 2×2 bound): one trajectory, a batch
+    with save_every, and two chunks carrying compensation and solver state -- bitwise the
+    runtime's, iterations included, on the fused path alone."""
+    name, method, kw = {"kepler-em2": ("kepler", "energy-momentum", {}),
+                        "hh2d-em8": ("henon-heiles-2d", "energy-momentum", {"order": 8}),
+                        "hh-kahan": ("henon-heiles", "kahan", {}),
+                        "kepler-gauss3": ("kepler", "gauss", {"stages": 3}),
+                        "hh2d-ec3": ("henon-heiles-2d", "energy-collocation", {"stages": 3})}[case]
+    scene = mg.load_scene(name)
+    mod = mg.build(scene.system, method, backend="numba", **kw)
+    y0, h = np.array(scene.y0, float), scene.h
+    Y0 = np.stack([y0, y0 * (1 + 1e-3)])
+    runs = {}
+    for fused in ("1", "0"):
+        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        calls = _counting(monkeypatch)
+        i1, i2, i3 = {}, {}, {}
+        one = mod.integrate(y0, h, 300, info=i1)
+        batch = mod.integrate(Y0, h, 200, save_every=7, info=i2)
+        first = mod.integrate(y0, h, 120, info=i3)
+        mid = _state_bytes(i3)
+        second = mod.integrate(first[-1], h, 180, info=i3)
+        runs[fused] = ([one, batch, np.concatenate([first, second[1:]])],
+                       _state_bytes(i1) + _state_bytes(i2) + mid + _state_bytes(i3))
+        assert (calls == []) == (fused == "1"), (fused, calls)
+    for a, b in zip(runs["1"][0], runs["0"][0]):
+        assert np.array_equal(a, b)
+    assert runs["1"][1] == runs["0"][1]
+    assert np.array_equal(runs["1"][0][0], runs["1"][0][2])
+    assert np.asarray(i1["newton_iterations"]).sum() >= 300          # the stages were solved
+
+
+@pytest.mark.parametrize("why", ["not-converged", "unresolved"])
+def test_an_implicit_failure_is_reported_by_the_runtime_as_before(monkeypatch, why):
+    """Newton stopped by maxiter, or a step the Newton matrix says is unresolved: the fused
+    loop hands the call back, and the error (type, step, message, rows) is the runtime's."""
+    scene = mg.load_scene("henon-heiles-2d")
+    mod = mg.build(scene.system, "energy-momentum", backend="numba")
+    y0 = np.array(scene.y0, float)
+    h, kw = (scene.h, {"maxiter": 2, "solver": "newton"}) if why == "not-converged" else (2.5, {})
+    got = {}
+    for fused in ("1", "0"):
+        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        calls = _counting(monkeypatch)
+        with pytest.raises(Exception) as info:
+            mod.integrate(y0, h, 100, **kw)
+        e = info.value
+        got[fused] = (type(e).__name__, getattr(e, "step", None), str(e))
+        assert len(calls) == 1
+    assert got["1"] == got["0"]
+    assert got["1"][0] == ("ConvergenceError" if why == "not-converged" else "ResolutionError")
+
+
+def test_an_undecided_resolution_bound_goes_to_the_runtime(monkeypatch):
+    """Light, soft, non-separable oscillators (midpoint, 4 unknowns): the norms of J - I are
+    ~10 while its spectral radius is ~0.15, so the fused loop, which has no eigenvalue solver,
+    cannot decide the resolution check and hands each call back; the runtime's eigenvalues pass
+    it, bitwise the same run.  After three such calls the module goes to the runtime directly.
+    Control: unit masses at h = 0.5, where the row sums exceed the threshold but the column-sum
+    bound decides the check, stay fused."""
+    from methodgen import fused as fz
+    drives = []
+    real = fz._drive
+
+    def drive(*args):
+        drives.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(fz, "_drive", drive)
+    H = "(p1**2 + p2**2)/(2*m) + k*(q1**2 + q2**2)/2 + c*q1*p2 + k*q1**4"
+    y0 = np.array([0.3, 0.0, 0.0, 0.01])
+    for m, h, steps, want_drives, want_calls in ((0.01, 0.2, 20, [1, 1, 1, 0, 0], [1] * 5),
+                                                 (1.0, 0.5, 50, [1] * 5, [0] * 5)):
+        mod = mg.build_text(H, ["q1", "q2"], ["p1", "p2"], "midpoint", params={"m": m, "k": m, "c": 0.1 * m},
+                            name=f"osc2_{int(m * 100)}", backend="numba")
+        monkeypatch.setenv("METHODGEN_FUSED", "0")
+        ref = mod.integrate(y0, h, steps)
+        monkeypatch.setenv("METHODGEN_FUSED", "1")
+        seen_drives, seen_calls = [], []
+        for _ in range(5):
+            calls = _counting(monkeypatch)
+            del drives[:]
+            assert np.array_equal(mod.integrate(y0, h, steps), ref)
+            seen_drives.append(len(drives))
+            seen_calls.append(len(calls))
+        assert (seen_drives, seen_calls) == (want_drives, want_calls), m

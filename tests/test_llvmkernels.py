@@ -176,10 +176,68 @@ def test_control_flow_helpers_and_stack_buffers_are_bitwise_numbas(tmp_path):
         assert np.array_equal(_rows(ll, Y, 6), _rows(_numba(mod.flow), Y, 6), equal_nan=True)
 
 
+LOOP_EXITS = """
+def exits(_z, _y, _c, _h, _p, _r):
+    # a Newton-like iteration: while with a counter, continue, break, integer min / max
+    it = 0
+    x = _y[0]
+    prev = math.inf
+    ok = 0
+    while it < 40:
+        it += 1
+        d = 0.5 * (x * x - abs(_y[1]) - 1.0) / (abs(x) + 1.0)
+        if it == 3 and _y[2] > 0.0:
+            prev = math.inf
+            continue
+        x -= d
+        if not abs(d) <= 1e300:
+            break
+        if abs(d) <= 1e-15 * abs(x) or (abs(d) >= prev and prev <= 1e-8):
+            ok = 1
+            break
+        prev = abs(d)
+    _r[0] = x
+    _r[1] = it
+    _r[2] = ok
+    s = 0.0
+    for i in range(5):
+        if i == 4 - min(3, it, 7) + max(0, it - 40):
+            break
+        if _y[0] > 10.0 * i:
+            continue
+        s += _y[1] * i
+    _r[3] = s + i
+    j = 0
+    for k in range(2, 2 + max(1, min(it, 6))):
+        j += k * 2
+    _r[4] = j
+"""
+
+
+def test_while_break_continue_and_integer_min_max_are_bitwise_numbas(tmp_path):
+    """The constructs of an iteration (the fused Newton loop): ``while`` with a counter,
+    ``continue`` (back to the test), ``break`` (out, the index left where it broke), integer
+    ``min``/``max`` in bounds: bitwise numba's, NaN and inf included."""
+    mod = _load(tmp_path, "k_exits", LOOP_EXITS)
+    ll = lk.compile_kernel(mod.exits, RES)
+    assert isinstance(ll, lk.LLVMKernel)
+    rng = np.random.default_rng(4)
+    Y = np.concatenate([rng.normal(size=(300, 3)) * 5.0,
+                        [[np.nan, 1.0, 2.0], [1.0, np.nan, -1.0], [np.inf, 2.0, 1.0], [40.0, 0.0, -1.0]]])
+    with np.errstate(all="ignore"):
+        a, b = _rows(ll, Y, 5), _rows(_numba(mod.exits), Y, 5)
+    assert np.array_equal(a, b, equal_nan=True)
+    assert len(set(a[:, 1])) > 3 and set(a[:, 2]) == {0.0, 1.0}    # the exits were taken
+    # control: a continue that skips the update changes the iterates
+    mod2 = _load(tmp_path, "k_exits2", LOOP_EXITS.replace("if it == 3 and", "if it <= 4 and"))
+    with np.errstate(all="ignore"):
+        assert not np.array_equal(_rows(lk.compile_kernel(mod2.exits, RES), Y, 5), b, equal_nan=True)
+
+
 @pytest.mark.parametrize("body, why", [
     ("    _r[0] = _y[0] % 2.0\n", "operator"),
     ("    _r[0] = math.hypot(_y[0], _y[1])\n", "function"),
-    ("    i = 0\n    while i < 2:\n        _r[i] = 1.0\n        i += 1\n", "while"),
+    ("    for i in range(2):\n        _r[i] = 1.0\n    else:\n        _r[0] = 2.0\n", "for-else"),
     ("    _r[0] = _helper(_y[0])\n", "python-call"),
 ])
 def test_what_is_not_translated_falls_back_to_numba(tmp_path, body, why):

@@ -228,21 +228,32 @@ def test_stale_runtime_negative_control(tmp_path, user_cache_dir):
 
 
 def test_a_cached_runtime_serves_a_new_system_without_recompiling(tmp_path):
-    """In a fresh process with the runtime cached, a new module compiles its kernels only."""
+    """In a fresh process with the runtime cached, a new module compiles its kernels only: the
+    shared runtime's loop (fused loop off) and the fused loop's driver are loaded from the cache."""
     scene = mg.load_scene("double-well")
     path = tmp_path / module_filename("dw", "midpoint", "numba")
     mg.generate(mg.discretize(scene.system, "midpoint"), path, backend="numba")
     code = textwrap.dedent(f"""
-        import numpy as np
-        from methodgen import nbruntime as rt
+        import os, numpy as np
+        from methodgen import nbruntime as rt, fused
         from methodgen.emit import load_module
         m = load_module({str(path)!r})
         m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
-        L = rt.loop_for(int(m._CFG[rt.CFG["N"]])); print(sum(L.stats.cache_misses.values()), sum(L.stats.cache_hits.values()))
+        if os.environ["METHODGEN_FUSED"] == "0":
+            L = rt.loop_for(int(m._CFG[rt.CFG["N"]]))
+        else:
+            assert not rt._COMPILED       # the fused loop ran the steps
+            L = fused._drive
+        print(sum(L.stats.cache_misses.values()), sum(L.stats.cache_hits.values()))
     """)
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=os.environ.copy())
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stdout.split() == ["0", "1"]
+    from methodgen import fused  # noqa: F401  (its driver, eagerly compiled: cached on import)
+    # the runtime's copy for this size, compiled (and cached) here: no other test may need it
+    nbruntime.loop_for(int(emit.load_module(path)._CFG[nbruntime.CFG["N"]]))
+    for flag in ("0", "1"):
+        env = dict(os.environ, METHODGEN_FUSED=flag)
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert proc.stdout.split() == ["0", "1"], flag
 
 
 # --- the runtime a module was generated for ----------------------------------------------
