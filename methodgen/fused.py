@@ -1,28 +1,35 @@
-"""An explicit module's integration loop compiled with its post kernel inlined (LLVM IR).
+"""A module's integration loop compiled with its kernels inlined (LLVM IR).
 
-On the shared runtime (:func:`methodgen.nbruntime.run`) every stage of an explicit
-composition is a call through a function pointer: about 13 ns a stage on Kepler's
-Störmer–Verlet composed to order 10 (35 stages), a third of its step.  When a module's
-post kernel was compiled through LLVM IR (:mod:`methodgen.llvmkernels`), this module
-compiles, once per module and process (milliseconds), the loop of :func:`_explicit_loop`
-with that kernel inlined: the same stages, the same compensated update, the same checks,
-operation for operation, so the same bits.
+On the shared runtime (:func:`methodgen.nbruntime.run`) every stage is a call through a
+function pointer, and an implicit stage's Newton iteration calls its residual and Jacobian
+kernels the same way: about 13 ns a call, a third of an explicit step of Kepler's
+Störmer–Verlet composed to order 10 (35 stages) and half of a Hénon–Heiles energy-momentum
+step of order 8 (80 calls).  When a module's kernels were compiled through LLVM IR
+(:mod:`methodgen.llvmkernels`), this module compiles, once per module, process and batch size
+(milliseconds), the loop of :func:`_stage_loop` with the kernels inlined: the same stages,
+Newton iterations (solvers "newton", "simplified", "fixed-point", "auto"; the linearly
+implicit solve), compensated update, first-same-as-last force and checks, operation for
+operation, so the same bits, iterations and solver state.
 
 It is an accelerator, never the judge: it runs only while every check passes.  When any
-check the runtime makes would fail (non-finite state, domain, time-scale guard, local
-error, energy jump) it stops and says so, and :func:`run_fused` restores the inputs and
-lets the shared runtime run the same call from the start, which records the failure
-exactly as before.  Modules it does not apply to (implicit stages, a post kernel numba
-compiled, a carried local-error estimate, a trajectory array that is not C-contiguous)
-take the shared runtime directly.
+check the runtime makes would fail (Newton's convergence, resolution, predictor, non-finite
+state, domain, time-scale guard, local error, energy jump) it stops and says so, and
+:func:`run_fused` restores the inputs and lets the shared runtime run the same call from
+the start, which records the failure exactly as before.  One check it can only bound: where
+the runtime takes the spectral radius of a Newton matrix from its eigenvalues, this loop
+uses a bound of it (:func:`_resolution_f`) and hands back what the bound cannot decide.
+Modules it does not apply to (a kernel numba compiled, solver "reuse", a scale kernel, more
+than 8 trajectories, arrays that are not C-contiguous) take the shared runtime directly.
 
 The loop's source below is translated by :mod:`methodgen.llvmkernels` with the module's
-configuration bound as constants (``_DIM``, ``_STAGES``, …) and its kernels as ``post``
-and ``hs``; the numba driver :func:`_drive` (compiled once per machine) calls it.
+configuration bound as constants (``_DIM``, ``_STAGES``, ``_N`` …) and its kernels as
+``guess``, ``res``, ``resjac``, ``post``, ``hs``, ``check``; it is called through its C
+entry point with ctypes (:func:`_drive`), so a run on this path loads no numba dispatcher.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 import os
 import types
@@ -34,11 +41,7 @@ from numba import types as _t
 from . import llvmkernels as _lk
 from . import nbruntime as _rt
 
-__all__ = ["run_fused", "enabled", "SOURCE_SHA256"]
-
-#: SHA-256 of this file: the stamp of the cached driver (as the shared runtime's).
-SOURCE_SHA256 = _rt._source_digest(os.path.abspath(__file__))
-_rt._install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
+__all__ = ["run_fused", "enabled", "false_alarm"]
 
 _f8, _i8, _V, _M = _rt._f8, _rt._i8, _rt._V, _rt._M
 _T3 = _t.float64[:, :, ::1]
@@ -391,11 +394,14 @@ def _resolution_f(_Jr, _rr):
         _rr[0] = 2.0 * math.sqrt(norm)
 
 
-@numba.njit(_t.void(_t.FunctionType(LOOP_SIG), *LOOP_SIG.args), cache=True, error_model="numpy")
 def _drive(loop, Y, C, G, T, p, ka, kd, kb, h, n0, n1, every, nxt0, row0, chk, comp, st, its, smode, maxiter,
            solver, usetol, tol):
-    loop(Y, C, G, T, p, ka, kd, kb, h, n0, n1, every, nxt0, row0, chk, comp, st, its, smode, maxiter, solver,
-         usetol, tol)
+    """Run the compiled loop through its C entry (ctypes: no numba dispatcher is loaded, so a
+    warm start does not pay for numba's target initialisation)."""
+    arrays = [_lk.array_struct(a) for a in (Y, C, G, T, p, ka, kd, kb)]
+    tail = [_lk.array_struct(a) for a in (st, its, smode)]
+    loop.c_call(*[ctypes.byref(a) for a in arrays], h, n0, n1, every, nxt0, row0, chk, comp,
+                *[ctypes.byref(a) for a in tail], maxiter, solver, usetol, tol)
 
 
 _LOOPS: dict = {}
@@ -447,7 +453,7 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, b
         for f in (_solve_f, _resolution_f):
             consts[f.__name__] = types.FunctionType(f.__code__, consts, f.__name__)
         try:
-            got = _lk.compile_kernel(_stage_loop, LOOP_SIG, globals_=consts)
+            got = _lk.compile_kernel(_stage_loop, LOOP_SIG, globals_=consts, c_entry=True)
         except _lk.Unsupported:
             got = False
         _LOOPS[key] = got
@@ -471,7 +477,9 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     if (not enabled() or int(cfg[CFG["HAS_SCALE"]])
             or (kind == 0 and solver == 3)
             or not all(isinstance(k, _lk.LLVMKernel) for k in needed)
-            or not traj.flags.c_contiguous or Y.shape[0] > 8 or n1 <= n0):
+            or Y.shape[0] > 8 or n1 <= n0
+            or not all(a.dtype.char == "d" and a.flags.c_contiguous
+                       for a in (Y, C, FRC, traj, p, kick_a, drift, kick_b))):
         return None
     loop, key = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, Y.shape[0])
     if loop is None or _FALSE_ALARMS.get(key, 0) >= _MAX_FALSE_ALARMS:

@@ -52,7 +52,7 @@ from numba import types as _t
 
 from . import nbruntime as _rt
 
-__all__ = ["kernel", "compile_kernel", "Unsupported", "LLVMKernel", "enabled"]
+__all__ = ["kernel", "compile_kernel", "Unsupported", "LLVMKernel", "enabled", "array_struct"]
 
 
 class Unsupported(Exception):
@@ -888,15 +888,29 @@ def _function_def(py_func) -> ast.FunctionDef:
     return tree.body[0]
 
 
-def compile_kernel(py_func, sig, globals_=None) -> "LLVMKernel":
+def compile_kernel(py_func, sig, globals_=None, c_entry=False) -> "LLVMKernel":
     """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the numba
     signature ``sig``, its names resolved in ``globals_`` (default: its module's).  Raises
-    :class:`Unsupported` when its source uses anything the translator does not know."""
+    :class:`Unsupported` when its source uses anything the translator does not know.
+
+    ``c_entry``: also a C entry point taking each array argument as a pointer to numba's
+    array structure (:func:`array_struct`), callable from Python through ctypes
+    (:meth:`LLVMKernel.c_call`) with no numba dispatcher loaded."""
     with _LOCK:     # one engine per process: modules are added to it one at a time
-        return _compile_kernel(py_func, sig, globals_)
+        return _compile_kernel(py_func, sig, globals_, c_entry)
 
 
-def _compile_kernel(py_func, sig, globals_=None):
+def _add_c_entry(module, fn, sig, name):
+    """``name``(arrays by pointer, scalars by value): loads each structure and calls ``fn``."""
+    args = [ir.PointerType(_llvm_type(t)) if isinstance(t, _t.Array) else _llvm_type(t) for t in sig.args]
+    entry = ir.Function(module, ir.FunctionType(ir.VoidType(), args), name=name)
+    b = ir.IRBuilder(entry.append_basic_block("entry"))
+    vals = [b.load(a) if isinstance(t, _t.Array) else a for a, t in zip(entry.args, sig.args)]
+    b.call(fn, vals)
+    b.ret_void()
+
+
+def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
     engine = _engine()
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
@@ -906,6 +920,10 @@ def _compile_kernel(py_func, sig, globals_=None):
     tr = _Translator(module, fdef, sig, name,
                      getattr(py_func, "__globals__", {}) if globals_ is None else globals_)
     tr.run()
+    if c_entry:
+        if sig.return_type != _t.none:
+            raise Unsupported("a C entry of a kernel that returns a value")
+        _add_c_entry(module, tr.f.fn, sig, name + "_c")
     mod = llvm.parse_assembly(str(module))
     mod.verify()
     tm = _target_machine()
@@ -917,7 +935,44 @@ def _compile_kernel(py_func, sig, globals_=None):
     addr = engine.get_function_address(name)
     if not addr:
         raise Unsupported("no address after compilation")
-    return LLVMKernel(py_func, sig, addr, engine)
+    out = LLVMKernel(py_func, sig, addr, engine)
+    if c_entry:
+        argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
+                    ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
+        out.c_call = ctypes.CFUNCTYPE(None, *argtypes)(engine.get_function_address(name + "_c"))
+    return out
+
+
+class _Array1(ctypes.Structure):
+    _fields_ = [("meminfo", ctypes.c_void_p), ("parent", ctypes.c_void_p), ("nitems", ctypes.c_int64),
+                ("itemsize", ctypes.c_int64), ("data", ctypes.c_void_p), ("shape", ctypes.c_int64 * 1),
+                ("strides", ctypes.c_int64 * 1)]
+
+
+class _Array2(ctypes.Structure):
+    _fields_ = _Array1._fields_[:5] + [("shape", ctypes.c_int64 * 2), ("strides", ctypes.c_int64 * 2)]
+
+
+class _Array3(ctypes.Structure):
+    _fields_ = _Array1._fields_[:5] + [("shape", ctypes.c_int64 * 3), ("strides", ctypes.c_int64 * 3)]
+
+
+_STRUCTS = {1: _Array1, 2: _Array2, 3: _Array3}
+
+
+def array_struct(a):
+    """numba's structure of the C-contiguous float64 array ``a`` (for a C entry point: pass it
+    with ``ctypes.byref``; keep ``a`` alive while it is used).  ValueError for any other array:
+    the translated code indexes C order from the shape alone."""
+    if a.dtype.char != "d" or not a.flags.c_contiguous or a.ndim not in _STRUCTS:
+        raise ValueError(f"a C-contiguous float64 array of 1-3 dimensions is needed, got {a.dtype} {a.shape}")
+    s = _STRUCTS[a.ndim]()
+    s.nitems = a.size
+    s.itemsize = 8
+    s.data = a.ctypes.data
+    s.shape[:] = a.shape
+    s.strides[:] = a.strides
+    return s
 
 
 class LLVMKernel(_rt.KernelHandle):
@@ -925,7 +980,7 @@ class LLVMKernel(_rt.KernelHandle):
     runtime (numba's wrapper-address protocol), callable from Python too (through numba,
     compiled on the first such call: tests and diagnostics; the runtime never does)."""
 
-    __slots__ = ("py_func", "engine", "_nb")
+    __slots__ = ("py_func", "engine", "_nb", "c_call")
 
     def __init__(self, py_func, sig, addr, engine):
         self.kernel = None
@@ -935,6 +990,7 @@ class LLVMKernel(_rt.KernelHandle):
         self.py_func = py_func
         self.engine = engine          # owns the machine code
         self._nb = None
+        self.c_call = None            # the C entry through ctypes (compile_kernel(c_entry=True))
 
     def __call__(self, *args):
         if self._nb is None:

@@ -138,6 +138,8 @@ def handle(kernel, sig):
     (a handle passed again is returned as it is)."""
     if isinstance(kernel, KernelHandle):
         return kernel
+    if isinstance(kernel, _Missing):
+        kernel = kernel.compiled()
     key = (id(kernel), id(sig))   # (hashing a numba signature costs microseconds)
     h = _HANDLES.get(key)
     if h is None:   # (the handle keeps its kernel alive: the id is not reused)
@@ -194,9 +196,38 @@ def _once(key, sig, py_func):
     return f
 
 
+class _Missing:
+    """The stand-in of a kernel a module does not have, compiled only when the shared runtime's
+    loop needs it (:func:`handle`): a run on the fused loop (methodgen.fused), which never
+    calls it, then loads no numba dispatcher at all."""
+
+    __slots__ = ("kind",)
+
+    def __init__(self, kind):
+        self.kind = kind
+
+    def compiled(self):
+        return _once("no_" + self.kind, KERNEL_TYPES[self.kind], _NO[self.kind])
+
+    def __call__(self, *args):
+        return self.compiled()(*args)
+
+    def __repr__(self):
+        return f"no_kernel({self.kind!r})"
+
+
+_MISSING = {}
+
+
 def no_kernel(kind: str):
-    """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one."""
-    return _once("no_" + kind, KERNEL_TYPES[kind], _NO[kind])
+    """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one
+    (compiled, or loaded from the cache, when first passed to the compiled runtime)."""
+    if kind not in _NO:
+        raise KeyError(f"no kernel kind {kind!r}; valid: {sorted(_NO)}")
+    got = _MISSING.get(kind)
+    if got is None:
+        got = _MISSING[kind] = _Missing(kind)
+    return got
 
 
 @_intrinsic

@@ -319,3 +319,30 @@ def test_kernels_compile_from_several_threads(tmp_path):
         t.join()
     Y = np.array([[1.0, 0.5, 0.0]])
     assert [float(_rows(k, Y, 1)[0, 0]) for k in got] == [1.0 * (i + 1) + 0.5 for i in range(6)]
+
+
+def test_a_c_entry_called_through_ctypes_is_the_kernel(tmp_path):
+    """compile_kernel(c_entry=True): the same machine code called from Python through ctypes
+    (arrays as numba's structures by pointer; the fused loop's route, no numba dispatcher) --
+    bitwise the compiled runtime's call of the kernel.  Arrays the translated code cannot index
+    (not C-contiguous, not float64) are refused by name, never passed."""
+    import ctypes
+
+    mod = _load(tmp_path, "k_centry", "from methodgen import nbruntime as _rt\n" + FLOW)
+    ll = lk.compile_kernel(mod.flow, RES, c_entry=True)
+    rng = np.random.default_rng(5)
+    Y = rng.normal(size=(40, 3))
+    ref = _rows(ll, Y, 6)
+    p = np.array([2.0, -3.0])
+    for b in range(Y.shape[0]):
+        r = np.zeros(6)
+        y, z, c = Y[b].copy(), np.zeros(3), np.zeros(3)
+        structs = [lk.array_struct(a) for a in (z, y, c)]
+        tail = [lk.array_struct(a) for a in (p, r)]
+        ll.c_call(*[ctypes.byref(s) for s in structs], 0.1, *[ctypes.byref(s) for s in tail])
+        assert np.array_equal(r, ref[b])
+    with pytest.raises(ValueError, match="C-contiguous float64"):
+        lk.array_struct(np.zeros((4, 4))[:, 1])
+    with pytest.raises(ValueError, match="C-contiguous float64"):
+        lk.array_struct(np.zeros(3, dtype=np.int64))
+    assert lk.compile_kernel(mod.flow, RES).c_call is None     # only where asked for
