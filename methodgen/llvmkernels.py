@@ -14,12 +14,13 @@ What is translated: assignments (scalar names live in stack slots that LLVM prom
 registers, so a value may be carried across iterations or branches), stores and ``+=``,
 ``-=`` … to array elements, ``for`` over ``range`` with bounds known at translation time
 (a loop in the machine code) and over constant tuples (unrolled: a sum kept in its printed
-order), ``if``/``else`` on run-time or translation-time conditions, ``return``; views of
+order), ``while``, ``break``, ``continue``, ``if``/``else`` on run-time or translation-time
+conditions, ``return``; views of
 the arguments (``X[a:b]``, rows ``A[i]``), stack buffers (``numba.carray(_rt.stack_buffer(n),
 shape)``) and ``numpy.zeros``; the module's constant tables (numpy arrays of indices or
 weights) and integer constants; calls of the module's scalar helpers (translated once,
 inlined by LLVM) and of its array kernels (inlined here); the arithmetic, comparisons and
-the math functions below.  Anything else (``while``, ``%`` of floats, an unknown function)
+the math functions below.  Anything else (``for … else``, ``%`` of floats, an unknown function)
 raises :class:`Unsupported`, and :func:`kernel` then compiles the kernel with numba as
 before.  ``METHODGEN_KERNELS=numba`` forces numba for every kernel (the control the tests use).
 
