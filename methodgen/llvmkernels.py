@@ -51,6 +51,7 @@ import llvmlite.binding as llvm
 from llvmlite import ir
 from numba import types as _t
 
+from . import llvmcache as _objcache
 from . import nbruntime as _rt
 
 __all__ = ["kernel", "compile_kernel", "Unsupported", "LLVMKernel", "enabled", "array_struct"]
@@ -913,11 +914,43 @@ def _add_c_entry(module, fn, sig, name):
 
 def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
     engine = _engine()
+    key = _objcache.key(py_func, sig, globals_, c_entry, _STATE)
+    if key is not None:
+        name = f"mg_{key[:24]}_{py_func.__name__}"      # the same in every process: a cached object's
+    else:
+        _STATE["count"] += 1
+        name = f"mg{_STATE['count']}_{py_func.__name__}"   # unique in the engine
+    got = _LOADED.get(name)
+    if got is None:
+        obj = _objcache.load(key, name) if key is not None else None
+        if obj is None:
+            obj = _translate_and_compile(py_func, sig, globals_, c_entry, name)
+            if key is not None:
+                _objcache.store(key, name, obj)
+        engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
+        engine.finalize_object()
+        addr = engine.get_function_address(name)
+        if not addr:
+            raise Unsupported("no address after compilation")
+        got = _LOADED[name] = (addr, engine.get_function_address(name + "_c") if c_entry else 0)
+    addr, c_addr = got
+    out = LLVMKernel(py_func, sig, addr, engine)
+    if c_entry:
+        argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
+                    ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
+        out.c_call = ctypes.CFUNCTYPE(None, *argtypes)(c_addr)
+    return out
+
+
+#: machine code in this process's engine, by symbol (a kernel asked for twice is added once)
+_LOADED: dict = {}
+
+
+def _translate_and_compile(py_func, sig, globals_, c_entry, name) -> bytes:
+    """The kernel's object code: translated to LLVM IR, optimised (-O2), emitted for the host."""
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
     module.triple = _STATE["triple"]
-    _STATE["count"] += 1
-    name = f"mg{_STATE['count']}_{py_func.__name__}"   # unique in the engine
     tr = _Translator(module, fdef, sig, name,
                      getattr(py_func, "__globals__", {}) if globals_ is None else globals_)
     tr.run()
@@ -931,17 +964,7 @@ def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
     pto = llvm.create_pipeline_tuning_options(speed_level=2)
     pb = llvm.create_pass_builder(tm, pto)
     pb.getModulePassManager().run(mod, pb)
-    engine.add_module(mod)
-    engine.finalize_object()
-    addr = engine.get_function_address(name)
-    if not addr:
-        raise Unsupported("no address after compilation")
-    out = LLVMKernel(py_func, sig, addr, engine)
-    if c_entry:
-        argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
-                    ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
-        out.c_call = ctypes.CFUNCTYPE(None, *argtypes)(engine.get_function_address(name + "_c"))
-    return out
+    return tm.emit_object(mod)
 
 
 class _Array1(ctypes.Structure):

@@ -1,0 +1,123 @@
+"""The disk cache of LLVM machine code (methodgen.llvmcache).
+
+A later process adds a module's kernels and fused loop from the cache without translating
+anything, and runs bitwise what a fresh compilation runs.  Object code is executable: an
+object whose tag does not verify, a cache folder others can write to, or an edited module
+never leads to loading anything stale or planted -- the kernel is compiled afresh.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from methodgen.emit import module_filename
+
+pytest.importorskip("numba")
+
+PROBE = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    from methodgen import llvmkernels as lk
+    calls = []
+    real = lk._translate_and_compile
+
+    def counting(py_func, *args):
+        calls.append(py_func.__name__)
+        return real(py_func, *args)
+
+    lk._translate_and_compile = counting
+    from methodgen.emit import load_module
+    m = load_module(sys.argv[1])
+    np.save(sys.argv[3], m.integrate(np.array(json.loads(sys.argv[2])), 0.05, 60))
+    print(json.dumps(sorted(calls)))
+""")
+
+
+def _run(path, y0, out, cache, **env):
+    e = dict(os.environ, METHODGEN_CACHE=str(cache), **env)
+    e.pop("METHODGEN_KERNELS", None)
+    proc = subprocess.run([sys.executable, "-c", PROBE, str(path), json.dumps(list(y0)), str(out)],
+                          capture_output=True, text=True, env=e)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1]), np.load(out)
+
+
+@pytest.fixture(scope="module")
+def hh_module(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("llvmcache")
+    scene = mg.load_scene("henon-heiles-2d")
+    path = tmp / module_filename("hh", "energy_momentum", "numba")
+    mg.generate(mg.discretize(scene.system, "energy-momentum"), path, backend="numba")
+    return path, np.array(scene.y0, float)
+
+
+def test_a_later_process_loads_the_machine_code_and_runs_the_same_bits(hh_module, tmp_path):
+    path, y0 = hh_module
+    cache = tmp_path / "cache"
+    first, Y1 = _run(path, y0, tmp_path / "a.npy", cache)
+    assert "_stage_loop" in first and "_nb_post" in first           # compiled, then stored
+    assert len(list((cache / "llvm").glob("*.o"))) == len(first)
+    second, Y2 = _run(path, y0, tmp_path / "b.npy", cache)
+    assert second == []                                              # nothing translated
+    assert np.array_equal(Y1, Y2)
+    # control: with the cache off everything is translated again, to the same bits
+    off, Y3 = _run(path, y0, tmp_path / "c.npy", cache, METHODGEN_LLVM_CACHE="0")
+    assert off == first and np.array_equal(Y1, Y3)
+
+
+def test_a_tampered_object_is_compiled_afresh_never_loaded(hh_module, tmp_path):
+    path, y0 = hh_module
+    cache = tmp_path / "cache"
+    first, Y1 = _run(path, y0, tmp_path / "a.npy", cache)
+    objs = sorted((cache / "llvm").glob("*.o"))
+    for o in objs:                       # a changed instruction byte, the tag left as it was
+        data = bytearray(o.read_bytes())
+        data[-200] ^= 0xFF
+        o.write_bytes(bytes(data))
+    again, Y2 = _run(path, y0, tmp_path / "b.npy", cache)
+    assert again == first and np.array_equal(Y1, Y2)                # every one recompiled
+    assert _run(path, y0, tmp_path / "c.npy", cache)[0] == []        # and stored anew
+    # a tag made with another key is refused too
+    (cache / ".methodgen-key").write_text("ab" * 32 + "\n")
+    os.chmod(cache / ".methodgen-key", 0o600)
+    assert _run(path, y0, tmp_path / "d.npy", cache)[0] == first
+
+
+def test_an_edited_module_is_not_served_its_old_code(tmp_path):
+    """Two modules whose kernels have the same names, lines and signatures but whose text
+    differs in one coefficient (a module edited and regenerated): the second is compiled
+    afresh, and its trajectory is its own.  Control: the first, run again, loads its code."""
+    runs = []
+    for i, c in enumerate(("3", "4")):
+        system = mg.Hamiltonian(f"(p1**2 + p2**2)/2 + (q1**2 + q2**2)/2 + q1**2*q2 - q2**3/{c}",
+                                ["q1", "q2"], ["p1", "p2"])
+        folder = tmp_path / f"m{i}"
+        folder.mkdir()
+        path = folder / module_filename("cubic", "energy_momentum", "numba")
+        mg.generate(mg.discretize(system, "energy-momentum"), path, backend="numba")
+        runs.append(path)
+    cache = tmp_path / "cache"
+    y0 = np.array([0.1, -0.2, 0.3, 0.1])
+    first, Y1 = _run(runs[0], y0, tmp_path / "a.npy", cache)
+    other, Y2 = _run(runs[1], y0, tmp_path / "b.npy", cache)
+    assert other == first                  # every kernel translated again
+    assert not np.array_equal(Y1, Y2)      # its own coefficients
+    assert _run(runs[0], y0, tmp_path / "c.npy", cache)[0] == []
+
+
+def test_a_cache_others_can_write_to_is_not_used(hh_module, tmp_path):
+    path, y0 = hh_module
+    cache = tmp_path / "cache"
+    first, _ = _run(path, y0, tmp_path / "a.npy", cache)
+    os.chmod(cache / "llvm", 0o775)
+    assert _run(path, y0, tmp_path / "b.npy", cache)[0] == first     # not read
+    os.chmod(cache / "llvm", 0o755)
+    assert _run(path, y0, tmp_path / "c.npy", cache)[0] == []        # control: read again
