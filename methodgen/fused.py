@@ -18,12 +18,12 @@ state, domain, time-scale guard, local error, energy jump) it stops and says so,
 the start, which records the failure exactly as before.  One check it can only bound: where
 the runtime takes the spectral radius of a Newton matrix from its eigenvalues, this loop
 uses a bound of it (:func:`_resolution_f`) and hands back what the bound cannot decide.
-Modules it does not apply to (a kernel numba compiled, solver "reuse", a scale kernel, more
-than 8 trajectories, arrays that are not C-contiguous) take the shared runtime directly.
+Modules it does not apply to (a kernel numba compiled, solver "reuse", more than 8
+trajectories, arrays that are not C-contiguous) take the shared runtime directly.
 
 The loop's source below is translated by :mod:`methodgen.llvmkernels` with the module's
 configuration bound as constants (``_DIM``, ``_STAGES``, ``_N`` …) and its kernels as
-``guess``, ``res``, ``resjac``, ``post``, ``hs``, ``check``; it is called through its C
+``guess``, ``res``, ``resjac``, ``post``, ``hs``, ``check``, ``scale``; it is called through its C
 entry point with ctypes (:func:`_drive`), so a run on this path loads no numba dispatcher.
 """
 
@@ -113,6 +113,10 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                     guess(_Y[_b], _hs, _p, _z)
                     for _i in range(_N):
                         _zp[_i] = _z[_i]
+                    if _HAS_SCALE:
+                        _floor = scale(_Y[_b], _hs, _p)
+                    else:
+                        _floor = 0.0
                     _prev = math.inf
                     _have = 0
                     _newton = 0
@@ -145,7 +149,7 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                             _v = abs(_z[_i])
                             if _v > _nz or _v != _v:
                                 _nz = _v
-                        _nz = max(_nz, 0.0)
+                        _nz = max(_nz, _floor)
                         if _solver == 4 and _newton == 0 and (not _nd <= 1e300 or (_it >= 2 and _nd > _AUTO_RATE * _prev)):
                             _newton = 1
                             _smode[_b, _k] = _AUTO_HOLD1
@@ -434,7 +438,7 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, b
                   "_PT": int(cfg[C["POST_TT"]]), "_LERR": int(cfg[C["LERR"]]), "_PE": int(cfg[C["POST_EXTRA"]]),
                   "_EJUMP": int(cfg[C["EJUMP"]]), "_PJ": int(cfg[C["POST_EJ"]]),
                   "_KIND": int(cfg[C["KIND"]]), "_N": n, "_NZ": max(n, 1), "_KL": int(cfg[C["KL"]]),
-                  "_KU": int(cfg[C["KU"]]), "_RESOL": resol,
+                  "_KU": int(cfg[C["KU"]]), "_RESOL": resol, "_HAS_SCALE": int(cfg[C["HAS_SCALE"]]),
                   "_LERR2": float(fcfg[F["LERR2"]]), "_MLD": float(fcfg[F["MAX_LEVEL_DEFECT"]]),
                   "_MEJ": float(fcfg[F["MAX_ENERGY_JUMP"]]), "_MAXRES": float(fcfg[F["MAX_RESOLUTION"]]),
                   "_MAXDIS": float(fcfg[F["MAX_PREDICTOR_DISAGREEMENT"]]),
@@ -447,7 +451,7 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, b
                   "_RATIOS": numpy.array(ratios, dtype=numpy.float64), "_GAMMA0": float(gammas[0]),
                   "_DPOS": numpy.array([int(bool(v)) for v in domain_pos] or [0], dtype=numpy.int64),
                   "numba": numba, "_rt": _rt, "math": math}
-        for name, k in zip(("guess", "res", "resjac", "post", "hs", "check"), kernels):
+        for name, k in zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels):
             consts[name] = getattr(k, "py_func", None)
         # the helpers, with their constants resolved in this loop's configuration
         for f in (_solve_f, _resolution_f):
@@ -463,19 +467,19 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, b
 def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p,
               maxiter, check_resolution, solver, use_tol, tol, compensated, its, fstat, every, smode):
     """Steps ``n0 .. n1-1`` through the module's fused loop (the arguments of
-    :func:`methodgen.nbruntime.run`; ``kernels`` = guess, res, resjac, post, hs, check).  True when it
+    :func:`methodgen.nbruntime.run`; ``kernels`` = guess, res, resjac, post, hs, check, scale).  True when it
     ran them all (every check passed: the results are those of the shared runtime); None when
     it does not apply; the loop's key when a check would fail or could not be decided here --
     then ``Y``, ``C``, ``FRC``, ``its`` and ``smode`` are as they were, and the caller runs the
     shared runtime (and reports :func:`false_alarm` if that runs to the end)."""
     CFG = _rt.CFG
     kind = int(cfg[CFG["KIND"]])
-    guess, res, resjac, post_k, hs, check = kernels
+    guess, res, resjac, post_k, hs, check, scale = kernels
     needed = [post_k] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
         ([check] if int(cfg[CFG["LERR"]]) == 2 else []) + \
+        ([scale] if kind == 0 and int(cfg[CFG["HAS_SCALE"]]) else []) + \
         ([resjac] if kind == 1 else [guess, res, resjac] if kind == 0 else [])
-    if (not enabled() or int(cfg[CFG["HAS_SCALE"]])
-            or (kind == 0 and solver == 3)
+    if (not enabled() or (kind == 0 and solver == 3)
             or not all(isinstance(k, _lk.LLVMKernel) for k in needed)
             or Y.shape[0] > 8 or n1 <= n0
             or not all(a.dtype.char == "d" and a.flags.c_contiguous

@@ -803,6 +803,8 @@ class _Translator:
               and (f.attr in _UNARY or f.attr in _BINARY)):
             name, table = f.attr, (_UNARY if f.attr in _UNARY else _BINARY)
         elif isinstance(f, ast.Name):
+            if any(self.array_arg(a) is not None for a in node.args):
+                return self.call_inline(node, value=True)     # an array kernel returning a float
             return self.call_helper(node)
         else:
             raise Unsupported("call")
@@ -846,9 +848,11 @@ class _Translator:
             raise Unsupported("argument count of a helper")
         return self.b.call(fn, [self.expr(a) for a in node.args])
 
-    def call_inline(self, node):
+    def call_inline(self, node, value=False):
         """A call statement of one of the module's array kernels (``_nb_field(_u, _p, _F[_k])``):
-        its body translated here, its parameters bound to the arguments."""
+        its body translated here, its parameters bound to the arguments.  ``value``: a call in
+        an expression of a kernel whose body ends in its only ``return <float>`` (the scale
+        kernel); that value is returned."""
         if node.keywords or not isinstance(node.func, ast.Name):
             raise Unsupported("call statement")
         py = self._py_function(node.func.id)
@@ -856,6 +860,13 @@ class _Translator:
         params = [a.arg for a in fdef.args.args]
         if len(params) != len(node.args) or self.inline_depth > 4:
             raise Unsupported("call statement")
+        body = fdef.body
+        if value:
+            returns = [n for n in ast.walk(fdef) if isinstance(n, ast.Return)]
+            if (not body or not isinstance(body[-1], ast.Return) or body[-1].value is None
+                    or len(returns) != 1):
+                raise Unsupported("an inlined kernel with a value: one return, at its end")
+            body = body[:-1]
         # the arguments, evaluated in the caller's scope: array views or float values
         args = []
         for a in node.args:
@@ -872,7 +883,9 @@ class _Translator:
         self.inline_depth += 1
         self.loop_assigned = self._assigned_in_loops(fdef.body)
         try:
-            self.block(fdef.body)
+            self.block(body)
+            if value:
+                return self.expr(fdef.body[-1].value)
         finally:
             self.scope = outer
             self.inline_depth -= 1

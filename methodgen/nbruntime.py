@@ -892,7 +892,7 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
         # A module whose kernels were compiled through LLVM IR: its loop with the kernels
         # inlined (methodgen.fused), which hands back to the loop below on any failure.
         from . import fused
-        handed_back = fused.run_fused((guess, res, resjac, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
+        handed_back = fused.run_fused((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos,
                                       gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
                                       check_resolution, solver, use_tol, tol, compensated, its, fstat, every, smode)
         if handed_back is True:

@@ -98,10 +98,11 @@ def _state_bytes(info):
     return out
 
 
-@pytest.mark.parametrize("case", ["kepler-em2", "hh2d-em8", "hh-kahan", "kepler-gauss3", "hh2d-ec3"])
+@pytest.mark.parametrize("case", ["kepler-em2", "hh2d-em8", "hh-kahan", "kepler-gauss3", "hh2d-ec3", "dp-rattle"])
 def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
     """Newton's method inlined with the kernels (solvers "newton" and "auto", the carried
-    local-error estimate, Gauss' stage system, energy collocation) and the linearly implicit
+    local-error estimate, Gauss' stage system, energy collocation, RATTLE with its scale
+    kernel inlined as an expression) and the linearly implicit
     step (Kahan: its resolution verdict from the closed-form 2×2 bound): one trajectory, a batch
     with save_every, and two chunks carrying compensation and solver state -- bitwise the
     runtime's, iterations included, on the fused path alone."""
@@ -109,11 +110,13 @@ def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
                         "hh2d-em8": ("henon-heiles-2d", "energy-momentum", {"order": 8}),
                         "hh-kahan": ("henon-heiles", "kahan", {}),
                         "kepler-gauss3": ("kepler", "gauss", {"stages": 3}),
-                        "hh2d-ec3": ("henon-heiles-2d", "energy-collocation", {"stages": 3})}[case]
+                        "hh2d-ec3": ("henon-heiles-2d", "energy-collocation", {"stages": 3}),
+                        "dp-rattle": ("double-pendulum", "rattle", {})}[case]
     scene = mg.load_scene(name)
     mod = mg.build(scene.system, method, backend="numba", **kw)
     y0, h = np.array(scene.y0, float), scene.h
-    Y0 = np.stack([y0, y0 * (1 + 1e-3)])
+    y1 = y0 * (1 + 1e-3)
+    Y0 = np.stack([y0, mod.project(y1) if hasattr(mod, "project") else y1])
     runs = {}
     for fused in ("1", "0"):
         monkeypatch.setenv("METHODGEN_FUSED", fused)

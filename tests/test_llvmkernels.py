@@ -135,6 +135,13 @@ def _helper(a, b):
 
 
 @numba.njit
+def _size(_y, _p):
+    a = abs(_y[0])
+    b = _p[0] * _y[1]
+    return max(a, abs(b), abs(_y[2]))
+
+
+@numba.njit
 def _field(_y, _p, _out):
     _out[0] = _y[0] * _p[0]
     _out[1] = _y[1] - _p[1]
@@ -157,7 +164,7 @@ def flow(_z, _y, _c, _h, _p, _r):
     _F = numba.carray(_rt.stack_buffer(4), (2, 2))
     for _k in range(2):
         _field(_y, _p, _F[_k])
-    _r[4] = _F[0, 0] + _F[1, 1]
+    _r[4] = _F[0, 0] + _F[1, 1] + _size(_y, _p)
     _r[5] = _y[0] > 0.5 and _y[1] < 0.5 or not _y[2] >= 0.0
 """
 
@@ -165,7 +172,8 @@ def flow(_z, _y, _c, _h, _p, _r):
 def test_control_flow_helpers_and_stack_buffers_are_bitwise_numbas(tmp_path):
     """Variables carried across iterations, branches on run-time values (NaN compares false,
     except !=), the module's scalar helpers (called) and array kernels (inlined into a stack
-    buffer's rows): translated, and bitwise numba's on random inputs with NaN and inf."""
+    buffer's rows, or returning a float in an expression, as a scale kernel): translated, and
+    bitwise numba's on random inputs with NaN and inf."""
     mod = _load(tmp_path, "k_flow", "from methodgen import nbruntime as _rt\n" + FLOW)
     ll = lk.compile_kernel(mod.flow, RES)
     assert isinstance(ll, lk.LLVMKernel)
