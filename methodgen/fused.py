@@ -5,8 +5,8 @@ function pointer, and an implicit stage's Newton iteration calls its residual an
 kernels the same way: about 13 ns a call, a third of an explicit step of Kepler's
 Störmer–Verlet composed to order 10 (35 stages) and half of a Hénon–Heiles energy-momentum
 step of order 8 (80 calls).  When a module's kernels were compiled through LLVM IR
-(:mod:`methodgen.llvmkernels`), this module compiles, once per module, process and batch size
-(milliseconds), the loop of :func:`_stage_loop` with the kernels inlined: the same stages,
+(:mod:`methodgen.llvmkernels`), this module compiles, once per module (milliseconds, or loaded
+from the machine-code cache), the loop of :func:`_stage_loop` with the kernels inlined: the same stages,
 Newton iterations (solvers "newton", "simplified", "fixed-point", "auto"; the linearly
 implicit solve), compensated update, first-same-as-last force and checks, operation for
 operation, so the same bits, iterations and solver state.
@@ -18,8 +18,9 @@ state, domain, time-scale guard, local error, energy jump) it stops and says so,
 the start, which records the failure exactly as before.  One check it can only bound: where
 the runtime takes the spectral radius of a Newton matrix from its eigenvalues, this loop
 uses a bound of it (:func:`_resolution_f`) and hands back what the bound cannot decide.
-Modules it does not apply to (a kernel numba compiled, solver "reuse", more than 8
-trajectories, arrays that are not C-contiguous) take the shared runtime directly.
+Modules it does not apply to (a kernel numba compiled, solver "reuse", arrays that are not
+C-contiguous float64) take the shared runtime directly; explicit batches of at least
+``nbbatch.MIN_BATCH`` take the lock-step block of :mod:`methodgen.nbbatch` before this.
 
 The loop's source below is translated by :mod:`methodgen.llvmkernels` with the module's
 configuration bound as constants (``_DIM``, ``_STAGES``, ``_N`` …) and its kernels as
@@ -48,9 +49,10 @@ _T3 = _t.float64[:, :, ::1]
 
 #: signature of the compiled loop: Y, C, G (B, ·), traj (rows, B, DIM), p, kick_a, drift,
 #: kick_b, h, n0, n1, every, nxt0, row0, check_resolution, compensated, status (1; 1.0 = stopped),
-#: iterations (B, n1 - n0; implicit), solver modes (B, STAGES; "auto"), maxiter, solver, use_tol, tol
+#: iterations (B, n1 - n0; implicit), solver modes (B, STAGES; "auto"), maxiter, solver, use_tol, tol,
+#: the number of trajectories B
 LOOP_SIG = _t.void(_M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _i8, _i8, _V,
-                   _M, _M, _i8, _i8, _i8, _f8)
+                   _M, _M, _i8, _i8, _i8, _f8, _i8)
 
 
 def enabled() -> bool:
@@ -59,7 +61,7 @@ def enabled() -> bool:
 
 
 def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _chk, _comp, _st,
-                _its, _smode, _maxiter, _solver, _usetol, _tol):
+                _its, _smode, _maxiter, _solver, _usetol, _tol, _nbt):
     # (translated by methodgen.llvmkernels with the module's constants and kernels bound)
     _z = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
     _zp = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
@@ -74,7 +76,7 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
     _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
     _g0 = numba.carray(_rt.stack_buffer(_NK), (_NK,))
     _hh = 0.5 * _h * _GAMMA0
-    for _b in range(_NB):
+    for _b in range(_nbt):
         if _EJUMP:
             hs(_Y[_b], _p, _ejs)
         _e0 = _ejs[0]
@@ -405,7 +407,7 @@ def _drive(loop, Y, C, G, T, p, ka, kd, kb, h, n0, n1, every, nxt0, row0, chk, c
     arrays = [_lk.array_struct(a) for a in (Y, C, G, T, p, ka, kd, kb)]
     tail = [_lk.array_struct(a) for a in (st, its, smode)]
     loop.c_call(*[ctypes.byref(a) for a in arrays], h, n0, n1, every, nxt0, row0, chk, comp,
-                *[ctypes.byref(a) for a in tail], maxiter, solver, usetol, tol)
+                *[ctypes.byref(a) for a in tail], maxiter, solver, usetol, tol, Y.shape[0])
 
 
 _LOOPS: dict = {}
@@ -421,10 +423,10 @@ def false_alarm(key):
     _FALSE_ALARMS[key] = _FALSE_ALARMS.get(key, 0) + 1
 
 
-def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, batch):
-    """The loop for this module's kernels and configuration (and batch size: the number of
-    trajectories is a constant of the loop), compiled on first use; None where it does not apply."""
-    key = tuple(id(k) for k in kernels) + (batch,)
+def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
+    """The loop for this module's kernels and configuration, compiled on first use (or loaded
+    from the machine-code cache); None where it does not apply."""
+    key = tuple(id(k) for k in kernels)
     got = _LOOPS.get(key)
     if got is None:
         C = _rt.CFG
@@ -432,7 +434,7 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, b
         n = int(cfg[C["N"]])
         fr = float(fcfg[F["NEWTON_FAILURE_RESOLUTION"]])
         resol = int(cfg[C["RESOLUTION"]])
-        consts = {"_PL": max(int(cfg[C["POST_LEN"]]), 1), "_NB": int(batch), "_STAGES": int(cfg[C["STAGES"]]),
+        consts = {"_PL": max(int(cfg[C["POST_LEN"]]), 1), "_STAGES": int(cfg[C["STAGES"]]),
                   "_DIM": int(cfg[C["DIM"]]), "_NF": int(cfg[C["NF"]]), "_NDOMAIN": int(cfg[C["NDOMAIN"]]),
                   "_PD": int(cfg[C["POST_DOMAIN"]]), "_TT_GUARD": int(cfg[C["TT_GUARD"]]),
                   "_PT": int(cfg[C["POST_TT"]]), "_LERR": int(cfg[C["LERR"]]), "_PE": int(cfg[C["POST_EXTRA"]]),
@@ -481,16 +483,19 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         ([resjac] if kind == 1 else [guess, res, resjac] if kind == 0 else [])
     if (not enabled() or (kind == 0 and solver == 3)
             or not all(isinstance(k, _lk.LLVMKernel) for k in needed)
-            or Y.shape[0] > 8 or n1 <= n0
+            or n1 <= n0
             or not all(a.dtype.char == "d" and a.flags.c_contiguous
                        for a in (Y, C, FRC, traj, p, kick_a, drift, kick_b))):
         return None
-    loop, key = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, Y.shape[0])
+    loop, key = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
     if loop is None or _FALSE_ALARMS.get(key, 0) >= _MAX_FALSE_ALARMS:
         return None
     Y0, C0, G0 = Y.copy(), C.copy(), FRC.copy()
     st = numpy.zeros(1)
-    itsf = numpy.zeros((Y.shape[0], n1 - n0) if kind != 2 else (1, 1))
+    # the iterations: counted as floats (the translated code's arrays are float64) in place of
+    # its, when its is zeros (its usual state: 0 has the same bits as 0.0), else in a copy
+    in_place = kind != 2 and its.flags.c_contiguous and not its.any()
+    itsf = its.view(numpy.float64) if in_place else numpy.zeros((Y.shape[0], n1 - n0) if kind != 2 else (1, 1))
     smf = smode.astype(numpy.float64) if kind == 0 else numpy.zeros((1, 1))
     nxt0 = (n0 // every + 1) * every
     _drive(loop, Y, C, FRC, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(n1), int(every), nxt0,
@@ -500,8 +505,12 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         Y[...] = Y0
         C[...] = C0
         FRC[...] = G0
+        if in_place:
+            its[...] = 0
         return key
-    if kind != 2:
+    if in_place:
+        its[...] = itsf        # (numpy copies overlapping operands first)
+    elif kind != 2:
         its += itsf.astype(numpy.int64)
     if kind == 0:
         smode[...] = smf.astype(numpy.int64)

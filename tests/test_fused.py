@@ -191,3 +191,24 @@ def test_an_undecided_resolution_bound_goes_to_the_runtime(monkeypatch):
             seen_drives.append(len(drives))
             seen_calls.append(len(calls))
         assert (seen_drives, seen_calls) == (want_drives, want_calls), m
+
+
+@pytest.mark.parametrize("method, kw", [("energy-momentum", {"order": 4}), ("stormer-verlet", {"order": 6})])
+def test_a_batch_of_any_size_runs_fused(monkeypatch, method, kw):
+    """The number of trajectories is a run-time bound of the loop: a batch of 12 (implicit; and
+    explicit below nbbatch's lock-step size) runs fused, bitwise the runtime's, iterations
+    included (counted in place, in the caller's zeroed array)."""
+    scene = mg.load_scene("henon-heiles-2d")
+    mod = mg.build(scene.system, method, backend="numba", **kw)
+    y0 = np.array(scene.y0, float)
+    Y = y0 * (1 + 1e-3 * np.arange(12)[:, None])
+    got = {}
+    for fused in ("1", "0"):
+        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        calls = _counting(monkeypatch)
+        info = {}
+        a = mod.integrate(Y, scene.h, 200, save_every=3, info=info)
+        got[fused] = (a, np.asarray(info["newton_iterations"]))
+        assert (calls == []) == (fused == "1")
+    assert np.array_equal(got["1"][0], got["0"][0])
+    assert np.array_equal(got["1"][1], got["0"][1])
