@@ -21,7 +21,9 @@ cache (:func:`methodgen.emit.check_cache_folder`: folders of this user that othe
 write to) and only with the HMAC-SHA256 tag of the user's cache key (the key that tags
 cached modules).  A file without a valid tag, or any error reading or writing, means no
 cache: the kernel is compiled as if there were none (never an error, never a stale load).
-``METHODGEN_LLVM_CACHE=0`` turns the cache off.
+``METHODGEN_LLVM_CACHE=0`` turns the cache off.  The folder is kept bounded: a store
+removes temporary files of killed writers and, past ``_MAX_OBJECTS`` objects, the least
+recently used ones.
 """
 
 from __future__ import annotations
@@ -35,6 +37,12 @@ import tempfile
 __all__ = ["key", "load", "store", "enabled"]
 
 _MAGIC = b"methodgen-llvm-object-v1\n"
+#: objects kept: past _MAX_OBJECTS a store removes the least recently used down to _KEEP_OBJECTS
+#: (a load touches its file), so edited and regenerated modules do not grow the folder forever
+_MAX_OBJECTS = 4096
+_KEEP_OBJECTS = 2048
+#: a temporary file older than this (seconds) is a killed writer's: removed by the next store
+_ORPHAN_AGE = 600.0
 _TAG_LEN = 64          # hex HMAC-SHA256
 _FILE_DIGESTS: dict = {}
 _STATIC: list = []
@@ -165,7 +173,40 @@ def load(key_: str, name: str) -> bytes | None:
     obj = data[len(_MAGIC) + _TAG_LEN + 1:]
     if not hmac.compare_digest(tag, _tag(secret, name, obj)):
         return None
+    try:
+        os.utime(folder / f"{key_}.o")          # recently used: kept by the pruning in store()
+    except OSError:
+        pass
     return obj
+
+
+def _tidy(folder) -> None:
+    """Remove killed writers' temporary files, and the least recently used objects past
+    _MAX_OBJECTS (down to _KEEP_OBJECTS)."""
+    import time
+
+    now = time.time()
+    objects = []
+    try:
+        with os.scandir(folder) as it:
+            for e in it:
+                try:
+                    if e.name.startswith(".tmp-"):
+                        if now - e.stat().st_mtime > _ORPHAN_AGE:
+                            os.unlink(e.path)
+                    elif e.name.endswith(".o"):
+                        objects.append((e.stat().st_mtime, e.path))
+                except OSError:
+                    pass
+    except OSError:
+        return
+    if len(objects) > _MAX_OBJECTS:
+        objects.sort()
+        for _, path in objects[:len(objects) - _KEEP_OBJECTS]:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
 
 
 def store(key_: str, name: str, obj: bytes) -> None:
@@ -188,4 +229,5 @@ def store(key_: str, name: str, obj: bytes) -> None:
             raise
     except OSError:
         return
+    _tidy(folder)
 

@@ -212,3 +212,23 @@ def test_a_batch_of_any_size_runs_fused(monkeypatch, method, kw):
         assert (calls == []) == (fused == "1")
     assert np.array_equal(got["1"][0], got["0"][0])
     assert np.array_equal(got["1"][1], got["0"][1])
+
+
+@pytest.mark.parametrize("solver", ["newton", "simplified", "fixed-point", "reuse", "auto"])
+@pytest.mark.parametrize("tol", [None, 1e-12])
+def test_every_solver_and_stopping_rule_is_the_runtimes(monkeypatch, solver, tol):
+    """Each solver with the round-off stopping rule and with a tolerance: bitwise the runtime's
+    trajectory and iterations; fused for all but "reuse" (which the runtime runs)."""
+    scene = mg.load_scene("henon-heiles-2d")
+    mod = mg.build(scene.system, "energy-momentum", backend="numba", order=4)
+    y0 = np.array(scene.y0, float)
+    got = {}
+    for fused in ("1", "0"):
+        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        calls = _counting(monkeypatch)
+        info = {}
+        got[fused] = (mod.integrate(y0, scene.h, 150, solver=solver, tol=tol, info=info),
+                      np.asarray(info["newton_iterations"]))
+        assert (calls == []) == (fused == "1" and solver != "reuse"), (fused, calls)
+    assert np.array_equal(got["1"][0], got["0"][0])
+    assert np.array_equal(got["1"][1], got["0"][1])

@@ -121,3 +121,36 @@ def test_a_cache_others_can_write_to_is_not_used(hh_module, tmp_path):
     assert _run(path, y0, tmp_path / "b.npy", cache)[0] == first     # not read
     os.chmod(cache / "llvm", 0o755)
     assert _run(path, y0, tmp_path / "c.npy", cache)[0] == []        # control: read again
+
+
+def test_the_cache_stays_bounded_and_drops_killed_writers_files(tmp_path, monkeypatch):
+    """A store removes a killed writer's old temporary file (not a fresh one: a writer may be
+    at work) and, past the limit, the least recently used objects; a load marks its object as
+    used.  Control: below the limit nothing is removed."""
+    import time
+
+    from methodgen import llvmcache
+
+    monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(llvmcache, "_MAX_OBJECTS", 4)
+    monkeypatch.setattr(llvmcache, "_KEEP_OBJECTS", 2)
+    for i in range(4):
+        llvmcache.store(f"{i:064x}", f"f{i}", b"object %d" % i)
+    folder = tmp_path / "cache" / "llvm"
+    old = time.time() - 3600
+    for i in range(4):
+        os.utime(folder / f"{i:064x}.o", (old + i, old + i))
+    assert llvmcache.load(f"{0:064x}", "f0") == b"object 0"        # used now: the newest
+    stale, fresh = folder / ".tmp-killed.o", folder / ".tmp-writing.o"
+    stale.write_bytes(b"x")
+    os.utime(stale, (old, old))
+    fresh.write_bytes(b"x")
+    def objects():
+        return sorted(p.name for p in folder.glob("*.o") if not p.name.startswith("."))
+
+    assert len(objects()) == 4                                         # control: at the limit
+    llvmcache.store(f"{9:064x}", "f9", b"object 9")                   # 5 > 4: down to 2
+    assert objects() == sorted([f"{0:064x}.o", f"{9:064x}.o"])        # the two most recently used
+    assert not stale.exists() and fresh.exists()
+    assert llvmcache.load(f"{9:064x}", "f9") == b"object 9"
+    assert llvmcache.load(f"{9:064x}", "f8") is None                  # the tag binds the symbol
