@@ -240,6 +240,19 @@ class _Translator:
                         out.add(sub.target.id)
         return out
 
+    @staticmethod
+    def _assigned_names(stmts) -> set:
+        """Names assigned anywhere in ``stmts``."""
+        out = set()
+        for node in ast.walk(ast.Module(body=list(stmts), type_ignores=[])):
+            if isinstance(node, (ast.Assign, ast.AugAssign)):
+                for t in (node.targets if isinstance(node, ast.Assign) else [node.target]):
+                    if isinstance(t, ast.Name):
+                        out.add(t.id)
+            elif isinstance(node, ast.For) and isinstance(node.target, ast.Name):
+                out.add(node.target.id)
+        return out
+
     # --- names --------------------------------------------------------------------------
     def slot(self, name, kind):
         sc = self.scope
@@ -343,6 +356,13 @@ class _Translator:
             if c is not None:
                 self.block(st.body if c else st.orelse)
                 return
+            # a name folded to a constant and assigned in a branch lives in its slot from here
+            # on, holding the constant on the paths that do not assign it
+            for name in sorted(self._assigned_names(st.body + st.orelse)):
+                if name in sc.consts:
+                    b.store(ir.Constant(_I64, sc.consts.pop(name)), self.slot(name, "i"))
+                elif name in sc.fconsts:
+                    b.store(ir.Constant(_DBL, sc.fconsts.pop(name)), self.slot(name, "f"))
             cond = self.bool_expr(st.test)
             then = self.f.fn.append_basic_block("then")
             other = self.f.fn.append_basic_block("else")
@@ -757,11 +777,31 @@ class _Translator:
             # numba: ordered comparisons, except != (unordered: NaN != x)
             return b.fcmp_unordered(op, x, y) if op == "!=" else b.fcmp_ordered(op, x, y)
         if isinstance(node, ast.BoolOp):
-            vals = [self.bool_expr(v) for v in node.values]
-            out = vals[0]
-            for v in vals[1:]:
-                out = b.and_(out, v) if isinstance(node.op, ast.And) else b.or_(out, v)
-            return out
+            # short-circuit, as Python and numba: a later operand is evaluated only when the
+            # earlier ones do not decide (``i < n and a[i] > 0`` never reads a[n])
+            is_and = isinstance(node.op, ast.And)
+            fn = self.f.fn
+            merge = fn.append_basic_block("bool.end")
+            incoming = []
+            for i, v in enumerate(node.values):
+                val = self.bool_expr(v)
+                here = b.block
+                if i == len(node.values) - 1:
+                    b.branch(merge)
+                    incoming.append((val, here))
+                else:
+                    nxt = fn.append_basic_block("bool.next")
+                    if is_and:
+                        b.cbranch(val, nxt, merge)
+                    else:
+                        b.cbranch(val, merge, nxt)
+                    incoming.append((ir.Constant(ir.IntType(1), 0 if is_and else 1), here))
+                    b.position_at_end(nxt)
+            b.position_at_end(merge)
+            phi = b.phi(ir.IntType(1))
+            for val, blk in incoming:
+                phi.add_incoming(val, blk)
+            return phi
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
             return b.not_(self.bool_expr(node.operand))
         raise Unsupported("condition")

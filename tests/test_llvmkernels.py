@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
 import textwrap
 
 import numpy as np
@@ -354,3 +355,48 @@ def test_a_c_entry_called_through_ctypes_is_the_kernel(tmp_path):
     with pytest.raises(ValueError, match="C-contiguous float64"):
         lk.array_struct(np.zeros(3, dtype=np.int64))
     assert lk.compile_kernel(mod.flow, RES).c_call is None     # only where asked for
+
+
+SHORT = """
+def guarded(_z, _y, _c, _h, _p, _r):
+    n = 0
+    if _p[0] > 1.0:
+        n = 1
+    _r[0] = 0.0
+    if n > 0 and _y[200000000000] > 0.0:
+        _r[0] = 1.0
+    if not (n == 0 or _y[300000000000] > 0.0):
+        _r[1] = 1.0
+"""
+
+
+@pytest.mark.parametrize("guard", [True, False])
+def test_and_or_short_circuit_as_python(tmp_path, guard):
+    """``a and b`` / ``a or b`` evaluate b only when a does not decide (as Python and numba):
+    a condition guarding an index never reads out of range; and a name first bound to a
+    constant, then assigned in one branch, keeps the constant on the other path.  Control: without the guard the
+    same read is made (the process dies of it), so the test sees an eager read."""
+    import subprocess
+    import sys
+
+    src = SHORT if guard else SHORT.replace("n > 0 and ", "").replace("n == 0 or ", "")
+    path = tmp_path / "k_short.py"
+    path.write_text("import math\nimport numba\nimport numpy\n" + src)
+    code = textwrap.dedent(f"""
+        import importlib.util, numpy as np
+        from methodgen import llvmkernels as lk, nbruntime as rt
+        spec = importlib.util.spec_from_file_location("k_short", {str(path)!r})
+        mod = importlib.util.module_from_spec(spec); spec.loader.exec_module(mod)
+        ll = lk.compile_kernel(mod.guarded, rt.KERNEL_TYPES["res"])
+        R = np.zeros((1, 2))
+        rt.res_rows(ll, np.zeros((1, 3)), np.ones((1, 3)), 0.1, np.array([0.5]), R)
+        print("ok", R.tolist())
+    """)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=dict(os.environ, METHODGEN_LLVM_CACHE="0"), timeout=120)
+    if guard:
+        assert proc.returncode == 0 and proc.stdout.split()[0] == "ok", proc.stderr[-2000:]
+        # n = 0 on the path that does not assign it (a folded constant assigned in a branch)
+        assert proc.stdout.split(None, 1)[1].strip() == "[[0.0, 0.0]]"
+    else:
+        assert proc.returncode != 0
