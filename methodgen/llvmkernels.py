@@ -651,14 +651,7 @@ class _Translator:
             b.branch(body)
         else:
             b.cbranch(b.icmp_signed("<", lo, hi), body, after)
-        b.position_at_end(body)
-        self.loops.append((latch, after))
-        try:
-            self.block(st.body)
-        finally:
-            self.loops.pop()
-        if not b.block.is_terminated:
-            b.branch(latch)
+        self.loop_body(body, st.body, latch, after)
         b.position_at_end(latch)
         nxt = b.add(b.load(var), ir.Constant(_I64, 1))
         b.store(nxt, var)
@@ -681,15 +674,21 @@ class _Translator:
         b.branch(head)
         b.position_at_end(head)
         b.cbranch(self.bool_expr(st.test), body, after)
-        b.position_at_end(body)
-        self.loops.append((head, after))
+        self.loop_body(body, st.body, head, after)
+        b.position_at_end(after)
+
+    def loop_body(self, block, stmts, cont, brk):
+        """``stmts`` translated into ``block``, ``continue`` going to ``cont`` and ``break`` to
+        ``brk``; falling off the end continues."""
+        b = self.b
+        b.position_at_end(block)
+        self.loops.append((cont, brk))
         try:
-            self.block(st.body)
+            self.block(stmts)
         finally:
             self.loops.pop()
         if not b.block.is_terminated:
-            b.branch(head)
-        b.position_at_end(after)
+            b.branch(cont)
 
     # --- expressions ----------------------------------------------------------------------
     def any_expr(self, node):
