@@ -25,7 +25,7 @@ C-contiguous float64) take the shared runtime directly; explicit batches of at l
 The loop's source below is translated by :mod:`methodgen.llvmkernels` with the module's
 configuration bound as constants (``_DIM``, ``_STAGES``, ``_N`` …) and its kernels as
 ``guess``, ``res``, ``resjac``, ``post``, ``hs``, ``check``, ``scale``; it is called through its C
-entry point with ctypes (:func:`_drive`), so a run on this path loads no numba dispatcher.
+entry point with ctypes (:func:`_drive`), so a run on this path does not import numba.
 """
 
 from __future__ import annotations
@@ -35,12 +35,11 @@ import math
 import os
 import types
 
-import numba
 import numpy
-from numba import types as _t
 
+from . import ktypes as _t
 from . import llvmkernels as _lk
-from . import nbruntime as _rt
+from . import nbabi as _rt
 
 __all__ = ["run_fused", "enabled", "false_alarm"]
 
@@ -452,7 +451,7 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
                   "_LIDX": numpy.array(list(lerr_index) or [0], dtype=numpy.int64),
                   "_RATIOS": numpy.array(ratios, dtype=numpy.float64), "_GAMMA0": float(gammas[0]),
                   "_DPOS": numpy.array([int(bool(v)) for v in domain_pos] or [0], dtype=numpy.int64),
-                  "numba": numba, "_rt": _rt, "math": math}
+                  "_rt": _rt, "math": math}
         for name, k in zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels):
             consts[name] = getattr(k, "py_func", None)
         # the helpers, with their constants resolved in this loop's configuration

@@ -75,7 +75,7 @@ def _static(state) -> str:
         here = os.path.dirname(os.path.abspath(__file__))
         parts = [llvmlite.__version__, ".".join(map(str, llvm.llvm_version_info)), state["triple"],
                  state["cpu"], state["features"]]
-        for name in ("llvmkernels.py", "nbruntime.py", "llvmcache.py"):
+        for name in ("llvmkernels.py", "ktypes.py", "nbabi.py", "nbruntime.py", "llvmcache.py"):
             with open(os.path.join(here, name), "rb") as f:
                 parts.append(hashlib.sha256(f.read()).hexdigest())
         _STATIC.append("\0".join(parts))

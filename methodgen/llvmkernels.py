@@ -5,10 +5,12 @@ solar system's energy-momentum Newton matrix: 3.4 s of a 9.5 s first use; most o
 numba's type inference trying overloads per operation, not LLVM).  The kernels of a numba
 module are float arithmetic on arrays of known shape, so this module writes their LLVM IR
 directly from the kernel's Python source -- as heyoka does from its expression graph -- and
-compiles it with LLVM in milliseconds.  The result is a
-:class:`methodgen.nbruntime.KernelHandle` (numba's wrapper-address protocol) with the
-signature of numba's C-ABI wrapper for the same kernel type, so the shared runtime calls it
-exactly as it calls a numba kernel.
+compiles it with LLVM in milliseconds.  The result is an :class:`LLVMKernel`: machine code
+with the signature of numba's C-ABI wrapper for the same kernel type, so the shared runtime
+calls it exactly as it calls a numba kernel (numba's wrapper-address protocol), and the
+fused loop (:mod:`methodgen.fused`) inlines its source.  Signatures are
+:mod:`methodgen.ktypes` (numba's accepted too); this module does not import numba unless a
+kernel falls back to it.
 
 What is translated: assignments (scalar names live in stack slots that LLVM promotes to
 registers, so a value may be carried across iterations or branches), stores and ``+=``,
@@ -49,10 +51,9 @@ import threading
 
 import llvmlite.binding as llvm
 from llvmlite import ir
-from numba import types as _t
-
+from . import ktypes as _t
 from . import llvmcache as _objcache
-from . import nbruntime as _rt
+from . import nbcache as _nbcache
 
 __all__ = ["kernel", "compile_kernel", "Unsupported", "LLVMKernel", "enabled", "array_struct"]
 
@@ -950,6 +951,7 @@ def compile_kernel(py_func, sig, globals_=None, c_entry=False) -> "LLVMKernel":
     ``c_entry``: also a C entry point taking each array argument as a pointer to numba's
     array structure (:func:`array_struct`), callable from Python through ctypes
     (:meth:`LLVMKernel.c_call`) with no numba dispatcher loaded."""
+    sig = _t.plain(sig)   # (numba's signatures are accepted too)
     with _LOCK:     # one engine per process: modules are added to it one at a time
         return _compile_kernel(py_func, sig, globals_, c_entry)
 
@@ -1056,42 +1058,69 @@ def array_struct(a):
     return s
 
 
-class LLVMKernel(_rt.KernelHandle):
-    """A kernel compiled by :func:`compile_kernel`: a first-class function for the shared
-    runtime (numba's wrapper-address protocol), callable from Python too (through numba,
-    compiled on the first such call: tests and diagnostics; the runtime never does)."""
+class LLVMKernel:
+    """A kernel compiled by :func:`compile_kernel`.
 
-    __slots__ = ("py_func", "engine", "_nb", "c_call")
+    For the shared runtime it is a first-class function: it implements numba's
+    wrapper-address protocol (``__wrapper_address__``, ``signature``; registered as such by
+    :mod:`methodgen.nbruntime`, which imports numba -- this module does not).  The fused loop
+    (:mod:`methodgen.fused`) inlines its source instead.  Callable from Python too (through
+    numba, compiled on the first such call: tests and diagnostics; the runtime never does)."""
+
+    __slots__ = ("py_func", "engine", "_nb", "c_call", "_sig", "_addr", "_type")
 
     def __init__(self, py_func, sig, addr, engine):
-        self.kernel = None
-        self._sig = sig
+        self._sig = sig               # methodgen.ktypes.Signature
         self._addr = addr
-        self._type = _t.FunctionType(sig)
+        self._type = None             # numba's FunctionType, made when numba asks
         self.py_func = py_func
         self.engine = engine          # owns the machine code
         self._nb = None
         self.c_call = None            # the C entry through ctypes (compile_kernel(c_entry=True))
 
+    def __wrapper_address__(self):
+        return self._addr
+
+    def signature(self):
+        """numba's signature of the kernel (imports numba)."""
+        return _t.to_numba(self._sig)
+
+    def numba_type(self):
+        """numba's FunctionType of the kernel, made once (numba's typeof of this object)."""
+        if self._type is None:
+            from numba import types as nt
+            self._type = nt.FunctionType(self.signature())
+        return self._type
+
     def __call__(self, *args):
         if self._nb is None:
-            import numba
-            self._nb = numba.njit(self._sig, cache=True, error_model="numpy")(self.py_func)
+            numba = _numba_for(self.py_func)
+            self._nb = numba.njit(self.signature(), cache=True, error_model="numpy")(self.py_func)
         return self._nb(*args)
+
+
+def _numba_for(py_func):
+    """numba, ready to compile a function of ``py_func``'s module: its cache guard installed and
+    its lazily compiled functions made dispatchers (:func:`methodgen.nbabi.materialize`)."""
+    from . import nbabi
+
+    g = getattr(py_func, "__globals__", None)
+    if g is not None:
+        nbabi.materialize(g)
+    return _nbcache.numba()
 
 
 def kernel(sig):
     """Decorator: the kernel compiled through LLVM IR when it is straight-line code this
     module translates (and the route is :func:`enabled`), else with numba for ``sig`` (cached
     on disk) as every kernel was before."""
-    import numba
-
     def deco(py_func):
         if enabled():
             try:
                 return compile_kernel(py_func, sig)
             except Unsupported:
                 pass
-        return numba.njit(sig, cache=True, error_model="numpy")(py_func)
+        numba = _numba_for(py_func)
+        return numba.njit(_t.to_numba(_t.plain(sig)), cache=True, error_model="numpy")(py_func)
 
     return deco

@@ -46,6 +46,7 @@ This module imports numpy and numba only, and is compiled once per machine
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 
@@ -53,12 +54,14 @@ import numba
 import numpy
 from numba import types as _t
 
+from methodgen import nbabi as _abi
 from methodgen import nbruntime as _rt
 
-__all__ = ["run_block", "KERNEL_TYPES", "MIN_BATCH", "SOURCE_SHA256", "use_block"]
+__all__ = ["run_block", "KERNEL_TYPES", "SOURCE_SHA256", "use_block"]
 
-#: SHA-256 of this file: the stamp of its cached machine code.
-SOURCE_SHA256 = _rt._source_digest(os.path.abspath(__file__))
+#: SHA-256 of this file and of the runtime's interface it reads (the configuration layout,
+#: methodgen.nbabi): the stamp of its cached machine code.
+SOURCE_SHA256 = hashlib.sha256((_rt._source_digest(os.path.abspath(__file__)) + _abi.SOURCE_SHA256).encode()).hexdigest()
 _rt._install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
 
 _f8 = _t.float64
@@ -72,10 +75,6 @@ _B = _t.boolean
 KERNEL_TYPES = {"post_block": _i8(_V, _V, _V, _f8, _f8, _f8, _V, _V, _i8, _B)}
 _F = {k: _t.FunctionType(v) for k, v in KERNEL_TYPES.items()}
 _RF = {k: _t.FunctionType(v) for k, v in _rt.KERNEL_TYPES.items()}
-
-#: Smallest batch that takes the lock-step path (below it the block is mostly empty and
-#: the one-trajectory path is as fast).  Read at each call: tests set it to force a path.
-MIN_BATCH = 16
 
 _OPTS = dict(cache=True, error_model="numpy")
 
@@ -97,11 +96,10 @@ _TIME_SCALE = _rt.STATUS["TIME_SCALE"]
 _ENERGY_JUMP = _rt.STATUS["ENERGY_JUMP"]
 
 
-def use_block(cfg, batch: int) -> bool:
-    """True when a batch of ``batch`` trajectories of a module with configuration ``cfg``
-    (:data:`methodgen.nbruntime.CFG`) takes :func:`run_block`: explicit stages and at least
-    :data:`MIN_BATCH` trajectories."""
-    return int(cfg[_C_KIND]) == 2 and batch >= MIN_BATCH
+# Which batches take run_block (explicit stages, at least nbabi.MIN_BATCH trajectories: below
+# that the block is mostly empty and the one-trajectory path is as fast).  Decided in
+# methodgen.nbabi, so that a module asks without importing this module.
+use_block = _abi.use_block
 
 
 @numba.njit(**_OPTS)

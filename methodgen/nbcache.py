@@ -7,15 +7,25 @@ would load stale machine code.  :func:`install_stamp_guard` replaces the stamp o
 by its content hash.  Kept apart from :mod:`methodgen.nbruntime` so that the guard can be
 installed (and tested) without compiling or loading the runtime itself.
 
-This module imports the standard library only (numba when the guard is installed).
+A generated module that may never use numba (a cached module on its fused loop) defers its
+guard (:func:`defer_stamp_guard`); :func:`numba` -- the one door through which methodgen's
+lazy paths import numba -- installs the deferred guards before numba is returned, so no
+function of such a module is compiled or loaded from numba's cache without its guard.
+
+This module imports the standard library only (numba when a guard is installed).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import sys
+import threading
 
-__all__ = ["source_digest", "install_stamp_guard"]
+__all__ = ["source_digest", "install_stamp_guard", "defer_stamp_guard", "numba"]
+
+_DEFERRED: list = []
+_LOCK = threading.Lock()
 
 
 def source_digest(path: str) -> str:
@@ -75,3 +85,31 @@ def install_stamp_guard(path: str, digest: str, *, owner: str = "methodgen.nbrun
         c for c in impl._locator_classes if getattr(c, "_methodgen_path", None) != path]
     for c in guarded:
         c._methodgen_path = path
+
+
+def defer_stamp_guard(path: str, digest: str, *, owner: str = "methodgen.nbruntime",
+                      tag: str | None = None) -> None:
+    """:func:`install_stamp_guard` now if numba is imported, else when :func:`numba` first
+    imports it."""
+    with _LOCK:
+        if sys.modules.get("numba") is None:
+            _DEFERRED.append((path, digest, owner, tag))
+            return
+    install_stamp_guard(path, digest, owner=owner, tag=tag)
+
+
+def numba():
+    """The numba module, imported on first call, with every deferred guard installed."""
+    import numba as nb
+
+    flush_deferred()
+    return nb
+
+
+def flush_deferred() -> None:
+    """Install the guards :func:`defer_stamp_guard` kept (numba is imported by the caller)."""
+    with _LOCK:
+        pending = list(_DEFERRED)
+        _DEFERRED.clear()
+    for path, digest, owner, tag in pending:
+        install_stamp_guard(path, digest, owner=owner, tag=tag)

@@ -55,18 +55,23 @@ from numba.core.typing.typeof import typeof_impl as _typeof_impl
 from numba.experimental.function_type import _get_wrapper_address
 from numba.extending import intrinsic as _intrinsic
 
+from . import nbabi as _abi
+from .llvmkernels import LLVMKernel
+from .nbcache import flush_deferred as _flush_deferred
 from .nbcache import install_stamp_guard as _install_stamp_guard
 from .nbcache import source_digest as _source_digest
 
 __all__ = ["run", "handle", "KernelHandle", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256",
-           "no_kernel", "stack_buffer"]
+           "no_kernel", "stack_buffer", "run_loop", "stand_in"]
 
 # --- cache stamp ---------------------------------------------------------------------
 
-#: SHA-256 of this file: the stamp of its cached machine code.
-SOURCE_SHA256 = _source_digest(os.path.abspath(__file__))
+#: SHA-256 over this file and nbabi.py (the configuration layout it reads): the stamp of its
+#: cached machine code (:data:`methodgen.nbabi.SOURCE_SHA256`).
+SOURCE_SHA256 = _abi.SOURCE_SHA256
 
 _install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
+_flush_deferred()   # numba is imported now: the guards generated modules deferred
 
 # --- kernel types ------------------------------------------------------------------------
 
@@ -77,16 +82,9 @@ _M = _t.float64[:, ::1]
 _IV = _t.int64[::1]
 _B = _t.boolean
 
-#: numba signatures of the kernels (see the module docstring).
-KERNEL_TYPES = {
-    "guess": _t.void(_V, _f8, _V, _V),
-    "res": _t.void(_V, _V, _V, _f8, _V, _V),
-    "resjac": _t.void(_V, _V, _V, _f8, _V, _V, _M),
-    "scale": _f8(_V, _f8, _V),
-    "post": _t.void(_V, _V, _V, _V, _f8, _f8, _f8, _V, _V),
-    "hs": _t.void(_V, _V, _V),
-    "check": _t.void(_V, _V, _V),
-}
+#: numba signatures of the kernels (see the module docstring; methodgen.nbabi.KERNEL_TYPES as
+#: numba's types).
+KERNEL_TYPES = {k: _abi._t.to_numba(v) for k, v in _abi.KERNEL_TYPES.items()}
 _F = {k: _t.FunctionType(v) for k, v in KERNEL_TYPES.items()}
 
 
@@ -133,12 +131,23 @@ def _typeof_handle(val, c):
 _HANDLES: dict = {}
 
 
+# A kernel compiled through LLVM IR (methodgen.llvmkernels) is a first-class function as it
+# is: its address is numba's C-ABI wrapper's, resolved once.  Registered here, where numba is
+# imported, so that llvmkernels stays free of numba.
+_WrapperAddressProtocol.register(LLVMKernel)
+
+
+@_typeof_impl.register(LLVMKernel)
+def _typeof_llvm_kernel(val, c):
+    return val.numba_type()
+
+
 def handle(kernel, sig):
     """The :class:`KernelHandle` of ``kernel`` for ``sig``, made on first use and then reused
-    (a handle passed again is returned as it is)."""
-    if isinstance(kernel, KernelHandle):
+    (a handle or an LLVM kernel passed is returned as it is)."""
+    if isinstance(kernel, (KernelHandle, LLVMKernel)):
         return kernel
-    if isinstance(kernel, _Missing):
+    if isinstance(kernel, _abi._Missing):
         kernel = kernel.compiled()
     key = (id(kernel), id(sig))   # (hashing a numba signature costs microseconds)
     h = _HANDLES.get(key)
@@ -196,38 +205,13 @@ def _once(key, sig, py_func):
     return f
 
 
-class _Missing:
-    """The stand-in of a kernel a module does not have, compiled only when the shared runtime's
-    loop needs it (:func:`handle`): a run on the fused loop (methodgen.fused), which never
-    calls it, then loads no numba dispatcher at all."""
-
-    __slots__ = ("kind",)
-
-    def __init__(self, kind):
-        self.kind = kind
-
-    def compiled(self):
-        return _once("no_" + self.kind, KERNEL_TYPES[self.kind], _NO[self.kind])
-
-    def __call__(self, *args):
-        return self.compiled()(*args)
-
-    def __repr__(self):
-        return f"no_kernel({self.kind!r})"
+def stand_in(kind: str):
+    """The compiled stand-in kernel of ``kind`` (see :func:`methodgen.nbabi.no_kernel`)."""
+    return _once("no_" + kind, KERNEL_TYPES[kind], _NO[kind])
 
 
-_MISSING = {}
-
-
-def no_kernel(kind: str):
-    """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one
-    (compiled, or loaded from the cache, when first passed to the compiled runtime)."""
-    if kind not in _NO:
-        raise KeyError(f"no kernel kind {kind!r}; valid: {sorted(_NO)}")
-    got = _MISSING.get(kind)
-    if got is None:
-        got = _MISSING[kind] = _Missing(kind)
-    return got
+no_kernel = _abi.no_kernel
+_Missing = _abi._Missing
 
 
 @_intrinsic
@@ -252,33 +236,10 @@ def stack_buffer(typingctx, size):
 
 # --- configuration -------------------------------------------------------------------------
 
-#: Positions in the int configuration array ``cfg`` of :func:`run`.
-CFG = {name: i for i, name in enumerate((
-    "N",            # unknowns of the step equations (0: explicit)
-    "DIM",          # state length
-    "STAGES",       # stages of the composition (1: the base method)
-    "NF",           # first-same-as-last force components following Δy in post
-    "LERR",         # local error estimate: 0 none, 1 "direct", 2 "carry"
-    "KLERR",        # components of a carried estimate
-    "POST_EXTRA",   # where the local-error values start in post
-    "POST_DOMAIN",  # where the domain conditions start
-    "NDOMAIN",      # how many domain conditions
-    "POST_TT",      # where g, the level-set defect and its scale start
-    "TT_GUARD",     # 1: time-transformation guard
-    "POST_EJ",      # where H and its size at y1 start
-    "EJUMP",        # 1: energy-jump test
-    "POST_LEN",     # length of post's output
-    "HAS_SCALE",    # 1: the module has a scale kernel (floor of the unknowns' size)
-    "RESOLUTION",   # 0 none, 1 "full", 2 "reduced"
-    "KIND",         # 0 Newton, 1 linearly implicit, 2 explicit
-    "KL", "KU",     # bandwidths of the Newton matrix
-))}
-#: Positions in the float configuration array ``fcfg`` of :func:`run`.
-FCFG = {name: i for i, name in enumerate((
-    "LERR2", "LERR_SCALE", "MAX_LEVEL_DEFECT", "MAX_ENERGY_JUMP", "MAX_RESOLUTION",
-    "NEWTON_FAILURE_RESOLUTION", "MAX_PREDICTOR_DISAGREEMENT", "REUSE_RATE", "AUTO_RATE",
-    "AUTO_HOLD",
-))}
+# The layout of the configuration arrays and the status codes: methodgen.nbabi's (plain
+# data a module reads without importing numba), as constants of the compiled code.
+CFG = _abi.CFG
+FCFG = _abi.FCFG
 (_C_N, _C_DIM, _C_STAGES, _C_NF, _C_LERR, _C_KLERR, _C_POST_EXTRA, _C_POST_DOMAIN, _C_NDOMAIN,
  _C_POST_TT, _C_TT_GUARD, _C_POST_EJ, _C_EJUMP, _C_POST_LEN, _C_HAS_SCALE, _C_RESOLUTION, _C_KIND,
  _C_KL, _C_KU) = range(len(CFG))
@@ -286,30 +247,13 @@ FCFG = {name: i for i, name in enumerate((
  _F_NEWTON_FAILURE_RESOLUTION, _F_MAX_PREDICTOR_DISAGREEMENT, _F_REUSE_RATE, _F_AUTO_RATE,
  _F_AUTO_HOLD) = range(len(FCFG))
 
-# Status codes (the generated module's _OK, _DIVERGED, ... have the same values).
-_OK = 0
-_DIVERGED = 1
-_NOT_CONVERGED = 2
-_UNRESOLVED = 3
-_MISPREDICTED = 4
-_LINEAR_FAILED = 5
-_NON_FINITE = 6
-_OUT_OF_DOMAIN = 7
-_LOCAL_ERROR = 8
-_SLOW = 9
-_UNRESOLVED_START = 10
-_TIME_SCALE = 11
-_ENERGY_JUMP = 12
-STATUS = {"OK": _OK, "DIVERGED": _DIVERGED, "NOT_CONVERGED": _NOT_CONVERGED, "UNRESOLVED": _UNRESOLVED,
-          "MISPREDICTED": _MISPREDICTED, "LINEAR_FAILED": _LINEAR_FAILED, "NON_FINITE": _NON_FINITE,
-          "OUT_OF_DOMAIN": _OUT_OF_DOMAIN, "LOCAL_ERROR": _LOCAL_ERROR, "SLOW": _SLOW,
-          "UNRESOLVED_START": _UNRESOLVED_START, "TIME_SCALE": _TIME_SCALE, "ENERGY_JUMP": _ENERGY_JUMP}
+STATUS = _abi.STATUS
+(_OK, _DIVERGED, _NOT_CONVERGED, _UNRESOLVED, _MISPREDICTED, _LINEAR_FAILED, _NON_FINITE, _OUT_OF_DOMAIN,
+ _LOCAL_ERROR, _SLOW, _UNRESOLVED_START, _TIME_SCALE, _ENERGY_JUMP) = range(len(STATUS))
 
-_EPS = 2.220446049250313e-16
-# Newton stops when the increment is at round-off level relative to the unknown, or when
-# increments stop decreasing once below sqrt(eps) (the generated modules' _TOL_*).
-_TOL_ROUNDOFF = 4.0 * _EPS
-_TOL_PLATEAU = 1.4901161193847656e-08
+_EPS = _abi._EPS
+_TOL_ROUNDOFF = _abi._TOL_ROUNDOFF
+_TOL_PLATEAU = _abi._TOL_PLATEAU
 
 # Newton's method and the checks are inlined (numba IR) into run: one function for LLVM,
 # about 1.3x faster per step on a cheap 2-DOF system than calls (compiled once, so free).
@@ -861,9 +805,9 @@ def loop_for(n):
     return f
 
 
-def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-        kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+def run_loop(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+             kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+             compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
     """Steps ``n0 .. n1-1`` of every trajectory: the states after the steps that are multiples
     of ``every`` go to their rows ``(n+1) // every`` of ``traj`` (rows, B, DIM).
 
@@ -886,17 +830,10 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     functions, not branches of one: a loop with four inlined Newton solvers was not
     optimised (no faster than the generic one).  Same arithmetic, so bitwise the same
     results whichever copy runs.
+
+    :func:`run` (:func:`methodgen.nbabi.run`) is a module's entry: it tries the module's fused
+    loop first (:mod:`methodgen.fused`) and calls this loop where that does not apply.
     """
-    handed_back = None
-    if isinstance(post_k, KernelHandle):
-        # A module whose kernels were compiled through LLVM IR: its loop with the kernels
-        # inlined (methodgen.fused), which hands back to the loop below on any failure.
-        from . import fused
-        handed_back = fused.run_fused((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos,
-                                      gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
-                                      check_resolution, solver, use_tol, tol, compensated, its, fstat, every, smode)
-        if handed_back is True:
-            return
     kt = KERNEL_TYPES
     guess, res, resjac, scale = (handle(guess, kt["guess"]), handle(res, kt["res"]), handle(resjac, kt["resjac"]),
                                  handle(scale, kt["scale"]))
@@ -905,8 +842,9 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
                               gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
                               check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
                               slu_ok, sLU, spiv)
-    if handed_back is not None and (fstat[:, 0] == _OK).all():
-        fused.false_alarm(handed_back)
+
+
+run = _abi.run
 
 
 def _res_rows(res, Z, Y, h, p, R):
@@ -941,23 +879,5 @@ def jac_rows(resjac, Z, Y, h, p, R, J):
 
 # --- configuration arrays (Python) ----------------------------------------------------------
 
-def int_config(**values) -> numpy.ndarray:
-    """The ``cfg`` array of :func:`run` from its entries by name (every one of :data:`CFG`)."""
-    return _config(CFG, values, numpy.int64)
-
-
-def float_config(**values) -> numpy.ndarray:
-    """The ``fcfg`` array of :func:`run` from its entries by name (every one of :data:`FCFG`)."""
-    return _config(FCFG, values, numpy.float64)
-
-
-def _config(names: dict, values: dict, dtype) -> numpy.ndarray:
-    if set(values) != set(names):
-        missing = sorted(set(names) - set(values))
-        extra = sorted(set(values) - set(names))
-        raise ValueError(f"runtime configuration: missing {missing}, unknown {extra} "
-                         f"(this module was generated for another methodgen.nbruntime)")
-    out = numpy.zeros(len(names), dtype=dtype)
-    for name, value in values.items():
-        out[names[name]] = value
-    return out
+int_config = _abi.int_config
+float_config = _abi.float_config

@@ -1,6 +1,6 @@
 """Lock-step batches of explicit methods on the numba backend (methodgen.nbbatch).
 
-A batch of at least ``nbbatch.MIN_BATCH`` trajectories of an explicit method runs in
+A batch of at least ``nbabi.MIN_BATCH`` trajectories of an explicit method runs in
 blocks of ``_BLOCK_LANES`` lanes, stepped together through a vectorised block kernel;
 smaller batches and implicit methods keep the one-trajectory runtime.  These tests
 check that both paths give *bitwise* the same rows (no fastmath: the block kernel is
@@ -19,7 +19,7 @@ from methodgen.emit import module_filename
 
 pytest.importorskip("numba")
 
-from methodgen import nbbatch, nbruntime  # noqa: E402
+from methodgen import nbabi, nbbatch, nbruntime  # noqa: E402
 
 B = 300  # two full blocks of 128 and a remainder of 44
 # (label, order, composition): Störmer–Verlet, a composition of it, a splitting family
@@ -46,18 +46,18 @@ def orbits(n, seed=0):
 
 def run(mod, path, *args, **kw):
     """``mod.integrate`` on the lock-step path (``path="block"``) or the one-trajectory one."""
-    saved = nbbatch.MIN_BATCH
-    nbbatch.MIN_BATCH = 1 if path == "block" else 1 << 62
+    saved = nbabi.MIN_BATCH
+    nbabi.MIN_BATCH = 1 if path == "block" else 1 << 62
     try:
         return mod.integrate(*args, **kw)
     finally:
-        nbbatch.MIN_BATCH = saved
+        nbabi.MIN_BATCH = saved
 
 
 def test_route_explicit_batches_only(modules):
     """Explicit modules carry a block kernel and take run_block for batches from MIN_BATCH on."""
     cfg = modules["sv2"]._CFG
-    assert nbbatch.use_block(cfg, nbbatch.MIN_BATCH) and not nbbatch.use_block(cfg, nbbatch.MIN_BATCH - 1)
+    assert nbbatch.use_block(cfg, nbabi.MIN_BATCH) and not nbbatch.use_block(cfg, nbabi.MIN_BATCH - 1)
     implicit = cfg.copy()
     implicit[nbruntime.CFG["KIND"]] = 0
     assert not nbbatch.use_block(implicit, 10 ** 6)  # Newton per lane stays on nbruntime.run

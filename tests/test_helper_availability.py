@@ -116,7 +116,8 @@ def _numba_helper_module(tmp_path, compiled=None):
     default all), and one jitted function that calls every one of them (one compile for
     the lot)."""
     numba_tpl = (TEMPLATES / "numba_module.py.j2").read_text()
-    inline = re.search(r"^_inline = .*$", numba_tpl, re.M).group(0)
+    # (the template route's spelling; the shared route's is the same njit, applied lazily)
+    inline = re.search(r"^_inline = numba\.njit.*$", numba_tpl, re.M).group(0)
     loop = re.search(r"\{% for name in ir.helpers %\}\n.*?\{% endfor %\}\n", numba_tpl, re.S).group(0)
     names = sorted(_template_names())
     plain = _plain_module(tmp_path, names)

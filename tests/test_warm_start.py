@@ -75,6 +75,43 @@ def test_a_cached_numba_module_imports_and_runs_without_sympy(tmp_path):
     assert warm["loaded"] == [] and warm["y"] == cold["y"] and warm["module"].endswith("_numba.py")
 
 
+NUMBA_PROBE = r"""
+import json, sys
+import numpy as np
+import methodgen as mg
+mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k": 2.0}, name="osc",
+                    backend="numba")
+y = mod.integrate(np.array([1.0, 0.0]), 0.1, 50)
+print(json.dumps({"y": y[-1].tolist(), "module": mod.__file__,
+                  "loaded": sorted(m for m in ("numba", "sympy", "methodgen.nbruntime") if m in sys.modules)}))
+"""
+
+
+def test_a_cached_numba_module_runs_fused_without_importing_numba(tmp_path):
+    """A cached numba module on its fused loop (kernels and loop machine code from the caches)
+    imports neither SymPy nor numba (its import alone was 0.18 s of a 0.3 s warm start): the
+    runtime's interface it reads is methodgen.nbabi, plain data.  Control: with the fused loop
+    off (METHODGEN_FUSED=0) the call goes to the numba runtime, which imports numba, and gives
+    the same bits."""
+    pytest.importorskip("numba")
+    cache = tmp_path / "cache"
+    env = {**os.environ, "METHODGEN_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
+    env.pop("METHODGEN_FUSED", None)
+
+    def run(**extra):
+        out = subprocess.run([sys.executable, "-c", NUMBA_PROBE, H], capture_output=True, text=True,
+                             env={**env, **extra}, cwd=tmp_path, check=True)
+        return json.loads(out.stdout)
+
+    cold = run()
+    assert "sympy" in cold["loaded"]
+    warm = run()
+    assert warm["loaded"] == [], warm["loaded"]
+    assert warm["y"] == cold["y"] and warm["module"] == cold["module"] and warm["module"].endswith("_numba.py")
+    off = run(METHODGEN_FUSED="0")
+    assert off["loaded"] == ["methodgen.nbruntime", "numba"] and off["y"] == warm["y"]
+
+
 def test_import_methodgen_itself_does_not_import_sympy(tmp_path):
     code = ("import sys, methodgen as mg; print(sorted(m for m in ('sympy', 'methodgen.schemes', "
             "'methodgen.derive', 'jinja2') if m in sys.modules)); mg.Hamiltonian; "
