@@ -10,7 +10,8 @@ call (``time.process_time``, minimum of 3; compiled before timing), the final-st
 against a reference (heyoka in long double where installed, else DOP853 at rtol 1e-13:
 :func:`methodgen.bench.reference`), and the largest |H - H0| over ~1000 saved states.
 Methods: ``stormer-verlet`` (explicit), ``stormer-verlet-projected`` (symmetric projection
-onto H = H0, methodgen.projection) and ``energy-momentum`` (implicit, H exact), each
+onto H = H0, methodgen.projection), ``standard-projected`` (the standard projection onto
+H = H0: Φ_h once per step, not symmetric) and ``energy-momentum`` (implicit, H exact), each
 composed to the orders given.  Then, at error levels every family reaches, the CPU of each
 family's cheapest row reaching that error (interpolated log-log between its rows), and the
 ratio projected / explicit and energy-momentum / explicit.
@@ -48,6 +49,7 @@ PROBLEMS = {
 FAMILIES = {"stormer-verlet": ("stormer-verlet", {}),
             "stormer-verlet-projected": ("stormer-verlet-projected", {}),
             "projected+I": ("stormer-verlet", {"project": "invariants"}),
+            "standard-projected": ("stormer-verlet", {"project": "energy-standard"}),
             "energy-momentum": ("energy-momentum", {})}
 METHODS = tuple(FAMILIES)
 

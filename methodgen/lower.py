@@ -294,6 +294,8 @@ class ModuleIR:
     #: H first (kernel ``proj``: their values, their gradients row by row, then the metric
     #: w of the direction diag(w) Gᵀ); empty without projection.
     projection: tuple[str, ...] = ()
+    #: False for the standard projection (Φ_h once per step; not symmetric).
+    projection_symmetric: bool = True
 
     @property
     def stages(self) -> int:
@@ -953,6 +955,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         **(_stage_fields(scheme) if fplan is not None else {}),
         stage=stage_tables(stage) if stage is not None else None,
         projection=tuple(scheme.projection),
+        projection_symmetric=bool(getattr(scheme, "projection_symmetric", True)),
     )
 
 

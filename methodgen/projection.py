@@ -60,8 +60,9 @@ from .errors import InputError, MethodNotApplicable
 __all__ = ["PROJECTIONS", "MAX_PROJECTED", "project_scheme", "projected_names", "symmetry_argument"]
 
 #: ``project=`` values: "energy" (H alone) or "invariants" (H and every declared or
-#: detected first integral the module monitors).
-PROJECTIONS = ("energy", "invariants")
+#: detected first integral the module monitors), symmetrically projected; with "-standard"
+#: the standard projection of the same invariants (see :func:`project_scheme`).
+PROJECTIONS = ("energy", "invariants", "energy-standard", "invariants-standard")
 #: At most this many invariants (the m×m matrix is solved by elimination per iterate).
 MAX_PROJECTED = 8
 
@@ -71,6 +72,7 @@ def projected_names(scheme, project: str) -> tuple[str, ...]:
     names = tuple(inv.name for inv in scheme.invariants)
     if not names or names[0] != "H":
         raise MethodNotApplicable("symmetric projection needs H among the monitored invariants")
+    project = project.removesuffix("-standard")
     if project == "energy":
         return ("H",)
     exact = tuple(inv.name for inv in scheme.invariants[1:] if inv.exact)
@@ -78,7 +80,18 @@ def projected_names(scheme, project: str) -> tuple[str, ...]:
 
 
 def project_scheme(scheme, project, record: bool = True):
-    """``scheme`` (symmetric, explicit, possibly composed) with symmetric projection.
+    """``scheme`` (symmetric, explicit, possibly composed) with symmetric projection, or with
+    the standard projection for a ``project`` ending in ``-standard``.
+
+    The standard projection [HLW06, §IV.4.1] is the same step without the shift of the start
+    point: ``ŷ1 = Φ_h(y0)``, ``y1 = ŷ1 + D(y1)λ``, ``g(y1) = g(start)`` -- the projection of
+    ŷ1 onto the level set along the metric's normal at y1.  Φ_h is evaluated once per step
+    (the symmetric projection evaluates it once per iterate, at least twice a step whenever λ
+    is above round-off), so the step costs the base step plus a few evaluations of g and G.
+    It keeps the invariants projected on and the base step's order (the correction is the
+    size of the base step's error in g, O(h^{p+1})); it is neither symmetric (the reverse
+    step from y1 does not return to y0: measured by :mod:`methodgen.verify.projection`) nor
+    symplectic.
 
     Parameters
     ----------
@@ -110,13 +123,21 @@ def project_scheme(scheme, project, record: bool = True):
         raise MethodNotApplicable(f"symmetric projection onto {len(names)} invariants ({', '.join(names)}): "
                                   f"at most {MAX_PROJECTED} (use project='energy')")
     kept_base = [n for n in t.preserved if n not in names]
-    note = (f"symmetric projection onto {', '.join(names)} (one quasi-Newton solve for "
-            f"{len(names)} multiplier(s) per step, Φ_h re-evaluated per iterate); symmetric because "
-            f"the base step is; order {t.order} kept; not symplectic"
-            + (f"; the base method's exact {', '.join(kept_base)} is not kept" if kept_base else ""))
+    symmetric = not project.endswith("-standard")
+    if symmetric:
+        note = (f"symmetric projection onto {', '.join(names)} (one quasi-Newton solve for "
+                f"{len(names)} multiplier(s) per step, Φ_h re-evaluated per iterate); symmetric because "
+                f"the base step is; order {t.order} kept; not symplectic")
+    else:
+        note = (f"standard projection onto {', '.join(names)} (Φ_h once per step, then a quasi-Newton "
+                f"solve for {len(names)} multiplier(s) on g alone); order {t.order} kept; not symmetric, "
+                f"not symplectic")
+    note += f"; the base method's exact {', '.join(kept_base)} is not kept" if kept_base else ""
     traits = dataclasses.replace(t, symplectic=False, energy_preserving=True, preserved=names,
-                                 solve="projection", notes=t.notes + (note,))
+                                 solve="projection", symmetric=symmetric and t.symmetric,
+                                 notes=t.notes + (note,))
     return dataclasses.replace(scheme, traits=traits, projection=names, projected_from=scheme,
+                               projection_symmetric=symmetric,
                                options=tuple(scheme.options) + ((("project", project),) if record else ()))
 
 

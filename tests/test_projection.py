@@ -267,7 +267,7 @@ def test_sixty_digit_measure_and_control(hh):
     base = mg.verify(s.projected_from).certificates
     orig = vp.measure
     try:
-        vp.measure = lambda scheme: orig(scheme, symmetric=False)
+        vp.measure = lambda scheme, **kw: orig(scheme, symmetric=False)
         certs = vp.projection_certificates(s, base)
     finally:
         vp.measure = orig

@@ -260,6 +260,9 @@ class Scheme:
     #: Names of the invariants a symmetric projection keeps (``H`` first,
     #: :mod:`methodgen.projection`); empty for the method itself.
     projection: tuple[str, ...] = ()
+    #: True for the symmetric projection, False for the standard one (the base step once, then
+    #: onto the level set: cheaper, not symmetric); meaningful only with ``projection``.
+    projection_symmetric: bool = True
     #: The scheme before the projection (its base step's claims are verified on it).
     projected_from: object | None = None
 

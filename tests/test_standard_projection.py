@@ -1,0 +1,135 @@
+"""The standard projection (``project="energy-standard"``, methodgen.projection): the base step
+once, then onto H = H0 -- energy to round-off and the order kept at about the explicit cost,
+not symmetric.
+
+Each property has its control: the unprojected base step drifts in H; the symmetric projection
+of the same module returns under ``-h`` where this one does not; the base step's evaluations are
+counted (once per step here, once per iterate for the symmetric projection).  numpy backend;
+``test_numba_agrees`` runs the compiled loop.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from conftest import HH_T, HH_Y0
+from methodgen.errors import InputError
+
+H = 0.1
+EPS = np.finfo(float).eps
+
+
+@pytest.fixture(scope="module")
+def std2(hh):
+    return mg.build(hh, "stormer-verlet", project="energy-standard")
+
+
+@pytest.fixture(scope="module")
+def sym2(hh):
+    return mg.build(hh, "stormer-verlet", project="energy")
+
+
+def _energy_error(mod, traj):
+    Hs = mod.hamiltonian(traj)
+    return float(np.max(np.abs(Hs - Hs[0])))
+
+
+def test_energy_to_roundoff_and_control(std2):
+    traj = std2.integrate(HH_Y0, H, 2000)
+    assert _energy_error(std2, traj) <= 32 * EPS * 0.125
+    base = std2._base_integrate(HH_Y0, H, 2000)
+    assert _energy_error(std2, base) > 1e-5      # control: the base step alone
+
+
+def test_not_symmetric_and_control(std2, sym2):
+    """One step forward, one back: the standard projection does not return (its defect is
+    O(h^3) here); the symmetric projection of the same base step does, to round-off."""
+    y1 = std2.integrate(HH_Y0, H, 1)[-1]
+    assert np.max(np.abs(std2.integrate(y1, -H, 1)[-1] - HH_Y0)) > 1e-9
+    y1 = sym2.integrate(HH_Y0, H, 1)[-1]
+    assert np.max(np.abs(sym2.integrate(y1, -H, 1)[-1] - HH_Y0)) <= 1e-15
+
+
+def test_the_base_step_is_evaluated_once_per_step(std2, sym2):
+    """What makes it cheap: Φ_h once per step, the iterations on g alone.  Control: the
+    symmetric projection evaluates Φ_h at every iterate (as many times as its iterations)."""
+    for mod, once in ((std2, True), (sym2, False)):
+        calls = []
+        flow = mod._base_flow
+
+        def counted(*a, _flow=flow):
+            calls.append(1)
+            return _flow(*a)
+
+        mod._base_flow = counted
+        try:
+            info = {}
+            mod.integrate(HH_Y0, H, 100, info=info)
+        finally:
+            mod._base_flow = flow
+        its = info["newton_iterations"]
+        if once:
+            assert len(calls) == 100 and its.max() >= 2
+        else:
+            assert len(calls) == int(its.sum()) > 100
+
+
+@pytest.mark.parametrize("order,hs,expect", [(2, (0.1, 0.05), 4.0), (4, (0.2, 0.1), 16.0)])
+def test_order_kept(hh, hh_reference, order, hs, expect):
+    mod = mg.build(hh, "stormer-verlet", order=order, project="energy-standard")
+    errs = [float(np.max(np.abs(mod.integrate(HH_Y0, h, int(round(HH_T / h)))[-1] - hh_reference)))
+            for h in hs]
+    ratio = errs[0] / errs[1]
+    assert 0.75 * expect < ratio < 1.25 * expect, (errs, ratio)
+
+
+def test_order_control(hh, hh_reference):
+    """Control of the order test: the order-2 step's ratio is 4, not the order-4 step's 16."""
+    mod = mg.build(hh, "stormer-verlet", order=2, project="energy-standard")
+    errs = [float(np.max(np.abs(mod.integrate(HH_Y0, h, int(round(HH_T / h)))[-1] - hh_reference)))
+            for h in (0.2, 0.1)]
+    assert not 12.0 < errs[0] / errs[1] < 20.0
+
+
+def test_chunks_equal_one_piece(std2):
+    one = std2.integrate(HH_Y0, H, 60)
+    info = {}
+    a = std2.integrate(HH_Y0, H, 25, info=info)
+    b = std2.integrate(a[-1], H, 35, info=info)
+    assert np.array_equal(np.vstack([a, b[1:]]), one)
+
+
+def test_numba_agrees(hh, std2):
+    pytest.importorskip("numba")
+    nb = mg.build(hh, "stormer-verlet", project="energy-standard", backend="numba")
+    a = nb.integrate(HH_Y0, H, 300)
+    b = std2.integrate(HH_Y0, H, 300)
+    assert np.max(np.abs(a - b)) <= 1e-12
+    assert _energy_error(nb, a) <= 32 * EPS * 0.125
+    assert nb.TRAITS["symmetric"] is False
+
+
+def test_key_traits_and_bad_value(hh):
+    s = mg.discretize(hh, "stormer-verlet", order=4, project="energy-standard")
+    assert s.key == "stormer-verlet-projectenergy-standard-order4-suzuki" and s.projection == ("H",)
+    t = s.traits
+    assert (t.order, t.symmetric, t.symplectic, t.energy_preserving) == (4, False, False, True)
+    assert any("standard projection" in n for n in t.notes)
+    with pytest.raises(InputError, match="energy-standard"):
+        mg.discretize(hh, "stormer-verlet", project="energy-standrd")
+
+
+def test_verify_certificates(hh):
+    from methodgen.verify.report import NUMERICAL
+
+    s = mg.discretize(hh, "stormer-verlet", project="energy-standard")
+    rep = mg.verify(s)
+    assert rep.ok
+    own = [c for c in rep.certificates if not c.claim.startswith("unprojected step:")]
+    inv = [c for c in own if "projected invariants kept: H" in c.claim]
+    assert len(inv) == 1 and inv[0].status == NUMERICAL and inv[0].details["invariant_change"] < 1e-40
+    # no symmetry claim: the measured defect of the 60-digit step is far above round-off
+    assert not any("projected step is symmetric" in c.claim for c in own)
+    assert inv[0].details["symmetry_defect"] > 1e-8
