@@ -671,6 +671,11 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                              f"symmetric method: {', '.join(SYMMETRIC_METHODS)})")
                 break
             jobs.append((method, order))
+    # Energy to round-off at explicit cost: Störmer–Verlet with the standard projection onto H
+    # (methodgen.projection), for the frontier's "energy kept" column, at the orders above 2
+    # (unconstrained canonical systems; a time-transformed scene's own method is the log form's)
+    projected = [] if ("stormer-verlet" not in methods or scene.system.constraints
+                       or scene.transformed is not None) else [o for o in orders if o > 2]
     # An upper bound of the base steps of methodgen's rows (a ladder may stop early), said before
     # they start: these rows are bounded one by one (check_length), not in total.
     def family_for(method, order):
@@ -687,21 +692,27 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
         if composition not in ALL_FAMILIES:
             raise InputError(f"unknown composition family {composition!r}; families: {', '.join(ALL_FAMILIES)}")
     estimate = 0
-    for method, order in jobs:
+    for method, order in jobs + [("stormer-verlet", o) for o in projected]:
         st = _family_stages(order, family_for(method, order))[1]
         estimate += sum(st * max(1, round(T / h)) for h in composed_steps(scene.h, order, st, quick=quick))
     if progress:
         print(f"methodgen: note: the --peers rows of methodgen run at most about {estimate:.3g} steps in all "
               f"({len(jobs)} method/order pairs; a row under 5 s runs 3 times for its CPU minimum)",
               file=sys.stderr)
-    for method, order in _progress(jobs, progress, "methodgen"):
+    for method, order, project in _progress([(m, o, None) for m, o in jobs]
+                                            + [("stormer-verlet", o, "energy-standard") for o in projected],
+                                            progress, "methodgen"):
         family, stages, processed = _family_stages(order, family_for(method, order))
-        label = row_label(method, order, family)
+        if project is not None and processed:
+            continue
+        label = row_label(method, order, family) + (" + standard projection" if project else "")
         try:
-            # a processed composition is three cache modules (path None), the others one file
-            path = None if processed else scene_module_path(
+            # a processed composition is three cache modules (path None), the others one file;
+            # a projected one is the cache's (its key names the projection)
+            path = None if (processed or project) else scene_module_path(
                 scene, method_key(method, composition_for(order, family)), used)
-            module = build(scene.system, method, path=path, backend=used, order=order, composition=family)
+            module = build(scene.system, method, path=path, backend=used, order=order, composition=family,
+                           **({"project": project} if project else {}))
         except MethodgenError as exc:
             notes.append(f"{label}: not built ({' '.join(str(exc).split())})")
             continue
@@ -742,7 +753,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
             its = info["newton_iterations"]
             row = {"method": label, "kind": "methodgen", "base_method": method, "order": order,
                    "composition": family, "stages": stages, "backend": used, "h": T / steps, "steps": steps,
-                   "processed": processed,
+                   "processed": processed, **({"project": project} if project else {}),
                    "seconds": sec, "us_per_step": sec / steps * 1e6,
                    "newton_mean": float(its.mean()) if its.size else 0.0,
                    **_errors(module, traj, ref.y, monitors)}
