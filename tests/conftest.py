@@ -43,6 +43,13 @@ def hh_reference():
     return solve_ivp(f, (0, HH_T), HH_Y0, method="DOP853", rtol=2.3e-14, atol=1e-16).y[:, -1]
 
 
+def hh_error_ratio(mod, hs, reference):
+    """(errors at HH_T against ``reference`` for the step sizes ``hs``, their ratio): halving h
+    divides the error of an order-K method by 2^K."""
+    errs = [float(np.max(np.abs(mod.integrate(HH_Y0, h, int(round(HH_T / h)))[-1] - reference))) for h in hs]
+    return errs, errs[0] / errs[1]
+
+
 def scene_system(name):
     """The system a built-in scene's modules integrate: its time transformation K when the
     scene declares one (``[run] time_transform``), else its Hamiltonian."""

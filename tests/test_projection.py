@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from conftest import HH_T, HH_Y0
+from conftest import HH_Y0, hh_error_ratio
 from methodgen.errors import InputError, MethodNotApplicable
 
 H = 0.1
@@ -82,12 +82,12 @@ def test_standard_projection_is_not_symmetric(proj2):
     assert abs(proj2.hamiltonian(y1) - 0.125) < 1e-15
 
 
+@pytest.mark.parametrize("project", ["energy", "energy-standard"])
 @pytest.mark.parametrize("order,hs,expect", [(2, (0.1, 0.05), 4.0), (4, (0.2, 0.1), 16.0)])
-def test_order_kept(hh, hh_reference, order, hs, expect):
-    mod = mg.build(hh, "stormer-verlet", order=order, project="energy")
-    errs = [float(np.max(np.abs(mod.integrate(HH_Y0, h, int(round(HH_T / h)))[-1] - hh_reference)))
-            for h in hs]
-    ratio = errs[0] / errs[1]
+def test_order_kept(hh, hh_reference, order, hs, expect, project):
+    """Both projections keep the base step's order (the standard one: tests/test_standard_projection.py)."""
+    mod = mg.build(hh, "stormer-verlet", order=order, project=project)
+    errs, ratio = hh_error_ratio(mod, hs, hh_reference)
     # order K: halving h divides the error by 2^K (within 25 %)
     assert 0.75 * expect < ratio < 1.25 * expect, (errs, ratio)
 
@@ -283,9 +283,8 @@ def test_projected_splitting_keeps_h_symmetry_order(hh, hh_reference):
     assert _energy_error(mod, mod._base_integrate(HH_Y0, H, 2000)) > 1e-11
     yN = mod.integrate(HH_Y0, H, 500)[-1]
     assert np.max(np.abs(mod.integrate(yN, -H, 500)[-1] - HH_Y0)) <= 1e-13
-    errs = [float(np.max(np.abs(mod.integrate(HH_Y0, h, int(round(HH_T / h)))[-1] - hh_reference)))
-            for h in (0.2, 0.1)]
-    assert 12.0 < errs[0] / errs[1] < 20.0, errs
+    errs, ratio = hh_error_ratio(mod, (0.2, 0.1), hh_reference)
+    assert 12.0 < ratio < 20.0, errs
 
 
 def test_projected_splitting_certificates(hh):
