@@ -100,6 +100,9 @@ def test_numba_agrees(hh, std2):
     assert np.max(np.abs(a - b)) <= 1e-12
     assert _energy_error(nb, a) <= 32 * EPS * 0.125
     assert nb.TRAITS["symmetric"] is False
+    # its failure names it (not the symmetric projection)
+    with pytest.raises(nb.ConvergenceError, match="the standard projection's solve did not converge"):
+        nb.integrate(HH_Y0, H, 5, maxiter=1)
 
 
 def test_key_traits_and_bad_value(hh):
