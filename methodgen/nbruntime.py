@@ -472,8 +472,8 @@ def _solve_newton(guess, res, resjac, scale, y, c, h, p, maxiter, check_resoluti
     while it contracts by AUTO_RATE or better, else Newton from the current iterate,
     and Newton for the next ``mode[0]`` steps).  The start value, stopping rule and
     resolution checks are those of the numpy backend; ``value`` is the residual norm,
-    h·ω or the predictor disagreement of a failure.  ``n`` is cfg[N], a compile-time constant
-    in the specialisations of the integration loop (see :func:`run`).
+    h·ω or the predictor disagreement of a failure.  ``n`` is cfg[N] (a compile-time constant
+    in the fused loop's copy of this iteration, methodgen.fused).
     """
     kl = cfg[_C_KL]
     ku = cfg[_C_KU]
@@ -610,8 +610,8 @@ _RUN_SIG = _t.void(
 @_inline
 def _loop(kernels, cfg, fcfg, lerr_index, domain_pos, coefs, traj, n0, n1, Y, C, FRC, h, p, options, its, fstat,
           fval, every, smode, slu_ok, sLU, spiv, N):
-    # The body of run, with the number of unknowns N passed in (a constant in _run_1 .. _run_3);
-    # run's other arguments come in tuples: Python compiles a call of more than 30 arguments
+    # The body of run_loop, with the number of unknowns N passed in; run_loop's other
+    # arguments come in tuples: Python compiles a call of more than 30 arguments
     # to a call with *args, which numba does not inline.
     guess, res, resjac, scale, post_k, hs, check = kernels
     gammas, ratios, kick_a, drift, kick_b = coefs
@@ -747,61 +747,35 @@ def _loop(kernels, cfg, fcfg, lerr_index, domain_pos, coefs, traj, n0, n1, Y, C,
                 nxt += every
 
 
-def _run_1(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
-    # run with N = 1 (see run)
-    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
-          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
-          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
-          sLU, spiv, 1)
-
-
-def _run_2(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
-    # run with N = 2 (see run)
-    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
-          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
-          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
-          sLU, spiv, 2)
-
-
-def _run_3(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
-    # run with N = 3 (see run)
-    _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
-          (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
-          (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
-          sLU, spiv, 3)
-
-
-def _run_n(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
-           kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-           compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
-    # run with any N (see run)
+def _run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+         kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+         compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+    # run_loop's compiled body (see there)
     _loop((guess, res, resjac, scale, post_k, hs, check), cfg, fcfg, lerr_index, domain_pos,
           (gammas, ratios, kick_a, drift, kick_b), traj, n0, n1, Y, C, FRC, h, p,
           (maxiter, check_resolution, solver, use_tol, tol, compensated), its, fstat, fval, every, smode, slu_ok,
           sLU, spiv, cfg[_C_N])
 
 
-_LOOPS = {1: _run_1, 2: _run_2, 3: _run_3, None: _run_n}
 _COMPILED: dict = {}
 
 
-def loop_for(n):
-    """The compiled copy of the integration loop for ``n`` unknowns (1, 2, 3; else the copy
-    for any N), compiled on first use with the fixed signature and cached by numba."""
-    key = n if n in (1, 2, 3) else None
-    f = _COMPILED.get(key)
+def loop_for(n=None):
+    """The compiled integration loop (any number of unknowns; ``n`` is accepted and ignored),
+    compiled on first use with the fixed signature and cached by numba: once per machine.
+
+    There were four copies, three with N = 1, 2, 3 a constant (unrolled Newton loops, the
+    closed-form solve folded: a fifth of a 2-unknown step faster), 21-25 s of compilation
+    each.  Since a module's fused loop (methodgen.fused) runs almost every call with N a
+    constant of its own, this loop only takes what that one hands back or does not apply to
+    (solver "reuse", kernels numba compiled, ``METHODGEN_FUSED=0``): one copy, compiled once."""
+    f = _COMPILED.get(None)
     if f is None:
         with warnings.catch_warnings():
             # numba calls first-class function types experimental; the runtime is built on them
-            # and tested, and the warning would reach users once per copy and machine
+            # and tested, and the warning would reach users once per machine
             warnings.simplefilter("ignore", numba.core.errors.NumbaExperimentalFeatureWarning)
-            f = _COMPILED[key] = numba.njit(_RUN_SIG, **_OPTS)(_LOOPS[key])
+            f = _COMPILED[None] = numba.njit(_RUN_SIG, **_OPTS)(_run)
     return f
 
 
@@ -821,15 +795,8 @@ def run_loop(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index
     cannot change which step fails first, only which trajectories fail there), so
     rows ``0 .. step`` are complete for all trajectories.
 
-    The loop has four copies: with the number of unknowns N a constant 1, 2 or 3, and for
-    any N; each is compiled when a module first needs it (then loaded from the cache), so a
-    new machine compiles only the copies its systems use (all four took 82 s at load 3-4).
-    With N a constant LLVM unrolls the short loops over the unknowns in Newton's method (copies, updates, max-norms), keeps
-    them in registers and folds the linear solve to its closed form; read from ``cfg`` they
-    stay loops, about a fifth of the step of a 2-unknown system.  The copies are separate
-    functions, not branches of one: a loop with four inlined Newton solvers was not
-    optimised (no faster than the generic one).  Same arithmetic, so bitwise the same
-    results whichever copy runs.
+    One compiled copy for any number of unknowns (:func:`loop_for`; 21-25 s to compile,
+    once per machine, then loaded from numba's cache).
 
     :func:`run` (:func:`methodgen.nbabi.run`) is a module's entry: it tries the module's fused
     loop first (:mod:`methodgen.fused`) and calls this loop where that does not apply.
@@ -838,7 +805,7 @@ def run_loop(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index
     guess, res, resjac, scale = (handle(guess, kt["guess"]), handle(res, kt["res"]), handle(resjac, kt["resjac"]),
                                  handle(scale, kt["scale"]))
     post_k, hs, check = handle(post_k, kt["post"]), handle(hs, kt["hs"]), handle(check, kt["check"])
-    loop_for(int(cfg[_C_N]))(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos,
+    loop_for()(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos,
                               gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
                               check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
                               slu_ok, sLU, spiv)

@@ -158,7 +158,7 @@ def test_status_codes_match_the_modules(tmp_path):
 # --- cache stamp -------------------------------------------------------------------------
 
 def test_the_runtime_is_stamped_with_its_content_hash():
-    locator = nbruntime.loop_for(2)._cache._impl.locator
+    locator = nbruntime.loop_for()._cache._impl.locator
     assert locator.get_source_stamp() == ("methodgen.nbruntime", nbruntime.SOURCE_SHA256)
     # the stamp covers the runtime and the interface whose layout it compiles in (nbabi)
     import hashlib
@@ -245,15 +245,15 @@ def test_a_cached_runtime_serves_a_new_system_without_recompiling(tmp_path):
         m = load_module({str(path)!r})
         m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
         if os.environ["METHODGEN_FUSED"] == "0":
-            L = rt.loop_for(int(m._CFG[rt.CFG["N"]]))
+            L = rt.loop_for()
             print(sum(L.stats.cache_misses.values()), sum(L.stats.cache_hits.values()))
         else:
             # the fused loop ran the steps: no numba dispatcher was compiled or loaded
             assert fused._LOOPS and not rt._COMPILED and not rt._compiled, (rt._COMPILED, rt._compiled)
             print(0, 1)
     """)
-    # the runtime's copy for this size, compiled (and cached) here: no other test may need it
-    nbruntime.loop_for(int(emit.load_module(path)._CFG[nbruntime.CFG["N"]]))
+    # the runtime's loop, compiled (and cached) here: no other test may have needed it yet
+    nbruntime.loop_for()
     for flag in ("0", "1"):
         env = dict(os.environ, METHODGEN_FUSED=flag)
         proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
@@ -401,48 +401,7 @@ def test_a_module_loaded_by_methodgen_can_be_imported_by_its_plain_name(tmp_path
     assert plain.returncode != 0 and "methodgen_generated" in plain.stderr
 
 
-# --- per-step cost: the loop specialised on N, work arrays on the stack ----------------------
-
-class _GenericLoop:
-    """methodgen.nbruntime with ``run`` replaced by its copy for any N (counts its calls)."""
-
-    def __init__(self):
-        self.calls = 0
-
-    def __getattr__(self, name):
-        return getattr(nbruntime, name)
-
-    def run(self, *args):
-        self.calls += 1
-        # (the stand-ins of missing kernels are compiled when handed to the runtime's loop)
-        nbruntime.loop_for(None)(*[a.compiled() if isinstance(a, nbruntime._Missing) else a for a in args])
-
-
-def test_loops_specialised_on_the_number_of_unknowns_agree_bitwise_with_the_generic_one(tmp_path, monkeypatch):
-    """``run`` hands N = 1, 2, 3 to copies of the loop compiled with N a constant (unrolled
-    Newton loops, closed-form solve folded: the per-step cost of issue 25).  Same arithmetic,
-    so each gives the trajectory and iteration counts of the copy for any N bit for bit.
-    Control: the comparison sees a one-ulp change of h."""
-    seen = set()
-    for scene_name, method in (("simple-pendulum", "energy-momentum"), ("henon-heiles-2d", "energy-momentum"),
-                               ("kepler", "energy-momentum")):
-        scene, mod = _module(tmp_path, scene_name, method)
-        n = int(mod._CFG[nbruntime.CFG["N"]])
-        seen.add(n)
-        y0 = np.array(scene.y0)
-        i_spec, i_gen = {}, {}
-        a = mod.integrate(y0, scene.h, 300, info=i_spec)
-        generic = _GenericLoop()
-        with monkeypatch.context() as mp:
-            mp.setattr(mod, "_rt", generic)
-            b = mod.integrate(y0, scene.h, 300, info=i_gen)
-            c = mod.integrate(y0, np.nextafter(scene.h, 1.0), 300)
-        assert generic.calls == 2, scene_name   # the generic copy did run
-        assert np.array_equal(a, b), scene_name
-        assert np.array_equal(i_spec["newton_iterations"], i_gen["newton_iterations"]), scene_name
-        assert not np.array_equal(a, c), scene_name
-    assert seen == {1, 2, 3}
-
+# --- per-step cost: work arrays on the stack ----------------------------------------------
 
 def test_stack_buffers_are_distinct_and_writable():
     """nbruntime.stack_buffer: each call is its own buffer in the caller's frame.  Control:
