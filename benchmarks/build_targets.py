@@ -24,6 +24,9 @@ import subprocess
 import sys
 import tempfile
 import textwrap
+from pathlib import Path
+
+HERE = str(Path(__file__).resolve().parent)
 
 SMALL = ["stormer-verlet:2", "stormer-verlet:10", "energy-momentum:2", "energy-momentum:8", "midpoint:2",
          "avf:2", "gauss:3", "gauss:6", "energy-collocation:3", "energy-collocation:4"]
@@ -42,22 +45,9 @@ PROBE = textwrap.dedent(r"""
     import methodgen as mg
     from methodgen import llvmkernels
     name, method, k = sys.argv[1], sys.argv[2], int(sys.argv[3])
-    if name.startswith("fpu"):
-        n = int(name[3:])
-        H = (f"Sum(p[i]**2/2, i, 1, {n}) + q[1]**2/2 + beta*q[1]**4/4 + Sum((q[i+1] - q[i])**2/2 "
-             f"+ beta*(q[i+1] - q[i])**4/4, i, 1, {n - 1}) + q[{n}]**2/2 + beta*q[{n}]**4/4")
-        system = mg.Hamiltonian(H, q=[f"q{i}" for i in range(1, n + 1)], p=[f"p{i}" for i in range(1, n + 1)],
-                                params={"beta": 1.0}, name=name)
-        y0 = np.array([np.sin(np.pi * i / (n + 1)) for i in range(1, n + 1)] + [0.0] * n); h = 0.05
-    elif name.startswith("toda"):
-        n = int(name[4:])
-        H = f"Sum(p[i]**2/2, i, 1, {n}) + Sum(exp(q[i] - q[i % {n} + 1]), i, 1, {n})"
-        system = mg.Hamiltonian(H, q=[f"q{i}" for i in range(1, n + 1)], p=[f"p{i}" for i in range(1, n + 1)],
-                                name=name)
-        y0 = np.array([0.1 * np.sin(2 * np.pi * i / n) for i in range(n)]
-                      + [0.2 * np.cos(2 * np.pi * i / n) for i in range(n)]); h = 0.05
-    else:
-        sc = mg.load_scene(name); system, y0, h = sc.system, np.array(sc.y0, dtype=float), sc.h
+    sys.path.insert(0, sys.argv[4])      # benchmarks/: the problems by name
+    from _problems import problem
+    system, y0, h = problem(name)
     opts = {"stages": k} if method in ("gauss", "energy-collocation") else {"order": k}
     if method in ("midpoint", "avf"):
         opts = {}
@@ -108,7 +98,7 @@ def main() -> None:
         if only and name not in only:
             continue
         env = dict(os.environ, METHODGEN_CACHE=tempfile.mkdtemp(), METHODGEN_KERNELS=a.kernels)
-        r = run(PROBE, [name, method, k], env)
+        r = run(PROBE, [name, method, k, HERE], env)
         r.update(system=name, method=f"{method} {k}", kernels=a.kernels)
         rows.append(r)
         t = TARGET.get((name, method), TARGET.get(name))
