@@ -112,15 +112,16 @@ def project_scheme(scheme, project, record: bool = True):
     if not isinstance(project, str) or project not in PROJECTIONS:
         raise InputError(f"project must be one of {', '.join(PROJECTIONS)}, got {project!r}")
     t = scheme.traits
+    kind = "standard" if project.endswith("-standard") else "symmetric"
     if t.solve != "explicit" or not t.symmetric:
         raise MethodNotApplicable(
-            f"symmetric projection wraps a symmetric explicit method (stormer-verlet and its "
+            f"{kind} projection wraps a symmetric explicit method (stormer-verlet and its "
             f"compositions); {scheme.method} is {'not symmetric' if not t.symmetric else t.solve}")
     if scheme.system.constraints or scheme.structure_matrix is not None:
-        raise MethodNotApplicable("symmetric projection is for unconstrained canonical systems here")
+        raise MethodNotApplicable(f"{kind} projection is for unconstrained canonical systems here")
     names = projected_names(scheme, project)
     if len(names) > MAX_PROJECTED:
-        raise MethodNotApplicable(f"symmetric projection onto {len(names)} invariants ({', '.join(names)}): "
+        raise MethodNotApplicable(f"{kind} projection onto {len(names)} invariants ({', '.join(names)}): "
                                   f"at most {MAX_PROJECTED} (use project='energy')")
     kept_base = [n for n in t.preserved if n not in names]
     symmetric = not project.endswith("-standard")

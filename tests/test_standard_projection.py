@@ -15,7 +15,7 @@ import pytest
 
 import methodgen as mg
 from conftest import HH_Y0, hh_error_ratio
-from methodgen.errors import InputError
+from methodgen.errors import InputError, MethodNotApplicable
 
 H = 0.1
 EPS = np.finfo(float).eps
@@ -113,6 +113,8 @@ def test_key_traits_and_bad_value(hh):
     assert any("standard projection" in n for n in t.notes)
     with pytest.raises(InputError, match="energy-standard"):
         mg.discretize(hh, "stormer-verlet", project="energy-standrd")
+    with pytest.raises(MethodNotApplicable, match="standard projection wraps a symmetric explicit method"):
+        mg.discretize(hh, "midpoint", project="energy-standard")
 
 
 def test_verify_certificates(hh):
