@@ -112,6 +112,55 @@ def test_a_cached_numba_module_runs_fused_without_importing_numba(tmp_path):
     assert off["loaded"] == ["methodgen.nbruntime", "numba"] and off["y"] == warm["y"]
 
 
+GUARD_PROBE = r"""
+import json, sys
+import numpy as np
+import methodgen as mg
+from methodgen import nbcache
+mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k": 2.0}, name="osc",
+                    backend="numba")
+mod.integrate(np.array([1.0, 0.0]), 0.1, 5)
+out = {"numba_after_run": "numba" in sys.modules,
+       "deferred": [d[0] for d in nbcache._DEFERRED]}
+if sys.argv[2] == "plain":
+    import numba   # imported by other code, not through methodgen's door: installs nothing
+else:
+    # a kernel called from Python is compiled by numba (cache=True): through the door
+    z = np.zeros(mod._N)
+    mod._nb_guess(np.array([1.0, 0.0]), 0.1, np.array([mod.DEFAULT_PARAMS[k] for k in mod.PARAM_NAMES]), z)
+from numba.core import caching
+impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")
+out["guarded"] = [getattr(c, "_methodgen_path", None) for c in impl._locator_classes]
+out["left"] = [d[0] for d in nbcache._DEFERRED]
+out["module"] = mod.__file__
+print(json.dumps(out))
+"""
+
+
+def test_a_deferred_cache_guard_is_installed_before_numba_compiles(tmp_path):
+    """A cached module on the fused loop defers its numba cache guard (numba is not imported);
+    the first numba compile of one of its functions goes through methodgen.nbcache.numba, which
+    installs it first, so no function of the module is cached or loaded unguarded.  Control:
+    numba imported by other code does not install it by itself (the door does)."""
+    pytest.importorskip("numba")
+    cache = tmp_path / "cache"
+    env = {**os.environ, "METHODGEN_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
+    env.pop("METHODGEN_FUSED", None)
+
+    def run(mode):
+        out = subprocess.run([sys.executable, "-c", GUARD_PROBE, H, mode], capture_output=True, text=True,
+                             env=env, cwd=tmp_path, check=True)
+        return json.loads(out.stdout)
+
+    run("door")                     # cold: builds the module (and may import numba on the way)
+    door = run("door")
+    assert not door["numba_after_run"] and door["deferred"] == [door["module"]]
+    assert door["module"] in door["guarded"] and door["left"] == []
+    plain = run("plain")
+    assert plain["deferred"] == [plain["module"]]
+    assert plain["module"] not in plain["guarded"] and plain["left"] == [plain["module"]]
+
+
 def test_import_methodgen_itself_does_not_import_sympy(tmp_path):
     code = ("import sys, methodgen as mg; print(sorted(m for m in ('sympy', 'methodgen.schemes', "
             "'methodgen.derive', 'jinja2') if m in sys.modules)); mg.Hamiltonian; "
