@@ -232,13 +232,7 @@ class _Translator:
         for node in ast.walk(ast.Module(body=list(body), type_ignores=[])):
             if isinstance(node, ast.While) or (isinstance(node, ast.For)
                                                and not isinstance(node.iter, (ast.Tuple, ast.Name))):
-                for sub in ast.walk(node):
-                    if isinstance(sub, (ast.Assign, ast.AugAssign)):
-                        for t in (sub.targets if isinstance(sub, ast.Assign) else [sub.target]):
-                            if isinstance(t, ast.Name):
-                                out.add(t.id)
-                    elif isinstance(sub, ast.For) and isinstance(sub.target, ast.Name):
-                        out.add(sub.target.id)
+                out |= _Translator._assigned_names([node])
         return out
 
     @staticmethod
