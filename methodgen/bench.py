@@ -807,7 +807,8 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
     ``[nbody]`` table has several free bodies (none about a fixed centre: one body about a centre
     is solved exactly by the Kepler drift, which would not be a comparison).  Timed for the end
     state (``save_every=steps``), errors from an untimed run keeping every step (the same
-    carried states, the same final row bitwise)."""
+    carried states, the same final row bitwise).  The corrected families run a second time with
+    the energy projection (``project="energy"``) for the frontier's "energy kept" column."""
     from . import peers as pe
     from .errors import MethodgenError
     from .nbody import MAX_STEP_FRACTION, wisdom_holman
@@ -816,10 +817,11 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
     if nb is None or nb.centre_mass is not None or len(nb.masses) < 2 or scene.transformed is not None:
         return []
     rows = []
-    for family in WH_PEER_FAMILIES:
+    jobs = [(f, None) for f in WH_PEER_FAMILIES] + [(f, "energy") for f in WH_PEER_FAMILIES if f != "wisdom-holman"]
+    for family, project in jobs:
         corrected = family != "wisdom-holman"
         try:
-            wh = wisdom_holman(scene, family, corrector=corrected)
+            wh = wisdom_holman(scene, family, corrector=corrected, project=project)
             top = MAX_STEP_FRACTION * float(np.min(wh.periods(y0)))
         except MethodgenError as exc:
             notes.append(f"{family}: not run ({' '.join(str(exc).split())})")
@@ -840,6 +842,7 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
             row = {"method": label, "kind": "methodgen", "base_method": family, "order": 2,
                    "composition": None, "stages": wh.splitting.stages, "backend": wh.BACKEND,
                    "h": T / steps, "steps": steps, "processed": False, "seconds": sec,
+                   **({"project": project} if project else {}),
                    "us_per_step": sec / steps * 1e6, "newton_mean": 0.0,
                    "epsilon": wh.epsilon, **_errors(base, traj, ref.y, monitors)}
             rows.append(row)

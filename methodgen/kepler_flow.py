@@ -46,7 +46,8 @@ except ImportError:   # pragma: no cover - the runtime then runs as Python
     numba = None
 
 __all__ = ["HAVE_NUMBA", "SOURCE_SHA256", "STATUS", "to_jacobi", "from_jacobi", "kepler_drift",
-           "interaction_gradient", "corrector_gradient", "run"]
+           "interaction_gradient", "corrector_gradient", "gradients", "apply_kick", "kick", "potential",
+           "invariants", "project", "run"]
 
 HAVE_NUMBA = numba is not None
 
@@ -73,7 +74,16 @@ else:   # pragma: no cover
 
 #: run()'s status codes.
 STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or a body at its centre)",
-          4: "a kick changed a Jacobi momentum by more than the limit (a close encounter)"}
+          4: "a kick changed a Jacobi momentum by more than the limit (a close encounter)",
+          5: "the energy projection did not reach round-off"}
+
+#: Largest number of iterations of the energy projection (:func:`project`); it takes 2 at the
+#: steps of a resolved run (one correction, then the check that it reached round-off).
+PROJ_MAXITER = 20
+_EPS = 2.220446049250313e-16
+#: The projection's residuals (relative to their first-order size) stopped decreasing at or
+#: below this: their round-off floor.
+_PROJ_PLATEAU = 64 * _EPS
 
 #: Largest number of iterations of the Kepler solve (Laguerre–Conway); it takes 2–6 at the
 #: steps of a converged run.
@@ -416,17 +426,21 @@ def corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj):
 
 
 @_jit
-def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
-    """``p' −= a ∇H_I + b ∇C`` (positions unchanged): the flow of ``a H_I + b C`` over time 1,
-    added with compensated summation (compensation ``cp``, as :func:`kepler_drift`).
-
-    ``work`` is an (7, n, 3) array.  ``b == 0`` skips the Hessian.
-    """
+def gradients(qj, b, m, M, mj, KM, G, jacobi, work):
+    """``work[2] = ∇H_I`` and, when ``b != 0``, ``work[6] = ∇C`` at ``qj`` (Jacobi; ``work[0]``
+    then holds the Cartesian positions): what a kick at ``qj`` adds, before it is added."""
     q, g, gj, u, w, h, hj = work[0], work[1], work[2], work[3], work[4], work[5], work[6]
-    n = qj.shape[0]
     interaction_gradient(qj, m, M, KM, G, jacobi, q, g, gj)
     if b != 0.0:
         corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj)
+
+
+@_jit
+def apply_kick(pj, cp, a, b, work, comp=True):
+    """``p' −= a ∇H_I + b ∇C`` with the gradients :func:`gradients` left in ``work``."""
+    gj, hj = work[2], work[6]
+    n = pj.shape[0]
+    if b != 0.0:
         for i in range(n):
             for k in range(3):
                 pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], -(a * gj[i, k] + b * hj[i, k]), comp)
@@ -434,6 +448,17 @@ def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
         for i in range(n):
             for k in range(3):
                 pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], -(a * gj[i, k]), comp)
+
+
+@_jit
+def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
+    """``p' −= a ∇H_I + b ∇C`` (positions unchanged): the flow of ``a H_I + b C`` over time 1,
+    added with compensated summation (compensation ``cp``, as :func:`kepler_drift`).
+
+    ``work`` is an (7, n, 3) array.  ``b == 0`` skips the Hessian.
+    """
+    gradients(qj, b, m, M, mj, KM, G, jacobi, work)
+    apply_kick(pj, cp, a, b, work, comp)
 
 
 @_jit
@@ -475,6 +500,22 @@ def _finite(qj, pj):
 
 
 @_jit
+def _row(tq, tp, tc, m, M, jacobi, work, row):
+    """``row`` = the Cartesian state (q then p) of the Jacobi state ``tq``, ``tp − tc``."""
+    n = tq.shape[0]
+    for i in range(n):
+        for k in range(3):
+            tp[i, k] -= tc[i, k]
+            tc[i, k] = 0.0
+    q, p = work[3], work[4]
+    from_jacobi(tq, tp, m, M, jacobi, q, p)
+    for i in range(n):
+        for k in range(3):
+            row[3 * i + k] = q[i, k]
+            row[3 * n + 3 * i + k] = p[i, k]
+
+
+@_jit
 def _emit(qj, pj, cq, cp, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, tc, row, comp):
     """The output row of the carried state: its compensated value with the lagged kick ``(a, b)``,
     on a copy, in Cartesian (``tq``, ``tp``, ``tc``: work arrays)."""
@@ -486,20 +527,182 @@ def _emit(qj, pj, cq, cp, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, tc, row, 
             tc[i, k] = cp[i, k]
     if a != 0.0 or b != 0.0:
         kick(tq, tp, tc, a, b, m, M, mj, KM, G, jacobi, work, comp)
+    _row(tq, tp, tc, m, M, jacobi, work, row)
+
+
+@_jit
+def potential(q, m, mu, G, jacobi):
+    """``U(q) = −Σ_{a<b} G m_a m_b/|q_a − q_b|`` (Cartesian positions ``q``), and about a fixed
+    centre also ``− Σ_b μ_b m_b/|q_b|``; returns ``(U, Σ|terms|)``."""
+    n = q.shape[0]
+    U = 0.0
+    for a in range(n):
+        for b in range(a + 1, n):
+            dx = q[b, 0] - q[a, 0]
+            dy = q[b, 1] - q[a, 1]
+            dz = q[b, 2] - q[a, 2]
+            U -= G * m[a] * m[b] / math.sqrt(dx * dx + dy * dy + dz * dz)
+        if not jacobi:
+            U -= mu[a] * m[a] / math.sqrt(q[a, 0] ** 2 + q[a, 1] ** 2 + q[a, 2] ** 2)
+    return U, abs(U)
+
+
+@_jit
+def invariants(tq, tp, tc, U, mj, out):
+    """``out[0:4] = (H, Lx, Ly, Lz)`` of the Jacobi state ``tq``, ``tp − tc`` with potential
+    ``U`` (``H = Σ_i |p'_i|²/(2m'_i) + U``, ``L = Σ_i q'_i × p'_i``: the Jacobi map is a linear
+    point transformation acting on the bodies, not on the axes, so both keep their form), and
+    ``out[4:8]`` their first-order sizes, round-off is relative to these: ``2T + |U|`` for H
+    (``Σ |∂H/∂y_k| |y_k|``, U homogeneous of degree −1), ``Σ_i |q'_i| |p'_i|`` for every
+    component of L (a rotation-invariant size: a component that is small in these axes, as
+    Lx of a nearly planar problem, carries the round-off of the others)."""
+    n = tq.shape[0]
+    T = 0.0
+    sL = 0.0
+    for k in range(8):
+        out[k] = 0.0
     for i in range(n):
-        for k in range(3):
-            tp[i, k] -= tc[i, k]
-    q, p = work[3], work[4]
-    from_jacobi(tq, tp, m, M, jacobi, q, p)
-    for i in range(n):
-        for k in range(3):
-            row[3 * i + k] = q[i, k]
-            row[3 * n + 3 * i + k] = p[i, k]
+        px = tp[i, 0] - tc[i, 0]
+        py = tp[i, 1] - tc[i, 1]
+        pz = tp[i, 2] - tc[i, 2]
+        x, y, z = tq[i, 0], tq[i, 1], tq[i, 2]
+        T += (px * px + py * py + pz * pz) / (2.0 * mj[i])
+        out[1] += y * pz - z * py
+        out[2] += z * px - x * pz
+        out[3] += x * py - y * px
+        sL += math.sqrt((x * x + y * y + z * z) * (px * px + py * py + pz * pz))
+    out[0] = T + U
+    out[4] = 2.0 * T + abs(U)
+    for k in range(5, 8):
+        out[k] = sL
+
+
+@_jit
+def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter):
+    """Project the output state onto ``(H, L) = tgt`` by moving its Jacobi momenta only.
+
+    The correction of body ``i`` (every body about a fixed centre; the Jacobi bodies ``i ≥ 1``
+    otherwise, so the total momentum ``p'_0`` is untouched) is
+    ``δp'_i = λ_H p'_i + m'_i (λ_L × q'_i)``: a scaling of the velocities and a rigid rotation,
+    the gradients of ``H`` and ``L`` in ``p`` in the metric ``diag(m')`` [HLW, §IV.4.1].  With
+    the positions fixed, the lagged kick from the carried state to the output (a function of the
+    positions alone) commutes with it, so ``δ`` is added to both the output (``tp``, ``tc``) and
+    the carried momenta (``pj``, ``cp``).  Newton on the four λ (the 4×4 matrix
+    ``[[2T, Lᵀ], [L, I]]``, ``I`` the inertia tensor of the moved bodies, at each iterate)
+    until every residual is at round-off relative to its size (:func:`invariants`) or stopped
+    decreasing at :data:`_PROJ_PLATEAU` of it.
+
+    Returns ``(status, iterations)``: status 0, or 5 when ``maxiter`` iterations did not reach
+    round-off (``inv[8]`` then the largest relative residual).
+    """
+    n = tq.shape[0]
+    first = 1 if jacobi else 0
+    A = np.empty((4, 4))
+    r = np.empty(4)
+    lam = np.empty(4)
+    prev = np.inf
+    for it in range(1, maxiter + 1):
+        invariants(tq, tp, tc, U, mj, inv)
+        rel = 0.0
+        for a in range(4):
+            r[a] = inv[a] - tgt[a]
+            if inv[4 + a] > 0.0:
+                rel = max(rel, abs(r[a]) / inv[4 + a])
+            elif r[a] != 0.0:
+                rel = np.inf
+        inv[8] = rel
+        if rel <= _EPS or (rel >= prev and prev <= _PROJ_PLATEAU):
+            return 0, it
+        if not rel < np.inf:
+            return 5, it
+        prev = rel
+        # ∂(H, L)/∂λ at the current momenta: [[2T_f, L_fᵀ], [L_f, I_f]] over the moved bodies
+        for a in range(4):
+            for b in range(4):
+                A[a, b] = 0.0
+        for i in range(first, n):
+            px = tp[i, 0] - tc[i, 0]
+            py = tp[i, 1] - tc[i, 1]
+            pz = tp[i, 2] - tc[i, 2]
+            x, y, z = tq[i, 0], tq[i, 1], tq[i, 2]
+            A[0, 0] += (px * px + py * py + pz * pz) / mj[i]
+            lx, ly, lz = y * pz - z * py, z * px - x * pz, x * py - y * px
+            A[0, 1] += lx
+            A[0, 2] += ly
+            A[0, 3] += lz
+            r2 = x * x + y * y + z * z
+            A[1, 1] += mj[i] * (r2 - x * x)
+            A[2, 2] += mj[i] * (r2 - y * y)
+            A[3, 3] += mj[i] * (r2 - z * z)
+            A[1, 2] -= mj[i] * x * y
+            A[1, 3] -= mj[i] * x * z
+            A[2, 3] -= mj[i] * y * z
+        for a in range(4):
+            for b in range(a):
+                A[a, b] = A[b, a]
+        for a in range(4):
+            lam[a] = -r[a]
+        _solve_sym(A, lam)
+        for i in range(first, n):
+            x, y, z = tq[i, 0], tq[i, 1], tq[i, 2]
+            wx = lam[2] * z - lam[3] * y
+            wy = lam[3] * x - lam[1] * z
+            wz = lam[1] * y - lam[2] * x
+            for k in range(3):
+                dk = lam[0] * (tp[i, k] - tc[i, k]) + mj[i] * (wx if k == 0 else (wy if k == 1 else wz))
+                tp[i, k], tc[i, k] = _kadd(tp[i, k], tc[i, k], dk, comp)
+                pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], dk, comp)
+    invariants(tq, tp, tc, U, mj, inv)
+    return 5, maxiter
+
+
+@_jit
+def _solve_sym(A, x):
+    """``x ← A⁻¹ x`` for the symmetric positive semi-definite 4×4 ``A`` (in place, A destroyed):
+    Gaussian elimination with diagonal pivoting; a pivot at round-off of the largest (a
+    direction that moves nothing: the rotation about the line of a single body, a planar
+    problem's in-plane axes) gets 0 in that component, the least correction that solves the
+    rest."""
+    m = x.shape[0]
+    order = np.zeros(m, dtype=np.int64)
+    used = np.zeros(m, dtype=np.bool_)
+    big = 0.0
+    for a in range(m):
+        big = max(big, abs(A[a, a]))
+    tiny = 1e-13 * big
+    npiv = 0
+    for _ in range(m):
+        k = -1
+        best = tiny
+        for a in range(m):
+            if not used[a] and abs(A[a, a]) > best:
+                best = abs(A[a, a])
+                k = a
+        if k < 0:
+            break
+        used[k] = True
+        order[npiv] = k
+        npiv += 1
+        for a in range(m):
+            if not used[a] and A[a, k] != 0.0:
+                f = A[a, k] / A[k, k]
+                for b in range(m):
+                    A[a, b] -= f * A[k, b]
+                x[a] -= f * x[k]
+    for a in range(m):
+        if not used[a]:
+            x[a] = 0.0
+    for s in range(npiv - 1, -1, -1):
+        k = order[s]
+        v = x[k]
+        for t in range(s + 1, npiv):
+            v -= A[k, order[t]] * x[order[t]]
+        x[k] = v / A[k, k]
 
 
 @_jit
 def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail, comp,
-        limit, peak):
+        limit, peak, proj, tgt, pstat, pmaxiter):
     """``steps`` steps of the corrected splitting from the carried state ``(qj, pj)`` (in place;
     ``cq``, ``cp``: its compensations, in place too; ``comp`` false: plain sums, the
     compensations untouched).
@@ -515,6 +718,14 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     (:data:`STATUS`); the state is then the last good one.  ``peak[0]`` (in/out) is the largest
     relative change of a Jacobi momentum by one kick so far (``peak[1]``: that body); a kick
     above ``limit`` stops the run with status 4 (a close encounter: H_I is no longer small).
+
+    ``proj`` true: every step ends with the energy projection (:func:`project`) of its output
+    state onto ``tgt = (H, Lx, Ly, Lz)``, added to the carried momenta too.  The gradients at
+    the step's end serve both the output's lagged kick and the next step's fused kick (the
+    positions do not change between them), so a step costs one potential evaluation more.
+    ``pstat`` (float, in/out) accumulates the projection's iterations (total, largest); on
+    status 5 ``pstat[2]`` is the largest residual relative to its size.  ``pmaxiter``: the
+    projection's iteration limit.
     """
     n = qj.shape[0]
     ns = c.shape[0]
@@ -529,6 +740,9 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     scp = np.empty((n, 3))
     a0 = (d[ns] + d[0]) * h
     b0 = 2.0 * kappa
+    a1 = d[ns] * h
+    inv = np.empty(9)
+    fresh = False      # work holds the gradients at the current positions (projection)
     row = 1
     for step in range(steps):
         for i in range(n):
@@ -539,7 +753,9 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
                 scp[i, k] = cp[i, k]
         ok = True
         if a0 != 0.0 or b0 != 0.0:
-            kick(qj, pj, cp, a0, b0, m, M, mj, KM, G, jacobi, work, comp)
+            if not fresh:
+                gradients(qj, b0, m, M, mj, KM, G, jacobi, work)
+            apply_kick(pj, cp, a0, b0, work, comp)
             size, body = _kick_size(qj, pj, work, a0, b0, first, mj, mu)
             if size > peak[0]:
                 peak[0] = size
@@ -566,6 +782,29 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
             fail[0] = 2
             fail[1] = -1
             ok = False
+        fresh = False
+        if ok and proj:
+            # the output state: the carried one with its lagged kick, the gradients kept
+            if a1 != 0.0 or kappa != 0.0:
+                gradients(qj, kappa, m, M, mj, KM, G, jacobi, work)
+                fresh = True
+            for i in range(n):
+                for k in range(3):
+                    tq[i, k] = qj[i, k] - cq[i, k]
+                    tp[i, k] = pj[i, k]
+                    tc[i, k] = cp[i, k]
+            if fresh:
+                apply_kick(tp, tc, a1, kappa, work, comp)
+            _positions(tq, m, M, jacobi, work[5])
+            U, _ = potential(work[5], m, mu, G, jacobi)
+            st, its = project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, pmaxiter)
+            pstat[0] += its
+            pstat[1] = max(pstat[1], its)
+            if st != 0:
+                fail[0] = st
+                fail[1] = -1
+                pstat[2] = inv[8]
+                ok = False
         if not ok:
             qj[:, :] = sq
             pj[:, :] = sp
@@ -573,6 +812,9 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
             cp[:, :] = scp
             return step
         if (step + 1) % save_every == 0:
-            _emit(qj, pj, cq, cp, d[ns] * h, kappa, m, M, mj, KM, G, jacobi, work, tq, tp, tc, out[row], comp)
+            if proj:
+                _row(tq, tp, tc, m, M, jacobi, work, out[row])
+            else:
+                _emit(qj, pj, cq, cp, a1, kappa, m, M, mj, KM, G, jacobi, work, tq, tp, tc, out[row], comp)
             row += 1
     return steps

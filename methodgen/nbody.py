@@ -57,12 +57,16 @@ import numpy as np
 
 from .errors import InputError, MethodNotApplicable, NumericalError
 
-__all__ = ["FAMILIES", "Splitting", "splitting", "certify", "WisdomHolman", "wisdom_holman", "nbody_energy",
-           "nbody_momenta",
-           "KeplerConvergenceError", "NonFiniteError", "ResolutionError", "MAX_STEP_FRACTION"]
+__all__ = ["FAMILIES", "PROJECTIONS", "Splitting", "splitting", "certify", "WisdomHolman", "wisdom_holman",
+           "nbody_energy", "nbody_momenta",
+           "KeplerConvergenceError", "NonFiniteError", "ProjectionError", "ResolutionError", "MAX_STEP_FRACTION"]
 
 #: Working precision (decimal digits) of the coefficients and their conditions.
 DPS = 50
+
+#: ``wisdom_holman(..., project=)``: None, or "energy" (every step's state projected onto the run's
+#: H and angular momentum by moving the Jacobi momenta: :func:`methodgen.kepler_flow.project`).
+PROJECTIONS = (None, "energy")
 
 #: Splitting names: "wisdom-holman" and saba1 … saba6, sbab1 … sbab6.
 FAMILIES = ("wisdom-holman",) + tuple(f"saba{n}" for n in range(1, 7)) + tuple(f"sbab{n}" for n in range(1, 7))
@@ -77,6 +81,12 @@ class KeplerConvergenceError(NumericalError):
 
 class NonFiniteError(NumericalError):
     """The state became inf or NaN (bodies collided: an interaction or a Kepler radius of 0)."""
+
+
+class ProjectionError(NumericalError):
+    """The energy projection (``project="energy"``) did not bring H and L to round-off within
+    its iteration limit; ``.step``, ``.trajectory`` (the rows before it), ``.residual`` (the
+    largest residual relative to its first-order size)."""
 
 
 class ResolutionError(NumericalError):
@@ -456,6 +466,7 @@ class WisdomHolman:
     KeplerConvergenceError = KeplerConvergenceError
     NonFiniteError = NonFiniteError
     ResolutionError = ResolutionError
+    ProjectionError = ProjectionError
     ConvergenceError = KeplerConvergenceError
     #: What a generated module's ``integrate`` callers read (``methodgen run``): the monitored
     #: quantities, the step's order in h, no composition, no Newton solver.
@@ -465,12 +476,13 @@ class WisdomHolman:
     EXTENDED_BITS = 53
 
     def __init__(self, system, nbody, split: Splitting, corrector: bool, certificate: dict,
-                 params: dict | None = None, compensated: bool = True):
+                 params: dict | None = None, compensated: bool = True, project: str | None = None):
         from . import kepler_flow as kf
 
         self._kf = kf
         self.system, self.nbody, self.splitting, self.corrector = system, nbody, split, bool(corrector)
         self.compensated = bool(compensated)
+        self.project = project
         self.certificate = certificate
         self.params = dict(system.param_values if params is None else params)
         G, masses, centre = nbody.values(self.params)
@@ -504,7 +516,7 @@ class WisdomHolman:
         self._c, self._d = split.c(), split.d()
         self._g = float(split.g) if corrector else 0.0
         self.n_bodies = n
-        self.METHOD = split.name + ("-corrected" if corrector else "")
+        self.METHOD = split.name + ("-corrected" if corrector else "") + ("-projected" if project else "")
         self.BACKEND = "numba" if kf.HAVE_NUMBA else "python"
         if not kf.HAVE_NUMBA:
             import warnings
@@ -517,15 +529,21 @@ class WisdomHolman:
         # about a fixed centre only the angular momentum about it is a first integral
         kept = (("total linear momentum", "total angular momentum") if self.jacobi
                 else ("total angular momentum about the centre",))
-        self.TRAITS = {"symplectic": True, "symmetric": True, "explicit": True, "order": 2, "kept": kept,
+        notes = [f"{split.source}; " + ("with the corrector of [LR01] (g = %.6g)" % self._g
+                                        if corrector else "without corrector")]
+        if project:
+            notes.append("every step projected onto the run's H and L: its Jacobi momenta scaled and "
+                         "rotated (positions and total momentum untouched); symplecticity and symmetry "
+                         "are not kept")
+        self.TRAITS = {"symplectic": not project, "symmetric": not project, "explicit": True, "order": 2,
+                       "kept": (("energy",) if project else ()) + kept,
                        # methodgen run's claims: kept to round-off / bounded error
-                       "preserved": ("Lx", "Ly", "Lz") + (("Px", "Py", "Pz") if self.jacobi else ()),
-                       "approximate": ("H",),
-                       "energy": "not kept (bounded error)", "error": err,
-                       "drifts_per_step": split.stages,
-                       "notes": [f"{split.source}; " + ("with the corrector of [LR01] (g = %.6g)" % self._g
-                                                      if corrector else "without corrector")]}
-        self._key = (id(self), split.name, self.corrector, self.compensated)
+                       "preserved": (("H",) if project else ()) + ("Lx", "Ly", "Lz")
+                       + (("Px", "Py", "Pz") if self.jacobi else ()),
+                       "approximate": () if project else ("H",),
+                       "energy": ("kept to round-off (projection)" if project else "not kept (bounded error)"),
+                       "error": err, "drifts_per_step": split.stages, "notes": notes}
+        self._key = (id(self), split.name, self.corrector, self.compensated, self.project)
 
     # -- functions of the state --
 
@@ -608,12 +626,25 @@ class WisdomHolman:
             self._kick(qj, pj, -a, -b)
         return qj, pj
 
+    def _target(self, y0) -> np.ndarray:
+        """``(H, Lx, Ly, Lz)`` of the state ``y0`` as the projection evaluates them (Jacobi kinetic
+        energy and angular momentum, Cartesian potential): the level it keeps."""
+        q, p = self._bodies(y0)
+        q, p = np.ascontiguousarray(q), np.ascontiguousarray(p)
+        m, M, mj, mu, KM = self._const
+        qj, pj = np.empty_like(q), np.empty_like(p)
+        self._kf.to_jacobi(q, p, m, M, self.jacobi, qj, pj)
+        U, _ = self._kf.potential(q, m, mu, self.G, self.jacobi)
+        inv = np.empty(9)
+        self._kf.invariants(qj, pj, np.zeros_like(pj), U, mj, inv)
+        return inv[:4].copy()
+
     def step(self, y0, h, params=None):
         """One step from ``y0`` (the state after it)."""
         return self.integrate(y0, h, 1, params)[-1]
 
     def integrate(self, y0, h, steps, params=None, *, save_every: int = 1, info: dict | None = None,
-                  check_resolution: bool = True, extended: bool = False) -> np.ndarray:
+                  check_resolution: bool = True, extended: bool = False, maxiter: int | None = None) -> np.ndarray:
         """``steps`` steps of size ``h`` from ``y0``: rows 0, save_every, 2·save_every, … (and the last).
 
         Parameters
@@ -637,6 +668,9 @@ class WisdomHolman:
             changes a Jacobi momentum by more than :data:`MAX_KICK` of itself.
         extended : bool
             Must be False (no long-double refinement).
+        maxiter : int ≥ 1, optional
+            The energy projection's iteration limit (default
+            :data:`methodgen.kepler_flow.PROJ_MAXITER`; it takes 2 at resolved steps).
 
         Returns
         -------
@@ -644,7 +678,7 @@ class WisdomHolman:
 
         Raises
         ------
-        KeplerConvergenceError, NonFiniteError
+        KeplerConvergenceError, NonFiniteError, ProjectionError
             With ``.step``, ``.trajectory`` (the rows up to the last good state).
         InputError
             A state of the wrong size or not finite, h zero or not finite, bad counts.
@@ -662,6 +696,7 @@ class WisdomHolman:
         h = float(h)
         steps = _check_int(steps, "steps", 0)
         save_every = _check_int(save_every, "save_every", 1)
+        maxiter = self._kf.PROJ_MAXITER if maxiter is None else _check_int(maxiter, "maxiter", 1)
         self._check_params(params)
         if extended:
             raise InputError(f"{self.METHOD}: extended=True (long double) is not available for the "
@@ -678,10 +713,12 @@ class WisdomHolman:
         kappa = -0.5 * self._g * h ** 3
         rec = info.get("wisdom_holman") if isinstance(info, dict) else None
         if rec is not None and rec["key"] == self._key and rec["h"] == h and np.array_equal(rec["output"], y0):
-            qj, pj, cq, cp = (rec[k].copy() for k in ("qj", "pj", "cq", "cp"))
+            qj, pj, cq, cp, tgt = (rec[k].copy() for k in ("qj", "pj", "cq", "cp", "target"))
         else:
             qj, pj = self._carried(y0, h, kappa)
             cq, cp = np.zeros_like(qj), np.zeros_like(pj)
+            # the level the projection keeps: the run's first state's (chunks carry it in info)
+            tgt = self._target(y0) if self.project else np.zeros(4)
         m, M, mj, mu, KM = self._const
         full, rest = divmod(steps, save_every)
         rows = 1 + full + (1 if rest else 0)
@@ -690,14 +727,22 @@ class WisdomHolman:
         fail = np.zeros(2, dtype=np.int64)
         limit = MAX_KICK if check_resolution else np.inf
         peak = np.zeros(2)
+        pstat = np.zeros(3)
         args = (m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa)
+        proj = (bool(self.project), tgt, pstat, maxiter)
         done = self._kf.run(qj, pj, cq, cp, *args, full * save_every, save_every, out, fail, self.compensated,
-                            limit, peak)
+                            limit, peak, *proj)
         if done == full * save_every and rest:
-            done += self._kf.run(qj, pj, cq, cp, *args, rest, rest, out[full:], fail, self.compensated, limit, peak)
+            done += self._kf.run(qj, pj, cq, cp, *args, rest, rest, out[full:], fail, self.compensated, limit, peak,
+                                 *proj)
         self.last_peak_kick = float(peak[0])
         if isinstance(info, dict):
             info["peak_kick"] = max(float(peak[0]), info.get("peak_kick", 0.0))
+            if self.project:
+                # the projection's iterations per step: mean of this call, largest so far
+                info["projection_iterations"] = {"mean": float(pstat[0]) / max(done, 1),
+                                                 "max": max(int(pstat[1]),
+                                                            info.get("projection_iterations", {}).get("max", 0))}
         if fail[0]:
             kept = 1 + done // save_every
             traj = out[:kept].copy()
@@ -711,6 +756,13 @@ class WisdomHolman:
                     "step, or a method for close encounters (energy-momentum, Störmer–Verlet with a time "
                     "transformation), or pass check_resolution=False to run it anyway")
                 exc.body = body
+            elif fail[0] == 5:
+                exc = ProjectionError(
+                    f"{self.METHOD}: the energy projection did not converge at step {step} (h = {h:g}): after "
+                    f"{maxiter} iterations H and L are {float(pstat[2]):.3g} of their size from the "
+                    "run's initial values, above round-off (a step too long for the splitting, or an "
+                    "encounter); a smaller step, or project=None")
+                exc.residual = float(pstat[2])
             elif fail[0] == 1:
                 body = int(fail[1])
                 exc = KeplerConvergenceError(
@@ -726,12 +778,13 @@ class WisdomHolman:
             raise exc
         if isinstance(info, dict):
             info["wisdom_holman"] = {"key": self._key, "h": h, "output": out[-1].copy(), "qj": qj.copy(),
-                                     "pj": pj.copy(), "cq": cq.copy(), "cp": cp.copy()}
+                                     "pj": pj.copy(), "cq": cq.copy(), "cp": cp.copy(), "target": tgt.copy()}
         return out
 
 
 def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = True, nbody=None,
-                  params: dict | None = None, compensated: bool = True) -> WisdomHolman:
+                  params: dict | None = None, compensated: bool = True,
+                  project: str | None = None) -> WisdomHolman:
     """The Wisdom–Holman splitting ``method`` of an ``[nbody]`` problem, certified.
 
     Parameters
@@ -753,6 +806,17 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         chunk).  Measured on the outer solar system (sbab4, T = 2·10⁵ days): the final error
         goes on decreasing like ε² h⁴ to 1.5e-12 at h = 65 days, where plain sums stop at a
         round-off floor of ~2e-11; it costs ~20 % per step.
+    project : {None, "energy"}
+        ``"energy"``: after every step, the standard projection [HLW, §IV.4.1] of its state onto
+        the run's initial energy H and angular momentum L (:func:`methodgen.kepler_flow.project`):
+        the Jacobi momenta are scaled and rotated rigidly, ``δp'_i = λ_H p'_i + m'_i λ_L × q'_i``
+        (the gradients of H and L in the momenta, in the mass metric), positions and total
+        momentum untouched.  Because the correction leaves the positions alone it commutes with
+        the lagged kick between the carried and the returned state, so it feeds back into the
+        run.  H, L and P are then kept to round-off; symplecticity and symmetry are not; the
+        order is (the correction is of the size of the step's energy error).  It costs one
+        potential evaluation and a 4×4 solve per step (the gradients of the step's end are
+        shared with the next step's kick).
 
     Raises
     ------
@@ -760,8 +824,19 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         No ``[nbody]`` declaration, or a Hamiltonian that is not the declared one (the
         message says which).
     InputError
-        An unknown ``method``.
+        An unknown ``method`` or ``project``.
+    ProjectionError
+        (from ``integrate``) The projection did not reach round-off within
+        :data:`methodgen.kepler_flow.PROJ_MAXITER` iterations.
+
+    References
+    ----------
+    .. [HLW] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
+       Springer 2006.
     """
+    if project not in PROJECTIONS:
+        raise InputError(f"project={project!r} is not a projection of the Wisdom–Holman splittings; valid: "
+                         "None, 'energy' (every step onto the run's H and angular momentum)")
     split = splitting(method)
     system = getattr(scene_or_system, "system", scene_or_system)
     nb = nbody if nbody is not None else getattr(scene_or_system, "nbody", None)
@@ -794,7 +869,7 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         raise MethodNotApplicable(f"{method}: G and every mass must be positive and finite "
                                   f"(G = {G!r}, masses = {masses!r}, centre = {centre!r})")
     cert = dict(cert, numerical=numerical_certificate(split))
-    return WisdomHolman(system, nb, split, corrector, cert, values, compensated)
+    return WisdomHolman(system, nb, split, corrector, cert, values, compensated, project)
 
 
 def claims(wh: WisdomHolman) -> list[dict]:

@@ -1,0 +1,151 @@
+"""The energy projection of the Wisdom–Holman splittings (``wisdom_holman(..., project="energy")``,
+methodgen.kepler_flow.project): every step's state onto the run's H and angular momentum by
+scaling and rotating the Jacobi momenta.
+
+Numerical checks (double precision runs).  Each property has its control: the unprojected run of
+the same splitting drifts in H where the projected one does not, returns under ``-h`` where the
+projected one does not, and a perturbed kick loses the order with the projection on too.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+from methodgen import nbody as W
+from methodgen.errors import InputError
+from test_wisdom_holman import error, reference, star_and_planets
+
+pytest.importorskip("numba")   # the runtime runs as Python without it: too slow for these runs
+
+EPS = np.finfo(float).eps
+
+
+@pytest.fixture(scope="module")
+def mild():
+    return star_and_planets(1e-3)
+
+
+def _drift(wh, Y):
+    H, L, P = wh.hamiltonian(Y), wh.angular_momentum(Y), wh.linear_momentum(Y)
+    return (float(np.max(np.abs(H - H[0])) / abs(H[0])), float(np.max(np.abs(L - L[0]))),
+            float(np.max(np.abs(P - P[0]))))
+
+
+@pytest.mark.parametrize("name", ["sbab3", "saba2", "wisdom-holman"])
+def test_energy_and_momenta_to_roundoff_and_control(mild, name):
+    """Every step: H to a few ulps of |T| + |U| (the projection's own evaluation and the user's
+    Cartesian one differ by round-off), L and P to round-off.  Control: the same splitting
+    unprojected keeps L and P but not H (above 1e-12 relative here, 100 times the projected)."""
+    system, nbody, y0 = mild
+    corrected = name != "wisdom-holman"
+    proj = W.wisdom_holman(system, name, nbody=nbody, corrector=corrected, project="energy")
+    plain = W.wisdom_holman(system, name, nbody=nbody, corrector=corrected)
+    dH, dL, dP = _drift(proj, proj.integrate(y0, 0.1, 2000))
+    assert dH < 2e-14 and dL < 1e-14 and dP < 1e-15, (dH, dL, dP)
+    dH0, dL0, dP0 = _drift(plain, plain.integrate(y0, 0.1, 2000))
+    assert dH0 > max(1e-12, 100 * dH) and dL0 < 1e-14 and dP0 < 1e-15, (dH0, dL0, dP0)
+
+
+def test_order_kept_and_control():
+    """ε = 1e-2, saba4 with the corrector (error ε² h⁴, tests/test_wisdom_holman.py): projected,
+    the order under halving h is still 4.  Control: a kick weight moved by 1e-3 (and another
+    back) is not, with the projection on as well."""
+    import dataclasses
+
+    import mpmath as mp
+
+    system, nbody, y0 = star_and_planets(1e-2)
+    ref = reference(system, y0, 2.0)
+    wh = W.wisdom_holman(system, "saba4", nbody=nbody, project="energy")
+    e1, e2 = error(wh, y0, ref, 2.0, 8), error(wh, y0, ref, 2.0, 16)
+    assert abs(math.log2(e1 / e2) - 4) < 0.3, (e1, e2)
+    s = W.splitting("saba4")
+    kicks = list(s.kicks)
+    kicks[1] += mp.mpf("1e-3")
+    kicks[3] -= mp.mpf("1e-3")
+    bad = W.WisdomHolman(system, nbody, dataclasses.replace(s, kicks=tuple(kicks)), True, wh.certificate,
+                         project="energy")
+    b1, b2 = error(bad, y0, ref, 2.0, 8), error(bad, y0, ref, 2.0, 16)
+    assert math.log2(b1 / b2) < 3, (b1, b2)
+
+
+def test_not_symmetric_and_control(mild):
+    """A step h then −h: the projected splitting misses y0 (the projection is not symmetric);
+    control: the unprojected one returns to round-off."""
+    system, nbody, y0 = mild
+    proj = W.wisdom_holman(system, "sbab3", nbody=nbody, project="energy")
+    plain = W.wisdom_holman(system, "sbab3", nbody=nbody)
+    miss = np.max(np.abs(proj.step(proj.step(y0, 0.3), -0.3) - y0))
+    assert miss > 1e-13, miss
+    assert np.max(np.abs(plain.step(plain.step(y0, 0.3), -0.3) - y0)) < 1e-14
+
+
+def test_chunks_and_save_every_are_bitwise_and_control(mild):
+    """Chunks continued with ``info`` keep the first chunk's target and carried state: the run in
+    one piece bitwise; ``save_every`` rows are those rows.  Control: a chunk without ``info``
+    projects onto its own start's H (round-off different), so it is not bitwise."""
+    system, nbody, y0 = mild
+    wh = W.wisdom_holman(system, "sbab3", nbody=nbody, project="energy")
+    whole = wh.integrate(y0, 0.05, 300)
+    every = wh.integrate(y0, 0.05, 300, save_every=7)
+    assert np.array_equal(every[1:-1], whole[7::7][: len(every) - 2]) and np.array_equal(every[-1], whole[-1])
+    info = {}
+    a = wh.integrate(y0, 0.05, 120, info=info)
+    b = wh.integrate(a[-1], 0.05, 180, info=info)
+    assert np.array_equal(b[-1], whole[-1])
+    assert 1.0 <= info["projection_iterations"]["mean"] <= 3.0
+    c = wh.integrate(wh.integrate(y0, 0.05, 120)[-1], 0.05, 180)
+    assert not np.array_equal(c[-1], whole[-1])
+
+
+def test_one_jacobi_body_and_a_fixed_centre(mild):
+    """Degenerate rotations: a star and one planet (one moved Jacobi body: its inertia tensor is
+    singular along its radius), and the kepler scene (one body about a fixed centre, the exact
+    flow): finite, H and L kept."""
+    system, nbody, y0 = star_and_planets(1e-3, n_planets=1)
+    wh = W.wisdom_holman(system, "sbab3", nbody=nbody, project="energy")
+    Y = wh.integrate(y0, 0.1, 500)
+    dH, dL, dP = _drift(wh, Y)
+    assert np.all(np.isfinite(Y)) and dH < 2e-14 and dL < 1e-14, (dH, dL)
+    sc = mg.load_scene("kepler")
+    wh = W.wisdom_holman(sc, "sbab3", project="energy")
+    Y = wh.integrate(np.array(sc.y0), 0.1, 500)
+    H, L = wh.hamiltonian(Y), wh.angular_momentum(Y)
+    assert np.max(np.abs(H - H[0])) / abs(H[0]) < 2e-14 and np.max(np.abs(L - L[0])) < 1e-14
+
+
+def test_outer_solar_system_frontier_step():
+    """The built-in scene at the frontier's step (h = 135 d, sbab3 with the corrector, 2·10⁴ d):
+    H to round-off, and the final state as close to DOP853 (rtol 1e-13) as the unprojected run's
+    (within 2×: the projection removes the energy error, not the phase error)."""
+    sc = mg.load_scene("outer-solar-system")
+    y0 = np.array(sc.y0)
+    ref = reference(sc.system, y0, 2.0e4)
+    proj = W.wisdom_holman(sc, "sbab3", project="energy")
+    plain = W.wisdom_holman(sc, "sbab3")
+    Y = proj.integrate(y0, 2.0e4 / 148, 148)
+    assert _drift(proj, Y)[0] < 1e-14
+    ep, e0 = np.max(np.abs(Y[-1] - ref)), error(plain, y0, ref, 2.0e4, 148)
+    assert ep < 2 * e0 + 1e-12, (ep, e0)
+
+
+def test_traits_errors_and_a_failed_projection(mild):
+    system, nbody, y0 = mild
+    wh = W.wisdom_holman(system, "sbab3", nbody=nbody, project="energy")
+    assert wh.METHOD == "sbab3-corrected-projected"
+    assert wh.TRAITS["symplectic"] is False and wh.TRAITS["symmetric"] is False
+    assert "H" in wh.TRAITS["preserved"] and wh.TRAITS["approximate"] == ()
+    with pytest.raises(InputError, match="valid: None, 'energy'"):
+        W.wisdom_holman(system, "sbab3", nbody=nbody, project="energy-standard")
+    with pytest.raises(InputError, match="maxiter"):
+        wh.integrate(y0, 0.1, 3, maxiter=0)
+    # one iteration corrects but cannot confirm round-off: a ProjectionError at the first step
+    with pytest.raises(W.ProjectionError, match="did not converge at step 1") as exc:
+        wh.integrate(y0, 0.1, 3, maxiter=1)
+    assert exc.value.step == 1 and exc.value.trajectory.shape == (1, 18) and exc.value.residual > EPS
+    # control: the default limit converges on the same steps
+    assert np.all(np.isfinite(wh.integrate(y0, 0.1, 3)))
