@@ -77,8 +77,8 @@ STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or 
           4: "a kick changed a Jacobi momentum by more than the limit (a close encounter)",
           5: "the energy projection did not reach round-off"}
 
-#: Largest number of iterations of the energy projection (:func:`project`); it takes 2 at the
-#: steps of a resolved run (one correction, then the check that it reached round-off).
+#: Largest number of iterations of the energy projection (:func:`project`); it takes about 2 at
+#: the steps of a resolved run (one correction, then the check that it reached round-off).
 PROJ_MAXITER = 20
 _EPS = 2.220446049250313e-16
 #: The projection's residuals (relative to their first-order size) stopped decreasing at or
@@ -578,7 +578,7 @@ def invariants(tq, tp, tc, U, mj, out):
 
 
 @_jit
-def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter):
+def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback):
     """Project the output state onto ``(H, L) = tgt`` by moving its Jacobi momenta only.
 
     The correction of body ``i`` (every body about a fixed centre; the Jacobi bodies ``i ≥ 1``
@@ -586,8 +586,9 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter):
     ``δp'_i = λ_H p'_i + m'_i (λ_L × q'_i)``: a scaling of the velocities and a rigid rotation,
     the gradients of ``H`` and ``L`` in ``p`` in the metric ``diag(m')`` [HLW, §IV.4.1].  With
     the positions fixed, the lagged kick from the carried state to the output (a function of the
-    positions alone) commutes with it, so ``δ`` is added to both the output (``tp``, ``tc``) and
-    the carried momenta (``pj``, ``cp``).  Newton on the four λ (the 4×4 matrix
+    positions alone) commutes with it: with ``feedback`` ``δ`` is added to the carried momenta
+    (``pj``, ``cp``) too, and the run continues from the projected state; without, only the
+    output (``tp``, ``tc``) is projected.  Newton on the four λ (the 4×4 matrix
     ``[[2T, Lᵀ], [L, I]]``, ``I`` the inertia tensor of the moved bodies, at each iterate)
     until every residual is at round-off relative to its size (:func:`invariants`) or stopped
     decreasing at :data:`_PROJ_PLATEAU` of it.
@@ -651,7 +652,8 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter):
             for k in range(3):
                 dk = lam[0] * (tp[i, k] - tc[i, k]) + mj[i] * (wx if k == 0 else (wy if k == 1 else wz))
                 tp[i, k], tc[i, k] = _kadd(tp[i, k], tc[i, k], dk, comp)
-                pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], dk, comp)
+                if feedback:
+                    pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], dk, comp)
     invariants(tq, tp, tc, U, mj, inv)
     return 5, maxiter
 
@@ -719,13 +721,14 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     relative change of a Jacobi momentum by one kick so far (``peak[1]``: that body); a kick
     above ``limit`` stops the run with status 4 (a close encounter: H_I is no longer small).
 
-    ``proj`` true: every step ends with the energy projection (:func:`project`) of its output
-    state onto ``tgt = (H, Lx, Ly, Lz)``, added to the carried momenta too.  The gradients at
-    the step's end serve both the output's lagged kick and the next step's fused kick (the
-    positions do not change between them), so a step costs one potential evaluation more.
-    ``pstat`` (float, in/out) accumulates the projection's iterations (total, largest); on
-    status 5 ``pstat[2]`` is the largest residual relative to its size.  ``pmaxiter``: the
-    projection's iteration limit.
+    ``proj`` 1: every output row is projected (:func:`project`) onto ``tgt = (H, Lx, Ly, Lz)``,
+    the run itself continues unprojected; 2: every step ends with that projection, fed back into
+    the carried state.  The gradients at a projected step's end serve both the output's lagged
+    kick and the next step's fused kick (the positions do not change between them), so a
+    projection costs one potential evaluation and a few 4×4 solves.  ``pstat`` (float, in/out)
+    accumulates the projection's iterations (total, largest, -, count); on status 5 ``pstat[2]``
+    is the largest residual relative to its size.  ``pmaxiter``: the projection's iteration
+    limit.
     """
     n = qj.shape[0]
     ns = c.shape[0]
@@ -783,7 +786,8 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
             fail[1] = -1
             ok = False
         fresh = False
-        if ok and proj:
+        emit = (step + 1) % save_every == 0
+        if ok and (proj == 2 or (proj == 1 and emit)):
             # the output state: the carried one with its lagged kick, the gradients kept
             if a1 != 0.0 or kappa != 0.0:
                 gradients(qj, kappa, m, M, mj, KM, G, jacobi, work)
@@ -797,9 +801,10 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
                 apply_kick(tp, tc, a1, kappa, work, comp)
             _positions(tq, m, M, jacobi, work[5])
             U, _ = potential(work[5], m, mu, G, jacobi)
-            st, its = project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, pmaxiter)
+            st, its = project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, pmaxiter, proj == 2)
             pstat[0] += its
             pstat[1] = max(pstat[1], its)
+            pstat[3] += 1
             if st != 0:
                 fail[0] = st
                 fail[1] = -1
@@ -811,7 +816,7 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
             cq[:, :] = scq
             cp[:, :] = scp
             return step
-        if (step + 1) % save_every == 0:
+        if emit:
             if proj:
                 _row(tq, tp, tc, m, M, jacobi, work, out[row])
             else:
