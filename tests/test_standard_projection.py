@@ -154,3 +154,26 @@ def test_verify_certificates(hh):
     # no symmetry claim: the measured defect of the 60-digit step is far above round-off
     assert not any("projected step is symmetric" in c.claim for c in own)
     assert inv[0].details["symmetry_defect"] > 1e-8
+
+
+def test_verify_decides_at_a_strong_force():
+    """Three particles with 1/(q_i - q_j)² pair forces (Calogero–Moser, confined): at verify's
+    start points the standard projection's λ is large (symmetry defect ~0.08 at h = 1/10), where
+    a plain fixed-point iteration for y1 = ŷ1 + D(y1)λ diverged and verify said "undecided";
+    solved by Newton it decides (the invariant to 60 digits).  The symmetric projection of the
+    same base is decided too, and symmetric (control of the defect's size)."""
+    from methodgen.verify.report import NUMERICAL
+
+    cm = mg.Hamiltonian("(p1**2 + p2**2 + p3**2)/2 + w**2*(q1**2 + q2**2 + q3**2)/2"
+                        " + g**2*(1/(q1 - q2)**2 + 1/(q1 - q3)**2 + 1/(q2 - q3)**2)",
+                        q=["q1", "q2", "q3"], p=["p1", "p2", "p3"], params={"w": 1.0, "g": 0.5},
+                        name="calogero3")
+    defects = {}
+    for project in ("energy-standard", "energy"):
+        rep = mg.verify(mg.discretize(cm, "stormer-verlet", order=4, project=project))
+        inv = [c for c in rep.certificates
+               if "projected invariants kept: H" in c.claim and not c.claim.startswith("unprojected")]
+        assert rep.ok and len(inv) == 1 and inv[0].status == NUMERICAL, [c.status for c in inv]
+        assert inv[0].details["invariant_change"] < 1e-40
+        defects[project] = inv[0].details["symmetry_defect"]
+    assert defects["energy-standard"] > 1e-3 and defects["energy"] < 1e-40, defects

@@ -156,7 +156,7 @@ def projected_step(scheme, flow, y0, symmetric=True):
     """One projected step from ``y0`` in 60-digit arithmetic: ``(y1, max |g(y1) - g(y0)|)``.
 
     ``ỹ0 = y0 + D(y0)λ, ŷ1 = Φ_h(ỹ0), y1 = ŷ1 + D(y1)λ, g(y1) = g(y0)`` (D = diag(w) Gᵀ):
-    y1 by fixed-point iteration for given λ, λ by Newton with a central-difference Jacobian.
+    y1 by Newton for given λ, λ by Newton, both with central-difference Jacobians.
     ``symmetric=False`` is the standard projection (``ỹ0 = y0``): a negative control.
     """
     from ..projection import gradients
@@ -180,14 +180,25 @@ def projected_step(scheme, flow, y0, symmetric=True):
             return [sum(wv[i] * Gx[a * n + i] * lam[a] for a in range(m)) for i in range(n)]
 
         def end(lam):
+            # y1 = ŷ1 + D(y1)λ by Newton (a plain fixed-point iteration diverges where |∂(Dλ)/∂y|
+            # exceeds 1: large λ at a strong force, as for 1/r² pairs near each other), with
+            # the Jacobian I − ∂(D(y)λ)/∂y by central differences at 60 digits
             yh = flow([a + b for a, b in zip(y0, corr(y0, lam))] if symmetric else y0)
-            y1 = yh
-            for _ in range(200):
-                new = [a + b for a, b in zip(yh, corr(y1, lam))]
-                if max(abs(a - b) for a, b in zip(new, y1)) <= tiny * (1 + max(map(abs, new))):
-                    return new
-                y1 = new
-            raise ArithmeticError("the 60-digit fixed point y1 = ŷ1 + D(y1)λ did not converge")
+            y1 = list(yh)
+            d = mp.mpf(10) ** (-(DPS // 2))
+            for _ in range(60):
+                R = [a - b - c for a, b, c in zip(y1, yh, corr(y1, lam))]
+                if max(map(abs, R)) <= tiny * (1 + max(map(abs, y1))):
+                    return y1
+                J = mp.eye(n)
+                for j in range(n):
+                    up = corr([x + (d if k == j else 0) for k, x in enumerate(y1)], lam)
+                    dn = corr([x - (d if k == j else 0) for k, x in enumerate(y1)], lam)
+                    for i in range(n):
+                        J[i, j] -= (up[i] - dn[i]) / (2 * d)
+                dy = mp.lu_solve(J, mp.matrix(R))
+                y1 = [x - dy[k] for k, x in enumerate(y1)]
+            raise ArithmeticError("the 60-digit Newton solve of y1 = ŷ1 + D(y1)λ did not converge")
 
         def F(lam):
             return [a - b for a, b in zip(gf(end(lam)), tgt)]
