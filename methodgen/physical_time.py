@@ -27,7 +27,10 @@ __all__ = ["run_to_time"]
 _FIRST_CHUNK = 64
 
 #: What ``info`` of one ``integrate`` call hands the next (see :func:`run_to_time`).
-_CARRIED = ("compensation", "solver_state", "force")
+#: What one call's info hands the next: its end state's compensation, solver state and force
+#: (the run in calls is the run in one piece), and that the end state was checked (numba
+#: modules skip the initial check of a state their loop checked).
+_CARRIED = ("compensation", "solver_state", "force", "checked")
 
 
 def run_to_time(module, Y0, t_final: float, h: float, params=None, *, check_resolution: bool = True,

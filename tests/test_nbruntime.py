@@ -484,3 +484,29 @@ def test_kernels_are_unboxed_without_looking_up_their_overloads(tmp_path, monkey
     raw = mod.integrate(y0, 0.05, 40)
     assert len(calls) >= 7
     assert np.array_equal(raw, ref)
+
+
+def test_a_continued_run_skips_the_initial_check_and_control(kepler, monkeypatch):
+    """A call continuing from the exact end state (and parameters) of this module's last call,
+    through ``info``, does not check its initial state again: the loop checked it as a step's
+    state.  Controls: without ``info``, from another state, or with other parameters the check
+    runs; and the continued run is bitwise the run in one piece."""
+    mod = mg.build(kepler, "stormer-verlet", backend="numba")
+    y0 = np.array(mg.load_scene("kepler").y0)
+    calls = []
+    check = mod._check_initial_rows
+
+    def counted(Y, p):
+        calls.append(1)
+        return check(Y, p)
+
+    monkeypatch.setattr(mod, "_check_initial_rows", counted)
+    whole = mod.integrate(y0, 0.01, 40)
+    info = {}
+    a = mod.integrate(y0, 0.01, 20, info=info)
+    b = mod.integrate(a[-1], 0.01, 20, info=info)
+    assert len(calls) == 2 and np.array_equal(b[-1], whole[-1])     # whole, then a; not b
+    mod.integrate(a[-1], 0.01, 5)                                       # no info
+    mod.integrate(a[-2], 0.01, 5, info=dict(info))                      # another state
+    mod.integrate(b[-1], 0.01, 5, params={"m": 1.0, "k": 2.0}, info=dict(info))
+    assert len(calls) == 5
