@@ -380,6 +380,21 @@ def test_numba_hyperbolic_escape_names_the_log_form(logh, tmp_path):
     assert exc.value.step == 49
 
 
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=pytest.mark.slow)])
+def test_projected_escape_names_the_log_form(logh, tmp_path, backend):
+    """The standard projection of the log form on the same escape: the numpy loop let Python's
+    ZeroDivisionError out (no step, no word of the log form), the numba one said only "state
+    became non-finite".  Now both raise NonFiniteError at step 49 with the hint and the rows
+    before it.  Control: the bound orbit runs to the end."""
+    mod = mg.build(logh, "stormer-verlet", backend=backend, project="energy-standard",
+                   path=tmp_path / f"logh_proj_{backend}.py")
+    with pytest.raises(mod.NonFiniteError, match="log form divides by T . e") as exc:
+        mod.integrate(mod.initial_state(np.array([1.0, 0, 0, 0, 2.0, 0])), 0.5, 200, check_resolution=False)
+    assert exc.value.step == 49 and exc.value.trajectory.shape == (50, 8)
+    Y = mod.integrate(mod.initial_state(pericentre(0.6)), 0.5, 200, check_resolution=False)
+    assert np.all(np.isfinite(Y))
+
+
 def test_control_the_same_escape_without_the_field_runs_to_the_end(build):
     # c = 0: U = -k/r < 0 everywhere; the same escaping motion runs through, energy kept
     mod = _field_module(build, 0.0)
