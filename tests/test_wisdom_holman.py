@@ -393,9 +393,13 @@ def test_symmetric_and_momenta_kept(mild, name):
     assert np.max(np.abs(H - H[0])) / abs(H[0]) < 1e-7     # bounded, not kept
 
 
-def test_chunks_and_save_every_are_bitwise(mild):
+@pytest.mark.parametrize("project", [None, "energy-output", "energy-standard"])
+def test_chunks_and_save_every_are_bitwise(mild, project):
+    """Chunks continued with ``info`` (the carried state, and a projection's target) are the run
+    in one piece bitwise; ``save_every`` rows are those rows (tests/test_wisdom_holman_projection.py
+    for the projections)."""
     system, nbody, y0 = mild
-    wh = W.wisdom_holman(system, "sbab3", nbody=nbody)
+    wh = W.wisdom_holman(system, "sbab3", nbody=nbody, project=project)
     whole = wh.integrate(y0, 0.05, 300)
     every = wh.integrate(y0, 0.05, 300, save_every=7)
     assert np.array_equal(every[1:-1], whole[7::7][: len(every) - 2]) and np.array_equal(every[-1], whole[-1])
@@ -403,7 +407,10 @@ def test_chunks_and_save_every_are_bitwise(mild):
     a = wh.integrate(y0, 0.05, 120, info=info)
     b = wh.integrate(a[-1], 0.05, 180, info=info)
     assert np.array_equal(b[-1], whole[-1])
-    # negative control: without the carried state the restart is a different (round-off) run
+    if project:
+        assert 1.0 <= info["projection_iterations"]["mean"] <= 3.0
+    # negative control: without the carried state (and target) the restart is a different
+    # (round-off) run
     c = wh.integrate(wh.integrate(y0, 0.05, 120)[-1], 0.05, 180)
     assert not np.array_equal(c[-1], whole[-1])
 

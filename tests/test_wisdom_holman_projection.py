@@ -92,25 +92,6 @@ def test_not_symmetric_and_control(mild, mode):
     assert np.max(np.abs(plain.step(plain.step(y0, 0.3), -0.3) - y0)) < 1e-14
 
 
-@pytest.mark.parametrize("mode", MODES)
-def test_chunks_and_save_every_are_bitwise_and_control(mild, mode):
-    """Chunks continued with ``info`` keep the first chunk's target and carried state: the run in
-    one piece bitwise; ``save_every`` rows are those rows.  Control: a chunk without ``info``
-    starts from the returned (projected) state with its own target, so it is not bitwise."""
-    system, nbody, y0 = mild
-    wh = W.wisdom_holman(system, "sbab3", nbody=nbody, project=mode)
-    whole = wh.integrate(y0, 0.05, 300)
-    every = wh.integrate(y0, 0.05, 300, save_every=7)
-    assert np.array_equal(every[1:-1], whole[7::7][: len(every) - 2]) and np.array_equal(every[-1], whole[-1])
-    info = {}
-    a = wh.integrate(y0, 0.05, 120, info=info)
-    b = wh.integrate(a[-1], 0.05, 180, info=info)
-    assert np.array_equal(b[-1], whole[-1])
-    assert 1.0 <= info["projection_iterations"]["mean"] <= 3.0
-    c = wh.integrate(wh.integrate(y0, 0.05, 120)[-1], 0.05, 180)
-    assert not np.array_equal(c[-1], whole[-1])
-
-
 def test_one_jacobi_body_and_a_fixed_centre(mild):
     """Degenerate rotations: a star and one planet (one moved Jacobi body: its inertia tensor is
     singular along its radius), and the kepler scene (one body about a fixed centre, the exact
