@@ -47,7 +47,7 @@ except ImportError:   # pragma: no cover - the runtime then runs as Python
 
 __all__ = ["HAVE_NUMBA", "SOURCE_SHA256", "STATUS", "to_jacobi", "from_jacobi", "kepler_drift",
            "interaction_gradient", "corrector_gradient", "gradients", "apply_kick", "kick", "potential",
-           "invariants", "project", "run"]
+           "invariants", "project", "run", "run_projected"]
 
 HAVE_NUMBA = numba is not None
 
@@ -703,8 +703,58 @@ def _solve_sym(A, x):
 
 
 @_jit
+def _save(qj, pj, cq, cp, sq, sp, scq, scp):
+    """Copy the carried state and its compensations (to restore it after a failed step)."""
+    for i in range(qj.shape[0]):
+        for k in range(3):
+            sq[i, k] = qj[i, k]
+            sp[i, k] = pj[i, k]
+            scq[i, k] = cq[i, k]
+            scp[i, k] = cp[i, k]
+
+
+@_jit
+def _step(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, a0, b0, fresh, work, fail, comp, limit, peak):
+    """One step of the splitting on the carried state (in place): the fused kick ``(a0, b0)``
+    (with the gradients already in ``work`` when ``fresh``), then the drifts and the inner
+    kicks.  False, with ``fail = (status, body)``, when a kick exceeded ``limit``, a Kepler
+    solve failed or the state is not finite (the state is then to be restored)."""
+    ns = c.shape[0]
+    first = 1 if jacobi else 0
+    if a0 != 0.0 or b0 != 0.0:
+        if not fresh:
+            gradients(qj, b0, m, M, mj, KM, G, jacobi, work)
+        apply_kick(pj, cp, a0, b0, work, comp)
+        size, body = _kick_size(qj, pj, work, a0, b0, first, mj, mu)
+        if size > peak[0]:
+            peak[0] = size
+            peak[1] = body
+    for j in range(ns):
+        if j > 0 and d[j] != 0.0:
+            kick(qj, pj, cp, d[j] * h, 0.0, m, M, mj, KM, G, jacobi, work, comp)
+            size, body = _kick_size(qj, pj, work, d[j] * h, 0.0, first, mj, mu)
+            if size > peak[0]:
+                peak[0] = size
+                peak[1] = body
+        if peak[0] > limit:
+            fail[0] = 4
+            fail[1] = int(peak[1])
+            return False
+        st, body = drift(qj, pj, cq, cp, mj, mu, jacobi, c[j] * h, comp)
+        if st != 0:
+            fail[0] = st
+            fail[1] = body
+            return False
+    if not _finite(qj, pj):
+        fail[0] = 2
+        fail[1] = -1
+        return False
+    return True
+
+
+@_jit
 def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail, comp,
-        limit, peak, proj, tgt, pstat, pmaxiter):
+        limit, peak):
     """``steps`` steps of the corrected splitting from the carried state ``(qj, pj)`` (in place;
     ``cq``, ``cp``: its compensations, in place too; ``comp`` false: plain sums, the
     compensations untouched).
@@ -720,74 +770,63 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     (:data:`STATUS`); the state is then the last good one.  ``peak[0]`` (in/out) is the largest
     relative change of a Jacobi momentum by one kick so far (``peak[1]``: that body); a kick
     above ``limit`` stops the run with status 4 (a close encounter: H_I is no longer small).
-
-    ``proj`` 1: every output row is projected (:func:`project`) onto ``tgt = (H, Lx, Ly, Lz)``,
-    the run itself continues unprojected; 2: every step ends with that projection, fed back into
-    the carried state.  The gradients at a projected step's end serve both the output's lagged
-    kick and the next step's fused kick (the positions do not change between them), so a
-    projection costs one potential evaluation and a few 4×4 solves.  ``pstat`` (float, in/out)
-    accumulates the projection's iterations (total, largest, -, count); on status 5 ``pstat[2]``
-    is the largest residual relative to its size.  ``pmaxiter``: the projection's iteration
-    limit.
     """
     n = qj.shape[0]
     ns = c.shape[0]
-    first = 1 if jacobi else 0
     work = np.empty((7, n, 3))
     tq = np.empty((n, 3))
     tp = np.empty((n, 3))
     tc = np.empty((n, 3))
-    sq = np.empty((n, 3))
-    sp = np.empty((n, 3))
-    scq = np.empty((n, 3))
-    scp = np.empty((n, 3))
+    saved = np.empty((4, n, 3))
+    a0 = (d[ns] + d[0]) * h
+    b0 = 2.0 * kappa
+    row = 1
+    for step in range(steps):
+        _save(qj, pj, cq, cp, saved[0], saved[1], saved[2], saved[3])
+        if not _step(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, a0, b0, False, work, fail, comp,
+                     limit, peak):
+            _save(saved[0], saved[1], saved[2], saved[3], qj, pj, cq, cp)
+            return step
+        if (step + 1) % save_every == 0:
+            _emit(qj, pj, cq, cp, d[ns] * h, kappa, m, M, mj, KM, G, jacobi, work, tq, tp, tc, out[row], comp)
+            row += 1
+    return steps
+
+
+@_jit
+def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail,
+                  comp, limit, peak, proj, tgt, pstat, pmaxiter):
+    """:func:`run` with the energy projection (:func:`project`) onto ``tgt = (H, Lx, Ly, Lz)``:
+    ``proj`` 1 projects every output row, the run itself continuing unprojected; 2 ends every
+    step with the projection, fed back into the carried state.  A function of its own so that
+    an unprojected run does not compile the projection.
+
+    The gradients at a projected step's end serve both the output's lagged kick and the next
+    step's fused kick (the positions do not change between them), so a projection costs one
+    potential evaluation and a few 4×4 solves.  ``pstat`` (float, in/out) accumulates the
+    projection's iterations (total, largest, -, count); on status 5 ``pstat[2]`` is the
+    largest residual relative to its size.  ``pmaxiter``: the projection's iteration limit.
+    """
+    n = qj.shape[0]
+    ns = c.shape[0]
+    work = np.empty((7, n, 3))
+    tq = np.empty((n, 3))
+    tp = np.empty((n, 3))
+    tc = np.empty((n, 3))
+    saved = np.empty((4, n, 3))
     a0 = (d[ns] + d[0]) * h
     b0 = 2.0 * kappa
     a1 = d[ns] * h
     inv = np.empty(9)
-    fresh = False      # work holds the gradients at the current positions (projection)
+    fresh = False      # work holds the gradients at the current positions
     row = 1
     for step in range(steps):
-        for i in range(n):
-            for k in range(3):
-                sq[i, k] = qj[i, k]
-                sp[i, k] = pj[i, k]
-                scq[i, k] = cq[i, k]
-                scp[i, k] = cp[i, k]
-        ok = True
-        if a0 != 0.0 or b0 != 0.0:
-            if not fresh:
-                gradients(qj, b0, m, M, mj, KM, G, jacobi, work)
-            apply_kick(pj, cp, a0, b0, work, comp)
-            size, body = _kick_size(qj, pj, work, a0, b0, first, mj, mu)
-            if size > peak[0]:
-                peak[0] = size
-                peak[1] = body
-        for j in range(ns):
-            if j > 0 and d[j] != 0.0:
-                kick(qj, pj, cp, d[j] * h, 0.0, m, M, mj, KM, G, jacobi, work, comp)
-                size, body = _kick_size(qj, pj, work, d[j] * h, 0.0, first, mj, mu)
-                if size > peak[0]:
-                    peak[0] = size
-                    peak[1] = body
-            if peak[0] > limit:
-                fail[0] = 4
-                fail[1] = int(peak[1])
-                ok = False
-                break
-            st, body = drift(qj, pj, cq, cp, mj, mu, jacobi, c[j] * h, comp)
-            if st != 0:
-                fail[0] = st
-                fail[1] = body
-                ok = False
-                break
-        if ok and not _finite(qj, pj):
-            fail[0] = 2
-            fail[1] = -1
-            ok = False
+        _save(qj, pj, cq, cp, saved[0], saved[1], saved[2], saved[3])
+        ok = _step(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, a0, b0, fresh, work, fail, comp,
+                   limit, peak)
         fresh = False
         emit = (step + 1) % save_every == 0
-        if ok and (proj == 2 or (proj == 1 and emit)):
+        if ok and (proj == 2 or emit):
             # the output state: the carried one with its lagged kick, the gradients kept
             if a1 != 0.0 or kappa != 0.0:
                 gradients(qj, kappa, m, M, mj, KM, G, jacobi, work)
@@ -811,15 +850,9 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
                 pstat[2] = inv[8]
                 ok = False
         if not ok:
-            qj[:, :] = sq
-            pj[:, :] = sp
-            cq[:, :] = scq
-            cp[:, :] = scp
+            _save(saved[0], saved[1], saved[2], saved[3], qj, pj, cq, cp)
             return step
         if emit:
-            if proj:
-                _row(tq, tp, tc, m, M, jacobi, work, out[row])
-            else:
-                _emit(qj, pj, cq, cp, a1, kappa, m, M, mj, KM, G, jacobi, work, tq, tp, tc, out[row], comp)
+            _row(tq, tp, tc, m, M, jacobi, work, out[row])
             row += 1
     return steps

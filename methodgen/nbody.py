@@ -735,12 +735,15 @@ class WisdomHolman:
         peak = np.zeros(2)
         pstat = np.zeros(4)
         args = (m, M, mj, mu, KM, self.G, self.jacobi, self._c, self._d, h, kappa)
-        proj = ({None: 0, "energy-output": 1, "energy-standard": 2}[self.project], tgt, pstat, maxiter)
-        done = self._kf.run(qj, pj, cq, cp, *args, full * save_every, save_every, out, fail, self.compensated,
-                            limit, peak, *proj)
+        if self.project:
+            proj = ({"energy-output": 1, "energy-standard": 2}[self.project], tgt, pstat, maxiter)
+            loop = self._kf.run_projected
+        else:
+            proj, loop = (), self._kf.run
+        done = loop(qj, pj, cq, cp, *args, full * save_every, save_every, out, fail, self.compensated, limit, peak,
+                    *proj)
         if done == full * save_every and rest:
-            done += self._kf.run(qj, pj, cq, cp, *args, rest, rest, out[full:], fail, self.compensated, limit, peak,
-                                 *proj)
+            done += loop(qj, pj, cq, cp, *args, rest, rest, out[full:], fail, self.compensated, limit, peak, *proj)
         self.last_peak_kick = float(peak[0])
         if isinstance(info, dict):
             info["peak_kick"] = max(float(peak[0]), info.get("peak_kick", 0.0))
