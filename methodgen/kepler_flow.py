@@ -714,6 +714,13 @@ def _save(qj, pj, cq, cp, sq, sp, scq, scp):
 
 
 @_jit
+def _buffers(n):
+    """The loops' work arrays for n bodies: the kicks' (7, n, 3), the output state's three
+    (n, 3) and the saved state's (4, n, 3)."""
+    return np.empty((7, n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((4, n, 3))
+
+
+@_jit
 def _step(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, a0, b0, fresh, work, fail, comp, limit, peak):
     """One step of the splitting on the carried state (in place): the fused kick ``(a0, b0)``
     (with the gradients already in ``work`` when ``fresh``), then the drifts and the inner
@@ -771,13 +778,8 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     relative change of a Jacobi momentum by one kick so far (``peak[1]``: that body); a kick
     above ``limit`` stops the run with status 4 (a close encounter: H_I is no longer small).
     """
-    n = qj.shape[0]
     ns = c.shape[0]
-    work = np.empty((7, n, 3))
-    tq = np.empty((n, 3))
-    tp = np.empty((n, 3))
-    tc = np.empty((n, 3))
-    saved = np.empty((4, n, 3))
+    work, tq, tp, tc, saved = _buffers(qj.shape[0])
     a0 = (d[ns] + d[0]) * h
     b0 = 2.0 * kappa
     row = 1
@@ -807,13 +809,8 @@ def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, s
     projection's iterations (total, largest, -, count); on status 5 ``pstat[2]`` is the
     largest residual relative to its size.  ``pmaxiter``: the projection's iteration limit.
     """
-    n = qj.shape[0]
     ns = c.shape[0]
-    work = np.empty((7, n, 3))
-    tq = np.empty((n, 3))
-    tp = np.empty((n, 3))
-    tc = np.empty((n, 3))
-    saved = np.empty((4, n, 3))
+    work, tq, tp, tc, saved = _buffers(qj.shape[0])
     a0 = (d[ns] + d[0]) * h
     b0 = 2.0 * kappa
     a1 = d[ns] * h
@@ -831,7 +828,7 @@ def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, s
             if a1 != 0.0 or kappa != 0.0:
                 gradients(qj, kappa, m, M, mj, KM, G, jacobi, work)
                 fresh = True
-            for i in range(n):
+            for i in range(qj.shape[0]):
                 for k in range(3):
                     tq[i, k] = qj[i, k] - cq[i, k]
                     tp[i, k] = pj[i, k]
