@@ -488,8 +488,8 @@ def test_kernels_are_unboxed_without_looking_up_their_overloads(tmp_path, monkey
 
 def test_a_continued_run_skips_the_initial_check_and_control(kepler, monkeypatch):
     """A call continuing from the exact end state (and parameters) of this module's last call,
-    through ``info``, does not check its initial state again: the loop checked it as a step's
-    state.  Controls: without ``info``, from another state, or with other parameters the check
+    through ``info`` or as the module's last run, does not check its initial state again: the
+    loop checked it as a step's state.  Controls: without ``info``, from another state, or with other parameters the check
     runs; and the continued run is bitwise the run in one piece."""
     mod = mg.build(kepler, "stormer-verlet", backend="numba")
     y0 = np.array(mg.load_scene("kepler").y0)
@@ -510,3 +510,9 @@ def test_a_continued_run_skips_the_initial_check_and_control(kepler, monkeypatch
     mod.integrate(a[-2], 0.01, 5, info=dict(info))                      # another state
     mod.integrate(b[-1], 0.01, 5, params={"m": 1.0, "k": 2.0}, info=dict(info))
     assert len(calls) == 5
+    # stepping in a loop: a step from the state the module's last run ended on skips it too
+    y1 = mod.step(y0, 0.01)
+    y2 = mod.step(y1, 0.01)
+    assert len(calls) == 6
+    again = mod.step(y1, 0.01)               # control: y1 is no longer the last end state
+    assert len(calls) == 7 and np.array_equal(again, y2)
