@@ -593,8 +593,9 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
     until every residual is at round-off relative to its size (:func:`invariants`) or stopped
     decreasing at :data:`_PROJ_PLATEAU` of it.
 
-    Returns ``(status, iterations)``: status 0, or 5 when ``maxiter`` iterations did not reach
-    round-off (``inv[8]`` then the largest relative residual).
+    Returns ``(status, iterations)``: status 0; 2 when H or L is not finite (``inv[8]`` NaN); 5
+    when ``maxiter`` iterations did not reach round-off (``inv[8]`` then the largest relative
+    residual).
     """
     n = tq.shape[0]
     first = 1 if jacobi else 0
@@ -607,12 +608,17 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
         rel = 0.0
         for a in range(4):
             r[a] = inv[a] - tgt[a]
+            if not (math.isfinite(r[a]) and math.isfinite(inv[4 + a])):
+                inv[8] = np.nan
+                return 2, it       # H or L not finite (two bodies at one place): not a state of H
             if inv[4 + a] > 0.0:
                 rel = max(rel, abs(r[a]) / inv[4 + a])
             elif r[a] != 0.0:
                 rel = np.inf
         inv[8] = rel
-        if rel <= _EPS or (rel >= prev and prev <= _PROJ_PLATEAU):
+        # converged, or stopped decreasing within the round-off plateau (this iterate itself
+        # within it: a worse one is not accepted)
+        if rel <= _EPS or (rel >= prev and rel <= _PROJ_PLATEAU):
             return 0, it
         if not rel < np.inf:
             return 5, it
@@ -660,22 +666,31 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
 
 @_jit
 def _solve_sym(A, x):
-    """``x ← A⁻¹ x`` for the symmetric positive semi-definite 4×4 ``A`` (in place, A destroyed):
-    Gaussian elimination with diagonal pivoting; a pivot at round-off of the largest (a
-    direction that moves nothing: the rotation about the line of a single body, a planar
-    problem's in-plane axes) gets 0 in that component, the least correction that solves the
-    rest."""
+    """``x ← A⁻¹ x`` for the symmetric positive semi-definite 4×4 ``A`` (in place, A destroyed).
+
+    The rows are first scaled by the square roots of the diagonal (the entries are in different
+    units: ``2T`` an energy, the inertia ``m r²`` an energy times a time squared, so a cutoff
+    relative to the largest entry would depend on the unit of time), then Gaussian elimination
+    with diagonal pivoting; a pivot below 1e-13 of its scaled row (a direction that moves
+    nothing: the rotation about the line of a single body) gets 0 in that component, the least
+    correction that solves the rest."""
     m = x.shape[0]
     order = np.zeros(m, dtype=np.int64)
     used = np.zeros(m, dtype=np.bool_)
-    big = 0.0
+    d = np.zeros(m)
     for a in range(m):
-        big = max(big, abs(A[a, a]))
-    tiny = 1e-13 * big
+        if A[a, a] > 0.0:
+            d[a] = math.sqrt(A[a, a])
+        else:
+            used[a] = True         # moves nothing at all: component 0 (below)
+    for a in range(m):
+        for b in range(m):
+            A[a, b] = A[a, b] / (d[a] * d[b]) if d[a] > 0.0 and d[b] > 0.0 else 0.0
+        x[a] = x[a] / d[a] if d[a] > 0.0 else 0.0
     npiv = 0
     for _ in range(m):
         k = -1
-        best = tiny
+        best = 1e-13
         for a in range(m):
             if not used[a] and abs(A[a, a]) > best:
                 best = abs(A[a, a])
@@ -691,8 +706,11 @@ def _solve_sym(A, x):
                 for b in range(m):
                     A[a, b] -= f * A[k, b]
                 x[a] -= f * x[k]
+    solved = np.zeros(m, dtype=np.bool_)
+    for s in range(npiv):
+        solved[order[s]] = True
     for a in range(m):
-        if not used[a]:
+        if not solved[a]:
             x[a] = 0.0
     for s in range(npiv - 1, -1, -1):
         k = order[s]
@@ -700,6 +718,9 @@ def _solve_sym(A, x):
         for t in range(s + 1, npiv):
             v -= A[k, order[t]] * x[order[t]]
         x[k] = v / A[k, k]
+    for a in range(m):
+        if d[a] > 0.0:
+            x[a] = x[a] / d[a]
 
 
 @_jit
@@ -824,7 +845,9 @@ def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, s
         fresh = False
         emit = (step + 1) % save_every == 0
         if ok and (proj == 2 or emit):
-            # the output state: the carried one with its lagged kick, the gradients kept
+            # the output state: the carried one with its lagged kick (gradients at the carried
+            # positions qj, as the next fused kick takes them, and kept for it; _emit evaluates
+            # them at qj - cq, a round-off apart), positions with their compensation
             if a1 != 0.0 or kappa != 0.0:
                 gradients(qj, kappa, m, M, mj, KM, G, jacobi, work)
                 fresh = True

@@ -26,7 +26,6 @@ __all__ = ["run_to_time"]
 #: Steps of the first probing chunk (the rate dt/dτ is unknown before it).
 _FIRST_CHUNK = 64
 
-#: What ``info`` of one ``integrate`` call hands the next (see :func:`run_to_time`).
 #: What one call's info hands the next: its end state's compensation, solver state and force
 #: (the run in calls is the run in one piece), and that the end state was checked (numba
 #: modules skip the initial check of a state their loop checked).

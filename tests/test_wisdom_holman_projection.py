@@ -145,3 +145,72 @@ def test_traits_errors_and_a_failed_projection(mild):
     assert exc.value.step == 1 and exc.value.trajectory.shape == (1, 18) and exc.value.residual > EPS
     # control: the default limit converges on the same steps
     assert np.all(np.isfinite(wh.integrate(y0, 0.1, 3)))
+
+
+def test_the_solve_does_not_depend_on_the_unit_of_time():
+    """The projection's 4×4 matrix mixes an energy (2T) with inertias (m r²): in SI units (a
+    Jupiter about the Sun, seconds) they are 16 orders apart, where a cutoff relative to the
+    largest entry dropped the energy direction (λ_H = 0).  The scaled solve agrees with
+    numpy's on it; control: a direction that moves nothing (zero diagonal) gets 0 and the
+    others still solve."""
+    from methodgen import kepler_flow as kf
+
+    m, r, v = 1.9e27, 7.8e11, 1.3e4
+    q = np.array([r, 0.0, 0.1 * r])
+    p = m * np.array([0.0, v, 0.0])
+    A = np.zeros((4, 4))
+    A[0, 0] = p @ p / m
+    L = np.cross(q, p)
+    A[0, 1:] = A[1:, 0] = L
+    A[1:, 1:] = m * (q @ q * np.eye(3) - np.outer(q, q)) + m * r * r * 1e-3 * np.eye(3)
+    b = np.array([1e25, 1e30, -2e29, 3e28])
+    want = np.linalg.solve(A, b)
+    x = b.copy()
+    kf._solve_sym(A.copy(), x)
+    assert np.max(np.abs(x - want) / np.abs(want)) < 1e-8, (x, want)
+    B = A.copy()
+    B[2, :] = B[:, 2] = 0.0
+    x = b.copy()
+    kf._solve_sym(B.copy(), x)
+    keep = [0, 1, 3]
+    assert x[2] == 0.0
+    np.testing.assert_allclose(x[keep], np.linalg.solve(B[np.ix_(keep, keep)], b[keep]), rtol=1e-8)
+
+
+def test_si_units_keep_the_energy():
+    """The same star and planets as the tests above, in SI-like units (lengths ×1.5e11, time in
+    seconds: G and the masses rescaled so the motion is the same): H kept to round-off."""
+    from methodgen.bench import nbody_system
+    from methodgen.scene import NBody
+
+    system, nbody, y0 = star_and_planets(1e-3)
+    Lu, Tu, Mu = 1.5e11, 5.0e6, 2.0e30                 # units of length, time, mass
+    G = 1.0 * Lu ** 3 / (Mu * Tu ** 2)
+    si = nbody_system(3, G, [Mu, 1e-3 * Mu, 1e-3 * Mu], name="star2si")
+    n = 3
+    y = y0.copy()
+    y[:3 * n] *= Lu
+    y[3 * n:] *= Mu * Lu / Tu
+    wh = W.wisdom_holman(si, "sbab3", nbody=NBody(G="G", masses=("m0", "m1", "m2")), project="energy-output")
+    Y = wh.integrate(y, 0.1 * Tu, 500)
+    assert _drift(wh, Y)[0] < 2e-14
+
+
+def test_non_finite_energy_is_a_non_finite_error_and_claims():
+    """project() on a row with U = -inf (two bodies at one place) says "not finite" (status 2),
+    never converged; and the projected splitting's verify claims drop symmetry and
+    symplecticity (not claimed) and claim the energy."""
+    from methodgen import kepler_flow as kf
+
+    q = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    p = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    inv = np.empty(9)
+    st, _ = kf.project(q, p.copy(), np.zeros_like(p), p.copy(), np.zeros_like(p), np.zeros(4), -np.inf,
+                       np.array([2.0, 0.5]), True, inv, True, 20, False)
+    assert st == 2 and np.isnan(inv[8])
+    system, nbody, y0 = star_and_planets(1e-3)
+    got = {c["claim"]: c["status"] for c in W.claims(W.wisdom_holman(system, "sbab3", nbody=nbody,
+                                                                       project="energy-output"))}
+    assert got["symmetric"] == got["symplectic"] == "not claimed" and got["energy"] == "proved"
+    plain = {c["claim"]: c["status"] for c in W.claims(W.wisdom_holman(system, "sbab3", nbody=nbody))}
+    assert plain["symmetric"] == plain["symplectic"] == "proved" and plain["energy"] == "not claimed"
