@@ -74,6 +74,13 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
     _rr = numba.carray(_rt.stack_buffer(1), (1,))
     _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
     _g0 = numba.carray(_rt.stack_buffer(_NK), (_NK,))
+    # the trajectory's state, compensation and carried force in stack buffers while it runs:
+    # LLVM keeps them in registers across the stages (the caller's rows it must reload after
+    # every store, not knowing that _Y, _C and _G do not overlap); written back at its end (a
+    # failure returns without: the caller restores its copies)
+    _yl = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _cl = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _gl = numba.carray(_rt.stack_buffer(_NG), (_NG,))
     _hh = 0.5 * _h * _GAMMA0
     for _b in range(_nbt):
         if _EJUMP:
@@ -87,6 +94,11 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                 _g0[_j] = _hh * _ck[1 + _LIDX[_j]]
         _nxt = _nxt0
         _row = _row0
+        for _i in range(_DIM):
+            _yl[_i] = _Y[_b, _i]
+            _cl[_i] = _C[_b, _i]
+        for _i in range(_NG):
+            _gl[_i] = _G[_b, _i]
         for _n in range(_n0, _n1):
             for _k in range(_STAGES):
                 _hs = _h * _kd[_k]
@@ -94,7 +106,7 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                     # linearly implicit: one solve from z = 0 (nbruntime._solve_linear)
                     for _i in range(_N):
                         _z[_i] = 0.0
-                    resjac(_z, _Y[_b], _C[_b], _hs, _p, _r, _J)
+                    resjac(_z, _yl, _cl, _hs, _p, _r, _J)
                     _solve_f(_J, _r, _dz, _wa, _wb)
                     for _i in range(_N):
                         _z[_i] = -_dz[_i]
@@ -111,11 +123,11 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                     _its[_b, _n - _n0] += 1.0
                 elif _KIND == 0:
                     # Newton's method (nbruntime._solve_newton, solvers 0, 1, 2 and 4)
-                    guess(_Y[_b], _hs, _p, _z)
+                    guess(_yl, _hs, _p, _z)
                     for _i in range(_N):
                         _zp[_i] = _z[_i]
                     if _HAS_SCALE:
-                        _floor = scale(_Y[_b], _hs, _p)
+                        _floor = scale(_yl, _hs, _p)
                     else:
                         _floor = 0.0
                     _prev = math.inf
@@ -128,15 +140,15 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                     while _it < _maxiter:
                         _it += 1
                         if _solver == 2 or (_solver == 4 and _newton == 0):
-                            res(_z, _Y[_b], _C[_b], _hs, _p, _r)
+                            res(_z, _yl, _cl, _hs, _p, _r)
                             for _i in range(_N):
                                 _dz[_i] = _r[_i]
                         else:
                             if _solver == 0 or _solver == 4 or _have == 0:
-                                resjac(_z, _Y[_b], _C[_b], _hs, _p, _r, _J)
+                                resjac(_z, _yl, _cl, _hs, _p, _r, _J)
                                 _have = 1
                             else:
-                                res(_z, _Y[_b], _C[_b], _hs, _p, _r)
+                                res(_z, _yl, _cl, _hs, _p, _r)
                             _solve_f(_J, _r, _dz, _wa, _wb)
                         for _i in range(_N):
                             _z[_i] -= _dz[_i]
@@ -195,21 +207,21 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                         _st[0] = 1
                         return
                     _its[_b, _n - _n0] += _it
-                post(_z, _Y[_b], _C[_b], _G[_b], _h * _ka[_k], _hs, _h * _kb[_k], _p, _out)
+                post(_z, _yl, _cl, _gl, _h * _ka[_k], _hs, _h * _kb[_k], _p, _out)
                 _bad = 0.0
                 for _i in range(_DIM):
                     if _comp != 0:
-                        _a = _out[_i] + _C[_b, _i]
-                        _s = _Y[_b, _i] + _a
-                        _C[_b, _i] = _a - (_s - _Y[_b, _i])
-                        _Y[_b, _i] = _s
+                        _a = _out[_i] + _cl[_i]
+                        _s = _yl[_i] + _a
+                        _cl[_i] = _a - (_s - _yl[_i])
+                        _yl[_i] = _s
                     else:
-                        _s = _Y[_b, _i] + _out[_i]
-                        _Y[_b, _i] = _s
+                        _s = _yl[_i] + _out[_i]
+                        _yl[_i] = _s
                     if not (_s - _s == 0.0):
                         _bad = 1.0
                 for _i in range(_NF):
-                    _G[_b, _i] = _out[_DIM + _i]
+                    _gl[_i] = _out[_DIM + _i]
                 if _bad != 0.0:
                     _st[0] = 1
                     return
@@ -252,8 +264,13 @@ def _stage_loop(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
             if _n + 1 == _nxt:
                 _row = _row + 1
                 for _i in range(_DIM):
-                    _T[_row, _b, _i] = _Y[_b, _i]
+                    _T[_row, _b, _i] = _yl[_i]
                 _nxt = _nxt + _every
+        for _i in range(_DIM):
+            _Y[_b, _i] = _yl[_i]
+            _C[_b, _i] = _cl[_i]
+        for _i in range(_NG):
+            _G[_b, _i] = _gl[_i]
 
 
 
@@ -438,7 +455,7 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
                   "_PD": int(cfg[C["POST_DOMAIN"]]), "_TT_GUARD": int(cfg[C["TT_GUARD"]]),
                   "_PT": int(cfg[C["POST_TT"]]), "_LERR": int(cfg[C["LERR"]]), "_PE": int(cfg[C["POST_EXTRA"]]),
                   "_EJUMP": int(cfg[C["EJUMP"]]), "_PJ": int(cfg[C["POST_EJ"]]),
-                  "_KIND": int(cfg[C["KIND"]]), "_N": n, "_NZ": max(n, 1), "_KL": int(cfg[C["KL"]]),
+                  "_KIND": int(cfg[C["KIND"]]), "_N": n, "_NG": max(int(cfg[C["NF"]]), 1), "_NZ": max(n, 1), "_KL": int(cfg[C["KL"]]),
                   "_KU": int(cfg[C["KU"]]), "_RESOL": resol, "_HAS_SCALE": int(cfg[C["HAS_SCALE"]]),
                   "_LERR2": float(fcfg[F["LERR2"]]), "_MLD": float(fcfg[F["MAX_LEVEL_DEFECT"]]),
                   "_MEJ": float(fcfg[F["MAX_ENERGY_JUMP"]]), "_MAXRES": float(fcfg[F["MAX_RESOLUTION"]]),
