@@ -533,7 +533,7 @@ def _emit(qj, pj, cq, cp, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, tc, row, 
 @_jit
 def potential(q, m, mu, G, jacobi):
     """``U(q) = −Σ_{a<b} G m_a m_b/|q_a − q_b|`` (Cartesian positions ``q``), and about a fixed
-    centre also ``− Σ_b μ_b m_b/|q_b|``; returns ``(U, Σ|terms|)``."""
+    centre also ``− Σ_b μ_b m_b/|q_b|``."""
     n = q.shape[0]
     U = 0.0
     for a in range(n):
@@ -544,33 +544,56 @@ def potential(q, m, mu, G, jacobi):
             U -= G * m[a] * m[b] / math.sqrt(dx * dx + dy * dy + dz * dz)
         if not jacobi:
             U -= mu[a] * m[a] / math.sqrt(q[a, 0] ** 2 + q[a, 1] ** 2 + q[a, 2] ** 2)
-    return U, abs(U)
+    return U
 
 
 @_jit
-def invariants(tq, tp, tc, U, mj, out):
+def invariants(tq, tp, tc, U, mj, out, first, A):
     """``out[0:4] = (H, Lx, Ly, Lz)`` of the Jacobi state ``tq``, ``tp − tc`` with potential
     ``U`` (``H = Σ_i |p'_i|²/(2m'_i) + U``, ``L = Σ_i q'_i × p'_i``: the Jacobi map is a linear
     point transformation acting on the bodies, not on the axes, so both keep their form), and
     ``out[4:8]`` their first-order sizes, round-off is relative to these: ``2T + |U|`` for H
     (``Σ |∂H/∂y_k| |y_k|``, U homogeneous of degree −1), ``Σ_i |q'_i| |p'_i|`` for every
     component of L (a rotation-invariant size: a component that is small in these axes, as
-    Lx of a nearly planar problem, carries the round-off of the others)."""
+    Lx of a nearly planar problem, carries the round-off of the others).
+
+    ``A`` (4×4) receives ∂(H, L)/∂λ of :func:`project`'s correction of the bodies ``i ≥ first``:
+    ``[[2T_f, L_fᵀ], [L_f, I_f]]`` over them (``I_f`` their inertia tensor)."""
     n = tq.shape[0]
     T = 0.0
     sL = 0.0
     for k in range(8):
         out[k] = 0.0
+    for a in range(4):
+        for b in range(4):
+            A[a, b] = 0.0
     for i in range(n):
         px = tp[i, 0] - tc[i, 0]
         py = tp[i, 1] - tc[i, 1]
         pz = tp[i, 2] - tc[i, 2]
         x, y, z = tq[i, 0], tq[i, 1], tq[i, 2]
-        T += (px * px + py * py + pz * pz) / (2.0 * mj[i])
-        out[1] += y * pz - z * py
-        out[2] += z * px - x * pz
-        out[3] += x * py - y * px
-        sL += math.sqrt((x * x + y * y + z * z) * (px * px + py * py + pz * pz))
+        p2 = px * px + py * py + pz * pz
+        r2 = x * x + y * y + z * z
+        lx, ly, lz = y * pz - z * py, z * px - x * pz, x * py - y * px
+        T += p2 / (2.0 * mj[i])
+        out[1] += lx
+        out[2] += ly
+        out[3] += lz
+        sL += math.sqrt(r2 * p2)
+        if i >= first:
+            A[0, 0] += p2 / mj[i]
+            A[0, 1] += lx
+            A[0, 2] += ly
+            A[0, 3] += lz
+            A[1, 1] += mj[i] * (r2 - x * x)
+            A[2, 2] += mj[i] * (r2 - y * y)
+            A[3, 3] += mj[i] * (r2 - z * z)
+            A[1, 2] -= mj[i] * x * y
+            A[1, 3] -= mj[i] * x * z
+            A[2, 3] -= mj[i] * y * z
+    for a in range(4):
+        for b in range(a):
+            A[a, b] = A[b, a]
     out[0] = T + U
     out[4] = 2.0 * T + abs(U)
     for k in range(5, 8):
@@ -604,7 +627,7 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
     lam = np.empty(4)
     prev = np.inf
     for it in range(1, maxiter + 1):
-        invariants(tq, tp, tc, U, mj, inv)
+        invariants(tq, tp, tc, U, mj, inv, first, A)
         rel = 0.0
         for a in range(4):
             r[a] = inv[a] - tgt[a]
@@ -623,30 +646,7 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
         if not rel < np.inf:
             return 5, it
         prev = rel
-        # ∂(H, L)/∂λ at the current momenta: [[2T_f, L_fᵀ], [L_f, I_f]] over the moved bodies
-        for a in range(4):
-            for b in range(4):
-                A[a, b] = 0.0
-        for i in range(first, n):
-            px = tp[i, 0] - tc[i, 0]
-            py = tp[i, 1] - tc[i, 1]
-            pz = tp[i, 2] - tc[i, 2]
-            x, y, z = tq[i, 0], tq[i, 1], tq[i, 2]
-            A[0, 0] += (px * px + py * py + pz * pz) / mj[i]
-            lx, ly, lz = y * pz - z * py, z * px - x * pz, x * py - y * px
-            A[0, 1] += lx
-            A[0, 2] += ly
-            A[0, 3] += lz
-            r2 = x * x + y * y + z * z
-            A[1, 1] += mj[i] * (r2 - x * x)
-            A[2, 2] += mj[i] * (r2 - y * y)
-            A[3, 3] += mj[i] * (r2 - z * z)
-            A[1, 2] -= mj[i] * x * y
-            A[1, 3] -= mj[i] * x * z
-            A[2, 3] -= mj[i] * y * z
-        for a in range(4):
-            for b in range(a):
-                A[a, b] = A[b, a]
+        # A: ∂(H, L)/∂λ at the current momenta, from the same pass
         for a in range(4):
             lam[a] = -r[a]
         _solve_sym(A, lam)
@@ -660,7 +660,7 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
                 tp[i, k], tc[i, k] = _kadd(tp[i, k], tc[i, k], dk, comp)
                 if feedback:
                     pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], dk, comp)
-    invariants(tq, tp, tc, U, mj, inv)
+    invariants(tq, tp, tc, U, mj, inv, first, A)
     return 5, maxiter
 
 
@@ -859,7 +859,7 @@ def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, s
             if fresh:
                 apply_kick(tp, tc, a1, kappa, work, comp)
             _positions(tq, m, M, jacobi, work[5])
-            U, _ = potential(work[5], m, mu, G, jacobi)
+            U = potential(work[5], m, mu, G, jacobi)
             st, its = project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, pmaxiter, proj == 2)
             pstat[0] += its
             pstat[1] = max(pstat[1], its)

@@ -641,9 +641,9 @@ class WisdomHolman:
         m, M, mj, mu, KM = self._const
         qj, pj = np.empty_like(q), np.empty_like(p)
         self._kf.to_jacobi(q, p, m, M, self.jacobi, qj, pj)
-        U, _ = self._kf.potential(q, m, mu, self.G, self.jacobi)
+        U = self._kf.potential(q, m, mu, self.G, self.jacobi)
         inv = np.empty(9)
-        self._kf.invariants(qj, pj, np.zeros_like(pj), U, mj, inv)
+        self._kf.invariants(qj, pj, np.zeros_like(pj), U, mj, inv, 0, np.empty((4, 4)))
         return inv[:4].copy()
 
     def step(self, y0, h, params=None):
