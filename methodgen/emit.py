@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 
 from ._version import __version__
 from .errors import GenerationError, InputError, StorageError, UntrustedCacheError
+from .kernelsource import SOURCE_ATTR
 from .progress import phase
 from .runio import find_orphans, make_temp, storage_error
 
@@ -678,6 +679,9 @@ def _exec_source(path: Path, source: bytes) -> ModuleType:
         from .nbcache import defer_stamp_guard, install_stamp_guard
         guard = install_stamp_guard if b"\nimport numba\n" in source else defer_stamp_guard
         guard(str(path), hashlib.sha256(source).hexdigest(), owner=name, tag=digest)
+    # the text the compiled route translates and keys its machine code by: these bytes, not
+    # the file (read again later) nor linecache's copy (methodgen.kernelsource)
+    module.__dict__[SOURCE_ATTR] = source.decode("utf-8")
     sys.modules[name] = module
     try:
         loader.exec_module(module)

@@ -442,7 +442,12 @@ def false_alarm(key):
 def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
     """The loop for this module's kernels and configuration, compiled on first use (or loaded
     from the machine-code cache); None where it does not apply."""
-    key = tuple(id(k) for k in kernels)
+    # keyed by what the loop is compiled from: the kernels' machine code (their symbols name
+    # the text they were translated from; an id() is reused once a regenerated module's old
+    # kernels are freed) and the constants bound into it
+    key = (tuple(getattr(k, "symbol", None) or ("id", id(k)) for k in kernels),
+           cfg.tobytes(), fcfg.tobytes(), tuple(lerr_index), tuple(map(bool, domain_pos)),
+           tuple(map(float, gammas)), tuple(map(float, ratios)))
     got = _LOOPS.get(key)
     if got is None:
         C = _rt.CFG
@@ -478,8 +483,9 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
             got = _lk.compile_kernel(_stage_loop, LOOP_SIG, globals_=consts, c_entry=True)
         except _lk.Unsupported:
             got = False
-        _LOOPS[key] = got
-    return (got or None), key
+        # (the kernels are kept with the loop: an id() in the key is not reused while it lives)
+        _LOOPS[key] = got = (got, kernels)
+    return (got[0] or None), key
 
 
 def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p,

@@ -6,9 +6,10 @@ Python, LLVM's -O2 pipeline, code generation) -- most of a warm start once numba
 is paid.  This cache keeps the object code, so a later process adds it to its engine
 without translating or optimising anything.
 
-**What a cached object is for** (its key, SHA-256 of all of it): the text of the file that
-defines the kernel (what the translator parses: the kernel, its helpers, its tables and
-constants are all in a generated module's text), the kernel's name, line and signature,
+**What a cached object is for** (its key, SHA-256 of all of it): the text the module that
+defines the kernel was executed from (what the translator parses: the kernel, its helpers,
+its tables and constants are all in a generated module's text; recorded by methodgen's
+loader, never re-read from the file -- :mod:`methodgen.kernelsource`), the kernel's name, line and signature,
 the translation-time constants a fused loop binds (values, and for functions the text of
 their file), the C-entry flag; the SHA-256 of the translator and of the runtime
 (``llvmkernels.py``, ``nbruntime.py``); llvmlite's and LLVM's versions; the target triple,
@@ -30,13 +31,14 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-import linecache
 import os
 import tempfile
 
+from . import kernelsource as _ks
+
 __all__ = ["key", "load", "store", "enabled"]
 
-_MAGIC = b"methodgen-llvm-object-v1\n"
+_MAGIC = b"methodgen-llvm-object-v2\n"
 #: objects kept: past _MAX_OBJECTS a store removes the least recently used down to _KEEP_OBJECTS
 #: (a load touches its file), so edited and regenerated modules do not grow the folder forever
 _MAX_OBJECTS = 4096
@@ -44,26 +46,12 @@ _KEEP_OBJECTS = 2048
 #: a temporary file older than this (seconds) is a killed writer's: removed by the next store
 _ORPHAN_AGE = 600.0
 _TAG_LEN = 64          # hex HMAC-SHA256
-_FILE_DIGESTS: dict = {}
 _STATIC: list = []
 
 
 def enabled() -> bool:
     """The cache is used unless ``METHODGEN_LLVM_CACHE=0``."""
     return os.environ.get("METHODGEN_LLVM_CACHE", "1").strip() != "0"
-
-
-def _text_digest(filename: str, module_globals=None) -> str | None:
-    """SHA-256 of the text inspect reads for ``filename`` (linecache: the file, or its
-    loader's source); None when there is none."""
-    lines = linecache.getlines(filename, module_globals)
-    if not lines:
-        return None
-    text = "".join(lines)
-    got = _FILE_DIGESTS.get((filename, len(text), hash(text)))
-    if got is None:
-        got = _FILE_DIGESTS[(filename, len(text), hash(text))] = hashlib.sha256(text.encode()).hexdigest()
-    return got
 
 
 def _static(state) -> str:
@@ -83,13 +71,10 @@ def _static(state) -> str:
 
 
 def _function_part(fn) -> str | None:
-    code = getattr(getattr(fn, "py_func", fn), "__code__", None)
-    if code is None:
-        return None
-    digest = _text_digest(code.co_filename, getattr(getattr(fn, "py_func", fn), "__globals__", None))
-    if digest is None:
-        return None
-    return f"fn:{digest}:{code.co_name}:{code.co_firstlineno}"
+    # the digest of the text the function was executed from (never a re-read file or
+    # linecache's copy): see methodgen.kernelsource
+    digest = _ks.cache_digest(fn)
+    return None if digest is None else f"fn:{digest}"
 
 
 def _value_part(value) -> str | None:
@@ -151,8 +136,11 @@ def _folder_and_key(create: bool):
     return folder, secret
 
 
-def _tag(secret: bytes, name: str, obj: bytes) -> bytes:
-    return hmac.new(secret, _MAGIC + name.encode() + b"\0" + obj, hashlib.sha256).hexdigest().encode()
+def _tag(secret: bytes, key_: str, name: str, obj: bytes) -> bytes:
+    # the whole key is tagged with the object: an object stored under one key and moved to
+    # another's file name (a swapped or planted file) does not verify
+    return hmac.new(secret, _MAGIC + key_.encode() + b"\0" + name.encode() + b"\0" + obj,
+                    hashlib.sha256).hexdigest().encode()
 
 
 def load(key_: str, name: str) -> bytes | None:
@@ -171,7 +159,7 @@ def load(key_: str, name: str) -> bytes | None:
         return None
     tag = data[len(_MAGIC):len(_MAGIC) + _TAG_LEN]
     obj = data[len(_MAGIC) + _TAG_LEN + 1:]
-    if not hmac.compare_digest(tag, _tag(secret, name, obj)):
+    if not hmac.compare_digest(tag, _tag(secret, key_, name, obj)):
         return None
     try:
         os.utime(folder / f"{key_}.o")          # recently used: kept by the pruning in store()
@@ -219,7 +207,7 @@ def store(key_: str, name: str, obj: bytes) -> None:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=".o")
         try:
             with os.fdopen(fd, "wb") as f:
-                f.write(_MAGIC + _tag(secret, name, obj) + b"\n" + obj)
+                f.write(_MAGIC + _tag(secret, key_, name, obj) + b"\n" + obj)
             os.replace(tmp, folder / f"{key_}.o")
         except BaseException:
             try:

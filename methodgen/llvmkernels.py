@@ -35,8 +35,9 @@ comparisons but ``!=``; ``max``/``min`` as numba's ``do_minmax``; ``math.sqrt``,
 fast-math flags, so it does not reassociate.  One difference: ``x**-n`` at x = 0 is inf
 here (the modules' error model); numba's raises ``ZeroDivisionError`` inside the kernel.
 
-The kernels' source is the generated module's own text (``inspect.getsource``), parsed
-with :mod:`ast` -- generated code, never user text.
+The kernels' source is the text the generated module was executed from (recorded by
+methodgen's loader: :mod:`methodgen.kernelsource`), parsed with :mod:`ast` -- generated
+code, never user text.
 """
 
 from __future__ import annotations
@@ -44,13 +45,12 @@ from __future__ import annotations
 import ast
 import ctypes
 import ctypes.util
-import inspect
 import os
-import textwrap
 import threading
 
 import llvmlite.binding as llvm
 from llvmlite import ir
+from . import kernelsource as _ks
 from . import ktypes as _t
 from . import llvmcache as _objcache
 from . import nbcache as _nbcache
@@ -927,14 +927,12 @@ class _Translator:
 
 
 def _function_def(py_func) -> ast.FunctionDef:
+    # the definition in the text the module was executed from (methodgen.kernelsource): a
+    # module regenerated at the same path is never translated from its previous text
     try:
-        src = textwrap.dedent(inspect.getsource(py_func))
-    except (OSError, TypeError) as exc:
+        return _ks.function_def(py_func)
+    except _ks.StaleSource as exc:
         raise Unsupported(f"no source ({exc})") from None
-    tree = ast.parse(src)
-    if len(tree.body) != 1 or not isinstance(tree.body[0], ast.FunctionDef):
-        raise Unsupported("not one function definition")
-    return tree.body[0]
 
 
 def compile_kernel(py_func, sig, globals_=None, c_entry=False) -> "LLVMKernel":
@@ -982,7 +980,7 @@ def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
             raise Unsupported("no address after compilation")
         got = _LOADED[name] = (addr, engine.get_function_address(name + "_c") if c_entry else 0)
     addr, c_addr = got
-    out = LLVMKernel(py_func, sig, addr, engine)
+    out = LLVMKernel(py_func, sig, addr, engine, name)
     if c_entry:
         argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
                     ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
@@ -1061,9 +1059,9 @@ class LLVMKernel:
     (:mod:`methodgen.fused`) inlines its source instead.  Callable from Python too (through
     numba, compiled on the first such call: tests and diagnostics; the runtime never does)."""
 
-    __slots__ = ("py_func", "engine", "_nb", "c_call", "_sig", "_addr", "_type")
+    __slots__ = ("py_func", "engine", "_nb", "c_call", "_sig", "_addr", "_type", "symbol")
 
-    def __init__(self, py_func, sig, addr, engine):
+    def __init__(self, py_func, sig, addr, engine, symbol=""):
         self._sig = sig               # methodgen.ktypes.Signature
         self._addr = addr
         self._type = None             # numba's FunctionType, made when numba asks
@@ -1071,6 +1069,9 @@ class LLVMKernel:
         self.engine = engine          # owns the machine code
         self._nb = None
         self.c_call = None            # the C entry through ctypes (compile_kernel(c_entry=True))
+        # the machine code's symbol: named by the cache key of the text it was translated
+        # from (or unique in the process), so it identifies the code, as an id() cannot
+        self.symbol = symbol
 
     def __wrapper_address__(self):
         return self._addr

@@ -154,3 +154,39 @@ def test_the_cache_stays_bounded_and_drops_killed_writers_files(tmp_path, monkey
     assert not stale.exists() and fresh.exists()
     assert llvmcache.load(f"{9:064x}", "f9") == b"object 9"
     assert llvmcache.load(f"{9:064x}", "f8") is None                  # the tag binds the symbol
+
+
+def test_an_object_moved_to_another_key_is_never_loaded(tmp_path):
+    """Two modules of the same kernels (names, lines, signatures) but another coefficient:
+    their objects swapped file for file (each under the other's key) are refused and
+    compiled afresh, and the run is the module's own.  Control: unswapped, all are loaded."""
+    import re
+
+    paths = []
+    for i, c in enumerate(("3", "4")):
+        system = mg.Hamiltonian(f"(p1**2 + p2**2)/2 + (q1**2 + q2**2)/2 + q1**2*q2 - q2**3/{c}",
+                                ["q1", "q2"], ["p1", "p2"])
+        folder = tmp_path / f"m{i}"
+        folder.mkdir()
+        paths.append(folder / module_filename("cubic", "energy_momentum", "numba"))
+        mg.generate(mg.discretize(system, "energy-momentum"), paths[-1], backend="numba")
+    cache = tmp_path / "cache"
+    y0 = np.array([0.1, -0.2, 0.3, 0.1])
+    first, Y1 = _run(paths[0], y0, tmp_path / "a.npy", cache)
+    before = set((cache / "llvm").glob("*.o"))
+    second, Y2 = _run(paths[1], y0, tmp_path / "b.npy", cache)
+    assert _run(paths[1], y0, tmp_path / "c.npy", cache)[0] == []         # control: all loaded
+    by_kernel = {}
+    for o in sorted((cache / "llvm").glob("*.o")):
+        m = re.search(rb"mg_[0-9a-f]{24}_(\w+?)(?:_c)?\x00", o.read_bytes())
+        assert m, o
+        by_kernel.setdefault(m.group(1), {})[o in before] = o
+    pairs = [(d[True], d[False]) for d in by_kernel.values() if len(d) == 2]
+    assert len(pairs) == len(second)
+    for a, b in pairs:                                  # each object under the other's key
+        da, db = a.read_bytes(), b.read_bytes()
+        a.write_bytes(db)
+        b.write_bytes(da)
+    again, Y3 = _run(paths[1], y0, tmp_path / "d.npy", cache)
+    assert again == second                              # every one refused, translated afresh
+    assert np.array_equal(Y2, Y3) and not np.array_equal(Y1, Y3)
