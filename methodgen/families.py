@@ -94,7 +94,10 @@ def term_families(expr: sp.Expr, q, params=()) -> tuple[TermFamily, ...]:
 
     Parameters
     ----------
-    expr : sympy.Expr
+    expr : sympy.Expr or sequence of sympy.Expr
+        The sum, or its additive terms as the caller grouped them (a term may itself be a sum:
+        :func:`methodgen.schemes.energy_momentum.decompose_families` groups the terms that
+        together are a function of one quadratic form).
     q : sequence of sympy.Symbol
         The coordinates (slots are ordered by position in ``q``).
     params : sequence of sympy.Symbol
@@ -112,7 +115,7 @@ def term_families(expr: sp.Expr, q, params=()) -> tuple[TermFamily, ...]:
     ppos = {s: i for i, s in enumerate(params)}
     groups: dict = {}
     order = []
-    for term in sp.Add.make_args(expr):
+    for term in (expr if isinstance(expr, (list, tuple)) else sp.Add.make_args(expr)):
         if not (term.free_symbols & qpos.keys()):
             continue
         template, slots, pslots, idx, pidx = _template(term, qpos, ppos)

@@ -137,10 +137,27 @@ def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr]
                 V = term.xreplace(line)
                 if V.has(sp.zoo, sp.nan, sp.oo) or (V.free_symbols & set(q)):
                     continue
-                if sp.simplify(term - V.xreplace({s: E})) == 0:
+                diff = term - V.xreplace({s: E})
+                if not _numerically_nonzero(diff, qs) and sp.simplify(diff) == 0:
                     return E, s, V
                 break
     return None
+
+
+def _numerically_nonzero(expr: sp.Expr, qs) -> bool:
+    """``expr`` is seen to be nonzero at a rational point (30 digits): a cheap rejection
+    before ``simplify``, which can take seconds on a large sum that is not a function of the
+    form.  Only ever a rejection: a 0 here proves nothing (the exact test follows)."""
+    point = {v: sp.Rational(7 + 3 * i, 11 + 2 * i) for i, v in enumerate(sorted(qs, key=str))}
+    rest = sorted(expr.free_symbols - set(point), key=str)
+    point.update({v: sp.Rational(5 + i, 4 + i) for i, v in enumerate(rest)})
+    try:
+        val = complex(expr.evalf(30, subs=point))
+    except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+        return False
+    scale = max(1.0, max((abs(complex(a.evalf(30, subs=point))) for a in sp.Add.make_args(expr)),
+                         default=1.0))
+    return abs(val) > 1e-20 * scale
 
 
 def _classify(t: sp.Expr, q) -> list[_Term] | None:
@@ -179,6 +196,16 @@ def _instantiate(term: _Term, ren: dict) -> _Term:
     return replace(term, expr=x(term.expr), var=x(term.var), E=x(term.E), L=x(term.L), V=x(term.V))
 
 
+def _families_of(terms, system: Hamiltonian) -> tuple | None:
+    out = []
+    for fam in term_families(terms, system.q, system.params):
+        found = _classify(fam.template, list(fam.slots))
+        if found is None:
+            return None
+        out.append((fam, tuple(found)))
+    return tuple(out)
+
+
 @_cache
 def decompose_families(system: Hamiltonian) -> tuple | None:
     """U's additive terms grouped into families of like terms
@@ -188,15 +215,86 @@ def decompose_families(system: Hamiltonian) -> tuple | None:
     :class:`_Term` s of the template in the family's slot symbols, or None when some
     template fits no rule.  Classifying the template once instead of every term is what
     makes a 6-body potential (15 pair terms) cost what one pair costs.
+
+    SymPy distributes a rational factor over a sum, so ``r⁴/4 - r²/2`` with ``r² = x² + y²
+    + z²`` arrives as ``(x² + y² + z²)²/4 - x²/2 - y²/2 - z²/2``: one term of the form and
+    three one-coordinate terms, whose forms (x, y, z) do not commute with q × p.  Where the
+    system has angular momenta ``qᵀDp`` that the terms as written do not keep, the terms
+    that together are a function of one quadratic form are taken as one term
+    (:func:`grouped_terms`), and that grouping is used where it keeps more of them.  The
+    discrete gradient of the group is ``V[E0, E1] ∇E(q̄)``: for the quadratic parts the same
+    midpoint gradient as term by term.
     """
     sep = separable_split(system)
-    out = []
-    for fam in term_families(sep.U, system.q, system.params):
-        found = _classify(fam.template, list(fam.slots))
-        if found is None:
-            return None
-        out.append((fam, tuple(found)))
-    return tuple(out)
+    terms = [t for t in sp.Add.make_args(sep.U) if t.free_symbols & set(system.q)]
+    fams = _families_of(terms, system)
+    wanted = set(bilinear_invariants(system))
+    if not wanted:
+        return fams
+    kept = set() if fams is None else {inv.name for inv in _kept_by(system, fams)}
+    if kept >= wanted:
+        return fams
+    grouped = grouped_terms(terms, list(system.q))
+    if grouped == terms:
+        return fams
+    gfams = _families_of(grouped, system)
+    if gfams is not None and (fams is None or {inv.name for inv in _kept_by(system, gfams)} > kept):
+        return gfams
+    return fams
+
+
+def grouped_terms(terms, q) -> list[sp.Expr]:
+    """``terms`` with those that together are a function ``V(E)`` of one quadratic form E
+    (a radial potential written as a sum, ``|q|⁴/4 - x²/2 - y²/2 - z²/2``) summed into one.
+
+    The forms tried are the quadratic forms inside the terms (``x² + y² + z²`` in
+    ``(x² + y² + z²)²`` or in ``1/sqrt(x² + y² + z²)``) and the sum of the terms that are
+    quadratic forms themselves (``x²/2 + y²/2 + z²/2``).  For each, the terms in its
+    coordinates only are summed, and the sum replaces them where it is exactly a function of
+    a quadratic form (:func:`_as_function_of_form`: ``simplify`` of the difference is 0).
+
+    Parameters
+    ----------
+    terms : list of sympy.Expr
+        Additive terms of U, each depending on q.
+    q : list of sympy.Symbol
+
+    Returns
+    -------
+    list of sympy.Expr
+        The terms, the grouped ones replaced by their sum (at the place of the first).
+    """
+    qset = set(q)
+    forms = []
+
+    def add_form(E):
+        E = sp.expand(E)
+        if E != 0 and E not in forms and sp.expand(-E) not in forms:
+            forms.append(E)
+
+    for t in terms:
+        for e in sp.preorder_traversal(t):
+            if isinstance(e, sp.Add):
+                for c in (e, e.as_independent(*q, as_Add=True)[1]):
+                    if _quadratic_form(c, q):
+                        add_form(c)
+    quadratic = [t for t in terms if _quadratic_form(t, q)]
+    if len(quadratic) >= 2:
+        add_form(sp.Add(*quadratic))
+    out = list(terms)
+    # the forms over the most coordinates first: a group never splits a larger one
+    for E in sorted(forms, key=lambda f: (-len(f.free_symbols & qset), sp.default_sort_key(f))):
+        coords = E.free_symbols & qset
+        group = [t for t in out if (t.free_symbols & qset) <= coords]
+        if len(group) < 2:
+            continue
+        total = sp.Add(*group)
+        if _as_function_of_form(total, q) is None:
+            continue
+        first = min(out.index(t) for t in group)
+        out = [t for t in out if t not in group]
+        out.insert(min(first, len(out)), total)
+    return out
 
 
 def decompose(system: Hamiltonian) -> tuple[_Term, ...] | None:
@@ -250,12 +348,23 @@ def kept_angular_momenta(system: Hamiltonian, terms, by_families: bool = True) -
     pattern (:func:`_forms_commute_by_families`; ``by_families=False`` tests every instance,
     the reference the tests compare with).
     """
+    return _kept_by(system, decompose_families(system), terms, by_families)
+
+
+def _kept_by(system: Hamiltonian, fams, terms=None, by_families: bool = True) -> tuple:
+    """:func:`kept_angular_momenta` for the families ``fams`` (the terms: their instances)."""
+    if fams is None:
+        return ()
+    if terms is None:
+        q, params = system.q, system.params
+        terms = tuple(_instantiate(t, fam.renaming(k, q, params))
+                      for fam, tterms in fams for k in range(fam.size) for t in tterms)
     if not terms or any(t.form is None for t in terms):
         return ()
     q, p = list(system.q), list(system.p)
     out = []
     bilinear = set(bilinear_invariants(system))
-    fams = decompose_families(system) if by_families else None
+    fams = fams if by_families else None
     for inv in first_integrals(system):
         if inv.name not in bilinear:
             continue

@@ -20,7 +20,7 @@ from ..derive import (_partials, angular_momenta, constraint_monitors, declared,
 from ..problem import Hamiltonian
 from .common import REF_NOTES, at, system_domain, y1_symbols
 from .exact import Domain, certify, fmt_point, guarded
-from .report import Certificate
+from .report import FLOW, Certificate
 
 __all__ = ["angular_momentum_generic", "angular_momentum_user", "invariant_preserved",
            "invariant_certificates", "invariant_items", "first_integral_certificates",
@@ -44,15 +44,22 @@ def angular_momentum_generic(dim: int) -> list[Certificate]:
             out.append(certify(f"for every radial potential V (undefined function), "
                                f"L = {L} is a first integral: {{L, H}} = 0 ({dim}D)", br,
                                Domain(positive={m}), f"{REF_NOTES}, Ex. 1.1.1"))
-    return out
+    return _about_flow(out)
+
+
+def _about_flow(certs: list[Certificate]) -> list[Certificate]:
+    """``certs`` marked as facts of the exact flow (reports list them apart from the method's)."""
+    for c in certs:
+        c.subject = FLOW
+    return certs
 
 
 def angular_momentum_user(system: Hamiltonian) -> list[Certificate]:
     """``{L, H} = 0`` for each angular-momentum component of the user's H."""
-    return [certify(f"{inv.name} = {inv.expr} is a first integral of this H: {{{inv.name}, H}} = 0",
-                    poisson_bracket(system, inv.expr, system.H), system_domain(system),
-                    f"{REF_NOTES}, Ex. 1.1.1")
-            for inv in angular_momenta(system)]
+    return _about_flow([certify(f"{inv.name} = {inv.expr} is a first integral of this H: {{{inv.name}, H}} = 0",
+                                poisson_bracket(system, inv.expr, system.H), system_domain(system),
+                                f"{REF_NOTES}, Ex. 1.1.1")
+                        for inv in angular_momenta(system)])
 
 
 def first_integral_certificates(system: Hamiltonian) -> list[Certificate]:
@@ -77,7 +84,7 @@ def first_integral_certificates(system: Hamiltonian) -> list[Certificate]:
             cert.details.setdefault("invariant", inv.name)
             cert.details.setdefault("kind", kind)
             out.append(cert)
-    return out
+    return _about_flow(out)
 
 
 def splitting_invariant(scheme, name: str, expr: sp.Expr) -> Certificate | None:

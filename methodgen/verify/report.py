@@ -11,13 +11,21 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-__all__ = ["Certificate", "Report", "PROVED", "REFUTED", "NUMERICAL", "UNDECIDED", "STATUSES"]
+__all__ = ["Certificate", "Report", "PROVED", "REFUTED", "NUMERICAL", "UNDECIDED", "STATUSES",
+           "METHOD", "FLOW"]
 
 PROVED = "proved"
 REFUTED = "refuted"
 NUMERICAL = "numerical"
 UNDECIDED = "undecided"   # the reduction raised or ran out of time: neither proof nor refutation
 STATUSES = (PROVED, REFUTED, NUMERICAL, UNDECIDED)
+
+#: what a certificate is about: the method's own steps (``L(y1) = L(y0)``), or the exact flow
+#: of H (``{L, H} = 0``: a first integral of the ODE, which says nothing about any method)
+METHOD = "method"
+FLOW = "exact flow"
+#: the heading of the exact flow's certificates in every rendering
+FLOW_HEADING = "about the exact flow of H (facts of the ODE, not claims about the method)"
 
 
 @dataclass
@@ -47,6 +55,10 @@ class Certificate:
         Where the claim comes from (exercise / section / paper).
     details : dict
         Counterexample, tolerance, sample points, notes; JSON-serialisable.
+    subject : str
+        :data:`METHOD` (a property of the method's steps, e.g. ``L(y1) = L(y0)``) or
+        :data:`FLOW` (a property of the exact flow of H, e.g. ``{L, H} = 0``): reports list
+        the two apart, so a first integral of H is never read as the method's proof.
     """
 
     claim: str
@@ -57,10 +69,13 @@ class Certificate:
     seconds: float = 0.0
     ref: str = ""
     details: dict = field(default_factory=dict)
+    subject: str = METHOD
 
     def __post_init__(self):
         if self.status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+        if self.subject not in (METHOD, FLOW):
+            raise ValueError(f"subject must be {METHOD!r} or {FLOW!r}, got {self.subject!r}")
 
     @property
     def passed(self) -> bool:
@@ -76,9 +91,9 @@ class Certificate:
         return bool(self.details.get("passed", True))
 
     def to_dict(self) -> dict:
-        return {"claim": self.claim, "status": self.status, "seconds": round(self.seconds, 4),
-                "method": self.method, "ref": self.ref, "expression": self.expression,
-                "latex": self.latex, "details": self.details}
+        return {"claim": self.claim, "status": self.status, "subject": self.subject,
+                "seconds": round(self.seconds, 4), "method": self.method, "ref": self.ref,
+                "expression": self.expression, "latex": self.latex, "details": self.details}
 
 
 def _reason(c: Certificate) -> str:
@@ -173,6 +188,14 @@ class Report:
     def __getitem__(self, i):
         return self.certificates[i]
 
+    def _sections(self):
+        """``[(heading or None, [(number, certificate)])]``: the method's certificates, then
+        those about the exact flow (numbered as in :attr:`certificates`)."""
+        numbered = list(enumerate(self.certificates, 1))
+        own = [(i, c) for i, c in numbered if c.subject != FLOW]
+        flow = [(i, c) for i, c in numbered if c.subject == FLOW]
+        return [(None, own)] + ([(FLOW_HEADING, flow)] if flow else [])
+
     def __len__(self):
         return len(self.certificates)
 
@@ -212,13 +235,18 @@ class Report:
                  f"({len(self.certificates)} claims{self._summary()}, {self.seconds:.2f} s)", ""]
         if self._composed_line():
             lines += [_md_escape(self._composed_line()), ""]
-        lines += ["| # | claim | status | method | s |", "|---|---|---|---|---|"]
-        for i, c in enumerate(self.certificates, 1):
-            how = _reason(c) if c.status == UNDECIDED else c.method
-            lines.append(f"| {i} | {_md_escape(c.claim)} | **{c.status}** | {_md_escape(how)} "
-                         f"| {c.seconds:.2f} |")
-        lines.append("")
-        for i, c in enumerate(self.certificates, 1):
+        for heading, certs in self._sections():
+            if heading:
+                lines += [f"*{heading[0].upper() + heading[1:]}:*", ""]
+            if not certs:
+                continue
+            lines += ["| # | claim | status | method | s |", "|---|---|---|---|---|"]
+            for i, c in certs:
+                how = _reason(c) if c.status == UNDECIDED else c.method
+                lines.append(f"| {i} | {_md_escape(c.claim)} | **{c.status}** | {_md_escape(how)} "
+                             f"| {c.seconds:.2f} |")
+            lines.append("")
+        for i, c in [ic for _, certs in self._sections() for ic in certs]:
             if c.status == UNDECIDED:
                 lines.append(f"{i}. *{_md_escape(c.claim)}* ({c.ref}) — **{c.status}**: "
                              f"{_md_escape(_reason(c))}.")
@@ -236,7 +264,18 @@ class Report:
         if self._composed_line():
             out.append(_tex_escape(self._composed_line()))
         out.append(r"\begin{description}")
-        for c in self.certificates:
+        for heading, certs in self._sections():
+            if heading:
+                out += [r"\end{description}", rf"\paragraph{{{_tex_escape(heading[0].upper() + heading[1:])}}}",
+                        r"\begin{description}"]
+            out += self._latex_items([c for _, c in certs])
+        out.append(r"\end{description}")
+        return "\n".join(out) + "\n"
+
+    @staticmethod
+    def _latex_items(certs) -> list:
+        out = []
+        for c in certs:
             if c.status == UNDECIDED:
                 out.append(rf"\item[{_tex_escape(c.status)}] {_tex_escape(c.claim)} "
                            rf"({_tex_escape(c.ref)}; {_tex_escape(_reason(c))}, {c.seconds:.2f}\,s)")
@@ -247,19 +286,27 @@ class Report:
                 out.append(rf"\[ {c.latex} \]")
             for k, v in c.details.items():
                 out.append(rf"\\ \emph{{{_tex_escape(k)}}}: {_tex_escape(str(v))}")
-        out.append(r"\end{description}")
-        return "\n".join(out) + "\n"
+        return out
 
     def __str__(self) -> str:
         rows = [f"{self.title}: {_HEADLINE[self.verdict]}"
                 + (f" ({len(self.undecided)} undecided)" if self.undecided else "")]
         if self._composed_line():
             rows.append(f"  {self._composed_line()}")
-        for c in self.certificates:
+        for heading, certs in self._sections():
+            if heading and certs:
+                rows.append(f"  {heading}:")
+            rows += self._text_rows([c for _, c in certs])
+        return "\n".join(rows)
+
+    @staticmethod
+    def _text_rows(certs) -> list:
+        rows = []
+        for c in certs:
             if c.status == UNDECIDED:
                 rows.append(f"  [{c.status:>9}] {c.claim}  ({_reason(c)})")
                 continue
             rows.append(f"  [{c.status:>9}] {c.claim}  ({c.method}, {c.seconds:.2f} s)")
             if c.status == REFUTED and "counterexample" in c.details:
                 rows.append(f"              counterexample: {c.details['counterexample']}")
-        return "\n".join(rows)
+        return rows
