@@ -10,7 +10,10 @@ keeps the shared runtime, compiled once per machine: run once to warm it).  Meas
 start → ``mg.build(system, method, backend="numba", ...)`` → the first step, the build alone
 (``build→step``), which kernels took the LLVM route (``llvm/numba`` counts) and the peak
 resident memory of the process.  heyoka's ``taylor_adaptive`` construction (tol 1e-15; for the
-outer solar system also ``compact_mode=True``) is timed in its own fresh process in the same run.
+outer solar system also ``compact_mode=True``) is timed in its own fresh process in the same run,
+cold (an empty disk cache of heyoka's compiled code) and warm (its cache filled by the run
+before).  The machine's cores and load average are printed (and kept in the JSON): quote them
+with every figure.
 ``--kernels numba`` sets ``METHODGEN_KERNELS=numba`` (every kernel compiled by numba: the route
 before methodgen.llvmkernels).
 """
@@ -70,6 +73,9 @@ HEYOKA = textwrap.dedent(r"""
     hy = import_peer("heyoka")
     sc = mg.load_scene(sys.argv[1])
     _, sys_ = heyoka_system(sc.system)
+    if sys.argv[3] == "cold":       # heyoka's disk cache of compiled code: a fresh, empty one
+        import tempfile
+        hy.llvm_state.set_diskcache_path(tempfile.mkdtemp())
     t = time.perf_counter()
     ta = hy.taylor_adaptive(sys_, [float(v) for v in sc.y0], tol=1e-15, compact_mode=sys.argv[2] == "1")
     print(json.dumps({"build": time.perf_counter() - t}))
@@ -112,11 +118,20 @@ def main() -> None:
                           ("outer-solar-system", "1")):
         if only and name not in only:
             continue
-        r = run(HEYOKA, [name, compact], dict(os.environ))
-        r.update(system=name, method="heyoka taylor_adaptive" + (" compact" if compact == "1" else ""))
-        rows.append(r)
-        print(f"{name:<20} {r['method']:<30} " + (f"build {r['build']:.2f} s" if "build" in r else r["error"]),
-              flush=True)
+        # cold: an empty disk cache of heyoka's; warm: its own cache, filled by the run before
+        for state in ("cold", "warm-up", "warm"):
+            r = run(HEYOKA, [name, compact, state], dict(os.environ))
+            if state == "warm-up":
+                continue
+            r.update(system=name, method="heyoka taylor_adaptive" + (" compact" if compact == "1" else ""),
+                     cache=state)
+            rows.append(r)
+            print(f"{name:<20} {r['method'] + ' (' + state + ')':<37} "
+                  + (f"build {r['build']:.2f} s" if "build" in r else r["error"]), flush=True)
+    load = os.getloadavg()
+    print(f"machine: {os.cpu_count()} cores; load average at the end {load[0]:.2f} (1 min), "
+          f"{load[1]:.2f} (5 min)")
+    rows.append({"machine": {"cores": os.cpu_count(), "loadavg": list(load)}})
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=1)

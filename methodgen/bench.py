@@ -90,6 +90,8 @@ WH_PEER_FAMILIES = ("wisdom-holman", "sbab3", "sbab4", "sbab5")
 #: Their step ladder: from the resolution limit (``MAX_STEP_FRACTION`` of the shortest period)
 #: down by √2 per point, at most this many points.
 WH_MAX_POINTS = 10
+#: ``--quick``: points of the Wisdom–Holman ladder, a factor 4 apart (the full ladder's range).
+WH_QUICK_POINTS = 4
 
 
 def _cpu() -> float:
@@ -105,6 +107,28 @@ def _progress(iterable, enabled: bool, desc: str, total: int | None = None):
     except ImportError:
         return iterable
     return tqdm(iterable, desc=desc, total=total, leave=False)
+
+
+class _Say:
+    """Progress lines of a long bench on stderr (``methodgen: bench: …``, elapsed and an
+    estimate of what is left) where no tqdm bar shows it: ``progress`` on and stderr not a
+    terminal (a log, CI).  ``total``: the number of announced items (for the estimate)."""
+
+    def __init__(self, enabled: bool, total: int):
+        self.on = bool(enabled) and not sys.stderr.isatty()
+        self.total = max(int(total), 1)
+        self.done = 0
+        self.t0 = time.perf_counter()
+
+    def __call__(self, text: str) -> None:
+        if not self.on:
+            return
+        el = time.perf_counter() - self.t0
+        left = ("" if self.done == 0 else
+                f", about {el / self.done * max(self.total - self.done, 0):.0f} s left")
+        self.done += 1
+        print(f"methodgen: bench: {text} [{self.done}/{self.total}, {el:.0f} s{left}]",
+              file=sys.stderr, flush=True)
 
 
 # --- the ODE a peer integrates -------------------------------------------------------
@@ -699,6 +723,9 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
         print(f"methodgen: note: the --peers rows of methodgen run at most about {estimate:.3g} steps in all "
               f"({len(jobs)} method/order pairs; a row under 5 s runs 3 times for its CPU minimum)",
               file=sys.stderr)
+    n_wh = 0 if (scene.nbody is None or scene.nbody.centre_mass is not None) else 2 * len(WH_PEER_FAMILIES) - 1
+    n_hy = len(pe.QUICK_HEYOKA_TOLERANCES if quick else pe.HEYOKA_TOLERANCES)
+    say = _Say(progress, len(jobs) + len(projected) + n_wh + n_hy + 1)
     for method, order, project in _progress([(m, o, None) for m, o in jobs]
                                             + [("stormer-verlet", o, "energy-standard") for o in projected],
                                             progress, "methodgen"):
@@ -706,6 +733,7 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
         if project is not None and processed:
             continue
         label = row_label(method, order, family) + (" + standard projection" if project else "")
+        say(label)
         try:
             # a processed composition is three cache modules (path None), the others one file;
             # a projected one is the cache's (its key names the projection)
@@ -770,13 +798,26 @@ def _work_precision_peers(scene: Scene, methods, *, quick: bool, T: float | None
                 break
     if scene.transformed is not None and scene.transformed.time_transform.form == "log":
         rows += _log_form_rows(scene, jobs, T, ref, monitors, base, used, quick, notes, progress, family_for)
-    rows += _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes)
+    rows += _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes, say)
     for name, fn in (("heyoka", pe.heyoka_rows), ("rebound", pe.rebound_rows)):
         if pe.import_peer(name) is None:
             notes.append(f"{name} is not installed: no {name} rows ({pe.INSTALL_HINT})")
             continue
         try:
-            rows += fn(scene, base, y0, T, ref.y, errors)
+            if name == "heyoka":
+                tols = pe.QUICK_HEYOKA_TOLERANCES if quick else pe.HEYOKA_TOLERANCES
+                if quick:
+                    left = [t for t in pe.HEYOKA_TOLERANCES if t not in tols]
+                    notes.append(f"--quick: heyoka at tol {', '.join(f'{t:g}' for t in tols)} only "
+                                 f"(left out: {', '.join(f'{t:g}' for t in left)})")
+                got = fn(scene, base, y0, T, ref.y, errors, tolerances=tols, say=say)
+                if any("model.nbody" in r["method"] for r in got):
+                    notes.append("heyoka runs its own N-body model (model.nbody: the peer's best "
+                                 "formulation), not our translation of H's vector field")
+                rows += got
+            else:
+                say(name)
+                rows += fn(scene, base, y0, T, ref.y, errors)
         except pe.PeerUnsupported as exc:
             notes.append(str(exc))
     notes.append("scipy solve_ivp and fsolve rows are left out with --peers (run without --peers for them)")
@@ -802,7 +843,7 @@ def _ladder_stop(err: float, best: float, plateau: bool, label: str, h: float, n
     return False, min(best, err)
 
 
-def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list[dict]:
+def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes, say=None) -> list[dict]:
     """``--peers`` rows of the Wisdom–Holman splittings (:data:`WH_PEER_FAMILIES`) on a scene whose
     ``[nbody]`` table has several free bodies (none about a fixed centre: one body about a centre
     is solved exactly by the Kepler drift, which would not be a comparison).  Timed for the end
@@ -821,6 +862,12 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
     rows = []
     jobs = [(f, None) for f in WH_PEER_FAMILIES] + [(f, "energy-output") for f in WH_PEER_FAMILIES
                                                     if f != "wisdom-holman"]
+    if quick:
+        # the quick ladder spans the full one's range in fewer, larger strides (a ladder of its
+        # two largest steps never reached the useful step: its 1e-10 row read "12x behind")
+        notes.append(f"--quick: the Wisdom–Holman families run at h = top/4^k, k < {WH_QUICK_POINTS} "
+                     f"(top: {MAX_STEP_FRACTION:g} of the shortest period), stopping at error "
+                     f"{PEER_ERROR_FLOOR:g}; the full bench runs √2 strides ({WH_MAX_POINTS} points)")
     for family, project in jobs:
         corrected = family != "wisdom-holman"
         try:
@@ -830,7 +877,10 @@ def _wisdom_holman_rows(scene, y0, T, ref, monitors, base, quick, notes) -> list
             notes.append(f"{family}: not run ({' '.join(str(exc).split())})")
             return rows
         label = f"{wh.METHOD} (Wisdom–Holman)"
-        ladder = [top / 2 ** (k / 2) for k in range(2 if quick else WH_MAX_POINTS)]
+        if say is not None:
+            say(label + (f", projected ({project})" if project else ""))
+        ladder = ([top / 4 ** k for k in range(WH_QUICK_POINTS)] if quick
+                  else [top / 2 ** (k / 2) for k in range(WH_MAX_POINTS)])
         best = math.inf
         wh.integrate(y0, ladder[0], 1)     # load the compiled runtime outside the timed region
         for h in ladder:

@@ -29,7 +29,6 @@ Python's ``inspect.findsource`` and ``linecache`` (the stale-text behaviour this
 from __future__ import annotations
 
 import ast
-import copy
 import hashlib
 import os
 import threading
@@ -42,7 +41,7 @@ SOURCE_ATTR = "__methodgen_source__"
 
 _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 _LOCK = threading.Lock()
-#: sha256 -> parsed module (the ast is never handed out: callers get deep copies)
+#: sha256 -> parsed module
 _TREES: dict = {}
 #: sha256 -> compiled module code (to verify a file against a function's code object)
 _CODES: dict = {}
@@ -189,8 +188,11 @@ def cache_digest(fn) -> str | None:
 
 
 def function_def(fn) -> ast.FunctionDef:
-    """The definition of ``fn`` in the text it was compiled from (a fresh copy: the caller may
-    change it).
+    """The definition of ``fn`` in the text it was compiled from.
+
+    Shared and read-only (the translator only reads it): one parse of a module's text serves
+    all its kernels, where a copy per call cost a tenth of a second of a large module's first
+    use.
 
     Raises
     ------
@@ -199,6 +201,11 @@ def function_def(fn) -> ast.FunctionDef:
     """
     text, sha, _ = source_of(fn)
     _, code = _unwrap(fn)
+    key = (sha, code.co_name, code.co_firstlineno)
+    with _LOCK:
+        got = _DEFS.get(key)
+    if got is not None:
+        return got
     with _LOCK:
         tree = _TREES.get(sha)
     if tree is None:
@@ -209,5 +216,11 @@ def function_def(fn) -> ast.FunctionDef:
         if isinstance(node, ast.FunctionDef) and node.name == code.co_name:
             first = min([node.lineno] + [d.lineno for d in node.decorator_list])
             if code.co_firstlineno in (node.lineno, first):
-                return copy.deepcopy(node)
+                with _LOCK:
+                    _DEFS[key] = node
+                return node
     raise StaleSource(f"no definition of {code.co_name} at line {code.co_firstlineno} in its source")
+
+
+#: (sha256, name, first line) -> the function's definition in that text
+_DEFS: dict = {}

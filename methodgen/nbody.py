@@ -770,7 +770,8 @@ class WisdomHolman:
         if y0.shape != (6 * N,):
             raise InputError(f"y0 must have shape ({6 * N},) (q then p of {N} bodies), got {y0.shape}")
         if not np.all(np.isfinite(y0)):
-            raise InputError("y0 has a non-finite entry")
+            j = int(np.flatnonzero(~np.isfinite(y0))[0])
+            raise InputError(f"y0 has a non-finite entry: {self.STATE_NAMES[j]} = {float(y0[j])!r}")
         self._check_positions(y0)
         if isinstance(h, bool) or not isinstance(h, (int, float, np.floating, np.integer)) \
                 or not np.isfinite(h) or h == 0:

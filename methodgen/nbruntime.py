@@ -60,6 +60,7 @@ from .llvmkernels import LLVMKernel
 from .nbcache import flush_deferred as _flush_deferred
 from .nbcache import install_stamp_guard as _install_stamp_guard
 from .nbcache import source_digest as _source_digest
+from .progress import phase
 
 __all__ = ["run", "handle", "KernelHandle", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256",
            "no_kernel", "stack_buffer", "run_loop", "stand_in"]
@@ -771,7 +772,10 @@ def loop_for(n=None):
     (solver "reuse", kernels numba compiled, ``METHODGEN_FUSED=0``): one copy, compiled once."""
     f = _COMPILED.get(None)
     if f is None:
-        with warnings.catch_warnings():
+        # minutes and ~1 GB on a loaded machine the first time (then numba's cache): reported as
+        # a phase like every other (a line on the CLI's stderr past 2 s; progress.install for
+        # the API), never silent
+        with phase("compile runtime (once per machine)"), warnings.catch_warnings():
             # numba calls first-class function types experimental; the runtime is built on them
             # and tested, and the warning would reach users once per machine
             warnings.simplefilter("ignore", numba.core.errors.NumbaExperimentalFeatureWarning)

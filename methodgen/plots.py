@@ -495,4 +495,4 @@ _ORDER_MARKERS = {2: "o", 4: "v", 6: "^", 8: "P", 10: "*"}
 #: Line styles of the peers of ``methodgen bench --peers`` (by row ``kind``).
 _PEER_STYLES = {"heyoka": "s--", "rebound": "D--"}
 #: Colours of the peers (by row ``method``): none of them is used for methodgen's methods.
-_PEER_COLORS = {"heyoka (Taylor)": "black", "REBOUND IAS15": "tab:olive", "REBOUND WHFast": "tab:gray"}
+_PEER_COLORS = {"heyoka (Taylor)": "black", "heyoka (Taylor) model.nbody": "black", "REBOUND IAS15": "tab:olive", "REBOUND WHFast": "tab:gray"}

@@ -371,6 +371,10 @@ class PoissonSystem:
         linear in the unknown coefficients of C; its nullspace (reduced row-echelon basis,
         quadratic monomials first) gives the Casimirs, each then reduced to 0 exactly.
         Empty when S is not rational in y (the search is not made) or has none.
+        Casimirs that are not polynomials of degree ≤ 2 are not searched for (``Σ log y_i``
+        of the 3-d Lotka–Volterra system): declare them as invariants (``invariants=`` here,
+        ``[invariants]`` in a scene) -- they are then monitored, ``verify`` decides that they
+        are first integrals, and a method claims them where it keeps them.
         Names: ``C`` for one, ``C1, C2, …`` for several (a name already used by the state,
         a parameter or a declared invariant gets the suffix ``_S``); a Casimir equal to a
         declared invariant is left out (the declared name is used).

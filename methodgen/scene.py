@@ -180,6 +180,10 @@ class Scene:
         return {"stages": s} if s is not None and method in stage_methods() else {}
 
 
+#: [system] keys with which a user gives a vector field instead of H (refused with the scope)
+_FIELD_KEYS = frozenset({"f", "F", "rhs", "field", "ode", "odes", "dydt", "ydot", "vector_field", "xdot"})
+
+
 def _check_keys(table: dict, allowed: dict, where: str) -> None:
     unknown = sorted(set(table) - set(allowed))
     if unknown:
@@ -361,6 +365,15 @@ def parse_scene(data: dict, source: str, path: Path | None = None, builtin: bool
     _check_keys(data, _TOP, "the scene")
     name = _require(data, "name", "the scene")
     system_t = _require(data, "system", "the scene")
+    if "H" not in system_t and set(system_t) & _FIELD_KEYS:
+        raise SceneError(
+            f"[system] gives a vector field ({', '.join(sorted(set(system_t) & _FIELD_KEYS))}) and no H: "
+            "methodgen integrates Hamiltonian systems only -- H with q and p (canonical), or H with "
+            "a skew-symmetric structure matrix S and state y (Poisson: y' = S(y)∇H(y)). A field "
+            "that is not of that form (the ABC flow, a dissipative system) is out of scope: if you "
+            "know an H and S with f = S∇H, give those; otherwise use a general ODE solver "
+            "(scipy.integrate.solve_ivp), or for a divergence-free field a volume-preserving "
+            "splitting method")
     _check_keys(system_t, _SYSTEM, "[system]")
     params_t = data.get("params", {})
     for k, v in params_t.items():

@@ -151,7 +151,7 @@ def test_bench_rows_of_peers_have_the_columns_of_methodgens(kepler_peers):
     kinds = {r["kind"] for r in rows}
     assert kinds == {"methodgen", "heyoka", "rebound"}
     assert {r["method"] for r in rows if r["kind"] == "rebound"} == {"REBOUND IAS15", "REBOUND WHFast"}
-    assert sorted(r["tol"] for r in rows if r["kind"] == "heyoka") == sorted(peers.HEYOKA_TOLERANCES)
+    assert sorted(r["tol"] for r in rows if r["kind"] == "heyoka") == sorted(peers.QUICK_HEYOKA_TOLERANCES)
     columns = {"method", "kind", "steps", "seconds", "error", "energy_error", "energy_rel_error",
                "invariant_errors"}
     for r in rows:
@@ -310,3 +310,66 @@ def test_timed_repeats_start_from_the_same_state(tmp_path, monkeypatch):
     a = module.integrate(y0, 0.05, 200, info=info, check_resolution=False)
     b = module.integrate(y0, 0.05, 200, info=info, check_resolution=False)
     assert not np.array_equal(a, b)
+
+
+def test_heyoka_runs_its_own_nbody_model_on_nbody_scenes():
+    """On an [nbody] scene of free bodies heyoka runs model.nbody (its best formulation), its
+    (x, v) state mapped to our (q, p = m v): the same trajectory as heyoka on our translation
+    of H's field.  Negative control: a model with one mass changed is caught."""
+    hy = pytest.importorskip("heyoka")
+    import types
+
+    from test_wisdom_holman import star_and_planets
+
+    system, nbody, y0 = star_and_planets(1e-3, 2)
+    scene = types.SimpleNamespace(nbody=nbody, system=system, y0=tuple(y0))
+    module = mg.generate(mg.discretize(system, "stormer-verlet"))
+    got = peers.heyoka_nbody(scene, module)
+    assert got is not None
+    sys_, to_h, from_h = got
+    assert np.array_equal(from_h(to_h(y0)), y0)
+    T = 3.0
+
+    def final(sys_, s0, back):
+        ta = hy.taylor_adaptive(sys_, [float(v) for v in s0], tol=1e-15)
+        ta.propagate_until(T)
+        return back(ta.state)
+
+    ours = final(peers.heyoka_system(system)[1], y0, np.array)
+    theirs = final(sys_, to_h(y0), from_h)
+    assert np.max(np.abs(ours - theirs)) < 1e-12
+    wrong = hy.model.nbody(3, masses=[1.0, 1e-3, 2e-3], Gconst=1.0)
+    assert np.max(np.abs(final(wrong, to_h(y0), from_h) - ours)) > 1e-6
+    # a fixed centre (the kepler scene's declaration) is not model.nbody's: the translation is used
+    kepler = mg.load_scene("kepler")
+    assert peers.heyoka_nbody(kepler, mg.generate(mg.discretize(kepler.system, "stormer-verlet"))) is None
+
+
+def test_quick_wisdom_holman_ladder_spans_the_full_range(tmp_path):
+    """--quick runs each Wisdom–Holman family on a ladder a factor 4 apart (the full ladder's
+    range, so the useful step is on it) and says so; control: the full ladder's √2 strides."""
+    import math
+
+    from test_wisdom_holman import star_and_planets
+
+    system, nbody, y0 = star_and_planets(1e-3, 2)
+    text = ['name = "star2"', 'description = "a star and two planets"', "[system]",
+            f'H = "{system.source}"', f"q = {[s.name for s in system.q]}", f"p = {[s.name for s in system.p]}",
+            "[params]"] + [f"{k} = {v!r}" for k, v in system.param_values.items()] + \
+           ["[nbody]", 'G = "G"', f"masses = {list(nbody.masses)}", "[run]", 'method = ["stormer-verlet"]',
+            "h = 0.05", "steps = 100", f"y0 = {[float(v) for v in y0]}"]
+    path = tmp_path / "star2.toml"
+    path.write_text("\n".join(text).replace("'", '"') + "\n")
+    scene = mg.load_scene(path)
+    T = 20.0
+    ref = bench.reference(scene.system, y0, T)
+    base = mg.generate(mg.discretize(scene.system, "stormer-verlet"))
+    for quick, ratio in ((True, 4.0), (False, math.sqrt(2))):
+        notes = []
+        rows = bench._wisdom_holman_rows(scene, y0, T, ref, None, base, quick, notes)
+        hs = [r["h"] for r in rows if r["base_method"] == "sbab3" and "project" not in r]
+        assert len(hs) >= 2
+        for a, b in zip(hs, hs[1:]):
+            assert a / b == pytest.approx(ratio, rel=0.05)
+        assert len(hs) <= (bench.WH_QUICK_POINTS if quick else bench.WH_MAX_POINTS)
+        assert any(n.startswith("--quick: the Wisdom–Holman") for n in notes) == quick

@@ -122,3 +122,15 @@ def test_numba_equals_numpy(gauss):
     pytest.importorskip("numba")
     a, b = gauss("henon-heiles-2d", 3), gauss("henon-heiles-2d", 3, "numba")
     assert np.abs(a.integrate(HH_Y0, 0.2, 200) - b.integrate(HH_Y0, 0.2, 200)).max() < 1e-13
+
+
+def test_gauss_on_a_large_system_says_its_newton_is_dense():
+    """Where Gauss is offered for many degrees of freedom (two bodies in 3-D: 2d = 12) its
+    notes say the stage Newton is dense and name the cheaper choices; control: not for 2 DOF."""
+    from methodgen.bench import nbody_system
+
+    big = mg.discretize(nbody_system(2, 1.0, [1.0, 1e-3]), "gauss", stages=2)
+    note = [n for n in big.traits.notes if "dense linear system" in n]
+    assert note and "24 unknowns" in note[0] and "Störmer–Verlet" in note[0] and "Wisdom–Holman" in note[0]
+    small = mg.discretize(mg.load_scene("henon-heiles-2d").system, "gauss", stages=2)
+    assert not [n for n in small.traits.notes if "dense linear system" in n]

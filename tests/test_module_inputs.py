@@ -138,3 +138,17 @@ def test_info_dict_is_filled(modules, kepler):
     info = {}
     mod.integrate(Y0, 0.01, 3, info=info)
     assert info["newton_iterations"].shape == (3,) and info["compensation"].shape == (6,)
+
+
+def test_a_non_finite_batch_row_is_named():
+    """A batch y0 with NaN names the row and the component (a batch of thousands is otherwise
+    searched by hand); a single state names the component.  Control: the finite batch runs."""
+    mod = mg.generate(mg.discretize(mg.load_scene("harmonic").system, "midpoint"))
+    Y = np.ones((5, 2))
+    mod.integrate(Y, 0.1, 2)                                  # control
+    Y[3, 1] = np.nan
+    Y[4, 0] = np.inf
+    with pytest.raises(ValueError, match=r"row 3, p = nan \(2 of its 5 rows are not finite\)"):
+        mod.integrate(Y, 0.1, 2)
+    with pytest.raises(ValueError, match=r"y0 contains NaN or infinite values: q = inf"):
+        mod.integrate(np.array([np.inf, 0.0]), 0.1, 2)

@@ -313,3 +313,20 @@ def test_scene_errors(tmp_path):
     path.write_text(base + 'y = ["u", "v", "w"]\nS = [["0", "u", "0"], ["-u", "0", "0"], ["0", "0", "0"]]\n')
     with pytest.raises(mg.SceneError, match="y0 has 2 values but the state"):
         mg.load_scene(path)
+
+
+def test_a_non_polynomial_casimir_is_declared_and_then_proved():
+    """The Casimir search covers polynomials of degree ≤ 2 only: log u + log v + log w of the
+    3-d Lotka–Volterra system is not found, and declared it is proved a first integral (about
+    the exact flow).  Negative control: a declared log u + log v is refuted."""
+    from methodgen.verify.report import FLOW
+
+    kw = dict(y=["u", "v", "w"], S=[["0", "u*v", "-u*w"], ["-u*v", "0", "v*w"], ["u*w", "-v*w", "0"]])
+    H = "u + v + w - log(u) - log(v) - log(w)"
+    assert mg.PoissonSystem(H, **kw).casimirs() == ()
+    lv = mg.PoissonSystem(H, invariants={"C": "log(u) + log(v) + log(w)"}, **kw)
+    (cert,) = mg.verify(mg.discretize(lv, "avf")).find("declared invariant C")
+    assert cert.status == "proved" and cert.subject == FLOW
+    wrong = mg.PoissonSystem(H, invariants={"C": "log(u) + log(v)"}, **kw)
+    (cert,) = mg.verify(mg.discretize(wrong, "avf")).find("declared invariant C")
+    assert cert.status == "refuted"

@@ -74,3 +74,21 @@ def test_method_that_does_not_apply_lists_those_that_do():
     assert mg.discretize(aniso, "energy-momentum").traits.energy_preserving
     with pytest.raises(mg.InputError, match="known methods"):
         mg.discretize(nonsep, "rk4")
+
+
+def test_a_vector_field_without_h_is_out_of_scope(tmp_path):
+    """A scene that gives a vector field (the ABC flow) instead of H is refused with the scope:
+    Hamiltonian and Poisson systems only, and what to use instead.  Control: an unknown key
+    beside H is the usual unknown-key error."""
+    from methodgen.errors import SceneError
+
+    path = tmp_path / "abc.toml"
+    path.write_text('name = "abc"\ndescription = "ABC flow"\n[system]\n'
+                    'f = ["sin(z) + cos(y)", "sin(x) + cos(z)", "sin(y) + cos(x)"]\ny = ["x", "y", "z"]\n'
+                    '[run]\ny0 = [0.1, 0.2, 0.3]\n')
+    with pytest.raises(SceneError, match="Hamiltonian systems only.*out of scope.*solve_ivp"):
+        mg.load_scene(path)
+    path.write_text('name = "h"\ndescription = "x"\n[system]\nH = "p**2/2 + q**2/2"\nq = ["q"]\np = ["p"]\n'
+                    'f = ["p"]\n[run]\ny0 = [0.1, 0.2]\n')
+    with pytest.raises(SceneError, match=r"unknown key\(s\) \['f'\]"):
+        mg.load_scene(path)

@@ -493,6 +493,10 @@ def test_bad_input_and_collisions_are_errors(mild):
     y[6:9] = y[3:6]                     # two planets at the same place: not a state of H
     with pytest.raises(InputError, match="same place"):
         wh.integrate(y, 0.1, 5)
+    y = y0.copy()
+    y[10] = np.nan                      # the non-finite entry is named
+    with pytest.raises(InputError, match=f"non-finite entry: {wh.STATE_NAMES[10]} = nan"):
+        wh.integrate(y, 0.1, 5)
 
 
 def test_outer_solar_system_with_the_corrector():

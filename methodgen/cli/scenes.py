@@ -44,6 +44,9 @@ def cmd_methods(args) -> int:
     else:
         for r in rows:
             print(f"{r['name']:<18} {r['summary']}")
+        print("\ngauss and energy-collocation solve a dense Newton system of s·2d unknowns every "
+              "iteration (LU: O((s·2d)³) a step): on many bodies prefer stormer-verlet --order 8/10, "
+              "or a Wisdom–Holman splitting ([nbody] scenes)")
         others = [r["name"] for r in rows if not r["composable"]]
         print(f"\nhigher order: --order {'/'.join(map(str, high))} (scene: [run] order) composes a "
               f"symmetric order-2 method symmetrically; the method's exact invariants and symplecticity "

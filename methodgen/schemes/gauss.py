@@ -116,6 +116,12 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
     preserved = quadratic_invariants(system)
     notes = (f"{stages}-stage Gauss–Legendre collocation; coefficients from the exact "
              "nodes (roots of the shifted Legendre polynomial), rounded to float64",)
+    if n >= 12:
+        # said where Gauss is offered for a large system: its stage Newton is dense
+        notes += (f"each Newton iteration solves a dense linear system of s·2d = {stages * n} unknowns "
+                  f"(an LU of O({stages * n}³) a step): for N-body problems Störmer–Verlet composed to "
+                  "order 8 or 10 (explicit, symplectic) or a Wisdom–Holman splitting (a dominant mass) "
+                  "costs far less for the same accuracy",)
     if "H" in preserved:
         # stated where H is claimed: the float64 module drifts (measured, see README)
         notes += ("H (quadratic) exact in exact arithmetic; in float64 it drifts linearly: "

@@ -39,7 +39,7 @@ try:  # guarded quotient n/d (0 where d = 0), used by newer Gonzalez forms
     from ..special import safe_div
 except ImportError:  # pragma: no cover - older special.py
     safe_div = None
-from .report import NUMERICAL, PROVED, REFUTED, Certificate
+from .report import METHOD, NUMERICAL, PROVED, REFUTED, Certificate
 
 __all__ = ["certify", "reduce_to_zero", "find_counterexample", "numerical_check", "Domain",
            "fmt_point"]
@@ -495,7 +495,17 @@ def _show(exprs) -> tuple[str, str]:
 
 
 def certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
-            shown=None, tol: float = 1e-12, details: dict | None = None) -> Certificate:
+            shown=None, tol: float = 1e-12, details: dict | None = None,
+            subject: str = METHOD) -> Certificate:
+    """Decide whether ``expr`` vanishes identically (see :func:`_certify`); ``subject``: what the
+    claim is about, the method (default) or the exact flow (:data:`~.report.FLOW`)."""
+    cert = _certify(claim, expr, domain, ref, shown=shown, tol=tol, details=details)
+    cert.subject = subject
+    return cert
+
+
+def _certify(claim: str, expr, domain: Domain | None = None, ref: str = "", *,
+             shown=None, tol: float = 1e-12, details: dict | None = None) -> Certificate:
     """Decide whether ``expr`` (scalar, list or Matrix) vanishes identically.
 
     Parameters

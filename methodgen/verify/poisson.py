@@ -36,7 +36,7 @@ import sympy as sp
 from ..derive import casimir_invariants, gradient, structure_matrix
 from .common import at, system_domain, y1_symbols
 from .exact import certify
-from .report import PROVED, REFUTED, Certificate
+from .report import FLOW, PROVED, REFUTED, Certificate
 
 __all__ = ["skew_certificate", "jacobi_certificate", "casimir_certificate", "casimir_certificates",
            "structure_symmetry", "kahan_conditions", "REF_POISSON", "LOST_WITHOUT_JACOBI"]
@@ -53,7 +53,7 @@ def skew_certificate(system, S: sp.Matrix | None = None) -> Certificate:
     """``S + Sᵀ ≡ 0`` (``S`` defaults to the system's; pass another for a negative control)."""
     S = structure_matrix(system) if S is None else sp.Matrix(S)
     return certify(f"the structure matrix is skew-symmetric: S + Sᵀ = 0 (S = {S.tolist()})", S + S.T,
-                   system_domain(system), REF_POISSON)
+                   system_domain(system), REF_POISSON, subject=FLOW)
 
 
 def jacobi_certificate(system, S: sp.Matrix | None = None) -> Certificate:
@@ -70,8 +70,9 @@ def jacobi_certificate(system, S: sp.Matrix | None = None) -> Certificate:
              "is a Poisson map)")
     if not triples:
         return Certificate(claim, PROVED, "0", "0", "n = 2: no triple of distinct indices (every skew 2×2 "
-                           "matrix satisfies it)", 0.0, REF_POISSON, {"triples": 0})
-    cert = certify(claim, sums, system_domain(system), REF_POISSON, details={"triples": len(triples)})
+                           "matrix satisfies it)", 0.0, REF_POISSON, {"triples": 0}, subject=FLOW)
+    cert = certify(claim, sums, system_domain(system), REF_POISSON, details={"triples": len(triples)},
+                   subject=FLOW)
     if cert.status != PROVED:
         bad = next((t for t, e in zip(triples, sums) if sp.expand(e) != 0), None)
         if bad is not None:
@@ -86,7 +87,7 @@ def casimir_certificate(system, name: str, expr: sp.Expr) -> Certificate:
     S = structure_matrix(system)
     g = sp.Matrix([sp.diff(expr, s) for s in system.y])
     return certify(f"{name} = {expr} is a Casimir of S: S∇{name} ≡ 0 (a first integral for every H)",
-                   S * g, system_domain(system), REF_POISSON, details={"casimir": name})
+                   S * g, system_domain(system), REF_POISSON, details={"casimir": name}, subject=FLOW)
 
 
 def casimir_certificates(system) -> list[Certificate]:
