@@ -49,6 +49,10 @@ from functools import lru_cache
 import mpmath as mp
 import sympy as sp
 
+from .series import exp as _exp
+from .series import log as _log
+from .series import mul as _mul
+
 __all__ = ["Composition", "FAMILIES", "ALL_FAMILIES", "ORDERS", "DEFAULT_FAMILY", "composition", "order_defects",
            "sequence_defects",
            "achieved_order", "error_constant", "efficiency", "triple_jump_exact"]
@@ -177,45 +181,6 @@ def composition(order: int, family: str | None = None) -> Composition:
 
 
 # --- order conditions in the truncated free associative algebra ----------------------
-
-def _mul(a: dict, b: dict, wmax: int, weight=sum) -> dict:
-    """Product of two truncated series {word: coefficient}, keeping words of ``weight`` ≤
-    ``wmax`` (``sum``: words of generator weights, as here; ``len``: words over letters, the
-    degree in :mod:`methodgen.splittings`)."""
-    out: dict = {}
-    for u, x in a.items():
-        wu = weight(u)
-        for v, y in b.items():
-            if wu + weight(v) <= wmax:
-                w = u + v
-                out[w] = out.get(w, 0) + x * y
-    return out
-
-
-def _exp(Y: dict, wmax: int) -> dict:
-    out, term = {(): mp.mpf(1)}, {(): mp.mpf(1)}
-    for n in range(1, wmax + 1):
-        term = {k: v / n for k, v in _mul(term, Y, wmax).items()}
-        if not term:
-            break
-        for k, v in term.items():
-            out[k] = out.get(k, 0) + v
-    return out
-
-
-def _log(P: dict, wmax: int, weight=sum) -> dict:
-    """``log P`` of a truncated series with constant term 1 (``weight``: see :func:`_mul`)."""
-    Z = {k: v for k, v in P.items() if k != ()}     # P - 1 (P has constant term 1)
-    out: dict = {}
-    power = {(): mp.mpf(1)}
-    for n in range(1, wmax + 1):
-        power = _mul(power, Z, wmax, weight)
-        if not power:
-            break
-        for k, v in power.items():
-            out[k] = out.get(k, 0) + (v if n % 2 else -v) / n
-    return out
-
 
 def log_composition(gammas, wmax: int) -> dict:
     """``log Ψ`` up to weight ``wmax``, as {word (tuple of odd generator weights): coefficient}."""

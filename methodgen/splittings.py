@@ -238,9 +238,9 @@ def log_splitting(kicks, drifts, wmax: int) -> dict:
     factor first; words are written in that product order, so the first flow applied is
     the word's last letter."""
     # the truncated-series product and log of the composition order conditions, with words
-    # truncated by their length (the degree) instead of their generator weights; imported
-    # here because methodgen.compositions imports this module
-    from .compositions import _log, _mul
+    # truncated by their length (the degree) instead of their generator weights
+    from .series import log as _log
+    from .series import mul as _mul
 
     with mp.workdps(DPS):
         P = {(): mp.mpf(1)}
