@@ -41,6 +41,7 @@ import sympy as sp
 from .errors import InputError
 from .parse import check_name, check_smooth, parse_expr
 from .special import fold_removable_quotients
+from .zeros import _zero_status
 from .problem import DeclaredInvariant, _names, param_values
 
 __all__ = ["PoissonSystem", "JacobiResult", "Casimir", "is_poisson"]
@@ -80,8 +81,6 @@ def is_poisson(system) -> bool:
 
 def _zero(expr: sp.Expr) -> str:
     """``"zero"`` (reduced exactly), ``"nonzero"`` (clearly nonzero at a sample point) or ``"unknown"``."""
-    from .derive import _zero_status
-
     return _zero_status(sp.sympify(expr), None, simplify_limit=400)
 
 
