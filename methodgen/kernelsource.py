@@ -41,13 +41,24 @@ SOURCE_ATTR = "__methodgen_source__"
 
 _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 _LOCK = threading.Lock()
-#: sha256 -> parsed module
+#: sha256 -> parsed module (the last few: a kernel's definition is kept in _DEFS)
 _TREES: dict = {}
 #: sha256 -> compiled module code (to verify a file against a function's code object)
 _CODES: dict = {}
 #: id(code) -> (code, text, sha256, in_package): a verified file, kept with its code object so
 #: the id cannot be reused while the entry lives
 _VERIFIED: dict = {}
+
+
+def _remember(store: dict, key, value, keep: int):
+    """``store[key] = value``, dropping the oldest entries past ``keep`` (a regenerating
+    process -- a sweep, a bench -- must not keep every module's parse tree: ~70x its text)."""
+    with _LOCK:
+        store.pop(key, None)
+        store[key] = value
+        while len(store) > keep:
+            del store[next(iter(store))]
+    return value
 
 
 class StaleSource(Exception):
@@ -114,14 +125,12 @@ def _verified_file(code: types.CodeType):
             module_code = compile(text, filename, "exec", dont_inherit=True)
         except SyntaxError as exc:
             raise StaleSource(f"{filename}: the file no longer compiles ({exc})") from None
-        with _LOCK:
-            _CODES[(sha, filename)] = module_code
+        _remember(_CODES, (sha, filename), module_code, 8)
     found = _find_code(module_code, code.co_name, code.co_firstlineno)
     if found is None or not _same_code(found, code):
         raise StaleSource(f"{filename}: the file has changed since {code.co_name} was imported")
     entry = (code, text, sha, os.path.abspath(filename).startswith(_PACKAGE))
-    with _LOCK:
-        _VERIFIED[id(code)] = entry
+    _remember(_VERIFIED, id(code), entry, 256)
     return entry[1:]
 
 
@@ -162,9 +171,7 @@ def source_of(fn) -> tuple[str, str, bool]:
         with _LOCK:
             sha = _TEXT_SHA.get(id(text))
         if sha is None or sha[0] is not text:
-            sha = (text, _sha(text))
-            with _LOCK:
-                _TEXT_SHA[id(text)] = sha
+            sha = _remember(_TEXT_SHA, id(text), (text, _sha(text)), 64)
         return text, sha[1], True
     text, sha, in_package = _verified_file(code)
     return text, sha, in_package
@@ -209,16 +216,12 @@ def function_def(fn) -> ast.FunctionDef:
     with _LOCK:
         tree = _TREES.get(sha)
     if tree is None:
-        tree = ast.parse(text)
-        with _LOCK:
-            _TREES[sha] = tree
+        tree = _remember(_TREES, sha, ast.parse(text), 4)
     for node in ast.walk(tree):
         if isinstance(node, ast.FunctionDef) and node.name == code.co_name:
             first = min([node.lineno] + [d.lineno for d in node.decorator_list])
             if code.co_firstlineno in (node.lineno, first):
-                with _LOCK:
-                    _DEFS[key] = node
-                return node
+                return _remember(_DEFS, key, node, 1024)
     raise StaleSource(f"no definition of {code.co_name} at line {code.co_firstlineno} in its source")
 
 

@@ -298,7 +298,25 @@ def test_an_edited_carried_force_is_refused(sv4, sv4_numba, backend):
     assert np.array_equal(np.concatenate([part, mod.integrate(part[-1], H, 30, info=copied)[1:]]), whole)
     kept = info["force"][4].copy()
     info["force"][4][...] *= 1.5
-    with pytest.raises(ValueError, match=r"relative difference 0.5, tolerance 1e-08"):
+    with pytest.raises(ValueError, match=r"relative difference 0.5 in a component, tolerance 1e-08"):
         mod.integrate(part[-1], H, 30, info=info)
     info["force"][4][...] = kept                    # control: the record as it was left
     assert np.array_equal(np.concatenate([part, mod.integrate(part[-1], H, 30, info=info)[1:]]), whole)
+
+
+def test_an_edited_small_component_is_refused(tmp_path):
+    """The tolerance is per component: a light body's small force component ×1000 is refused
+    although it is far below the largest component; control: the record as left is used."""
+    mod = mg.generate(mg.discretize(mg.Hamiltonian("(p1**2 + p2**2)/2 + q1**2/2 + 1e-12*q2**2/2",
+                                                   ["q1", "q2"], ["p1", "p2"]), "stormer-verlet"),
+                      tmp_path / "light.py")
+    y0 = np.array([0.6, 1.0, 0.1, 0.2])
+    info = {}
+    part = mod.integrate(y0, 0.1, 10, info=info)
+    kept = info["force"][4].copy()
+    info["force"][4][..., 1] *= 1000
+    with pytest.raises(ValueError, match="is not the force ∇U at its state"):
+        mod.integrate(part[-1], 0.1, 10, info=info)
+    info["force"][4][...] = kept                    # control: the record as it was left
+    whole = mod.integrate(y0, 0.1, 20)
+    assert np.array_equal(np.concatenate([part, mod.integrate(part[-1], 0.1, 10, info=info)[1:]]), whole)

@@ -99,8 +99,12 @@ class _Term:
 
 def _quadratic_form(expr: sp.Expr, q) -> bool:
     """A homogeneous quadratic polynomial in q (no linear or constant part)."""
+    fs = expr.free_symbols
+    present = [v for v in q if v in fs]   # (a Poly in all of q is slow for many bodies)
+    if not present:
+        return False
     try:
-        poly = sp.Poly(expr, *q)
+        poly = sp.Poly(expr, *present)
     except sp.PolynomialError:
         return False
     if poly.free_symbols_in_domain & set(q):
@@ -142,6 +146,26 @@ def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr]
                     return E, s, V
                 break
     return None
+
+
+def _same_on_a_level_set(expr: sp.Expr, E: sp.Expr, qs) -> bool:
+    """False when ``expr`` is seen to differ at two rational-direction points of one level set
+    ``E = const`` (30 digits): then it is no function of E.  A cheap rejection before the exact
+    test (a Poly and ``simplify`` of a large sum); True proves nothing."""
+    rest = sorted((expr.free_symbols | E.free_symbols) - set(qs), key=str)
+    par = {v: sp.Rational(5 + i, 4 + i) for i, v in enumerate(rest)}
+    a = {v: sp.Rational(7 + 3 * i, 11 + 2 * i) for i, v in enumerate(qs)}
+    b = {v: sp.Rational(13 - 2 * (i % 5), 9 + i) for i, v in enumerate(qs)}
+    try:
+        Ea, Eb = (complex(E.evalf(30, subs={**a, **par})), complex(E.evalf(30, subs={**b, **par})))
+        if Ea.imag or Eb.imag or Ea.real * Eb.real <= 0:
+            return True
+        t = sp.sqrt(sp.Float(Ea.real, 30) / sp.Float(Eb.real, 30))
+        va = complex(expr.evalf(30, subs={**a, **par}))
+        vb = complex(expr.evalf(30, subs={**{v: t * x for v, x in b.items()}, **par}))
+    except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+        return True
+    return not abs(va - vb) > 1e-12 * max(1.0, abs(va), abs(vb))
 
 
 def _numerically_nonzero(expr: sp.Expr, qs) -> bool:
@@ -282,18 +306,21 @@ def grouped_terms(terms, q) -> list[sp.Expr]:
     if len(quadratic) >= 2:
         add_form(sp.Add(*quadratic))
     out = list(terms)
+    used = {t: t.free_symbols & qset for t in out}
     # the forms over the most coordinates first: a group never splits a larger one
     for E in sorted(forms, key=lambda f: (-len(f.free_symbols & qset), sp.default_sort_key(f))):
         coords = E.free_symbols & qset
-        group = [t for t in out if (t.free_symbols & qset) <= coords]
+        group = [t for t in out if used[t] <= coords]
         if len(group) < 2:
             continue
         total = sp.Add(*group)
-        if _as_function_of_form(total, q) is None:
+        if not _same_on_a_level_set(total, E, sorted(coords, key=str)) or \
+                _as_function_of_form(total, q) is None:
             continue
         first = min(out.index(t) for t in group)
         out = [t for t in out if t not in group]
         out.insert(min(first, len(out)), total)
+        used[total] = total.free_symbols & qset
     return out
 
 
