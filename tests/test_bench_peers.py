@@ -351,17 +351,9 @@ def test_quick_wisdom_holman_ladder_spans_the_full_range(tmp_path):
     full ladder's √2 strides."""
     import math
 
-    from test_wisdom_holman import star_and_planets
+    from test_wisdom_holman import star_scene
 
-    system, nbody, y0 = star_and_planets(1e-3, 2)
-    text = ['name = "star2"', 'description = "a star and two planets"', "[system]",
-            f'H = "{system.source}"', f"q = {[s.name for s in system.q]}", f"p = {[s.name for s in system.p]}",
-            "[params]"] + [f"{k} = {v!r}" for k, v in system.param_values.items()] + \
-           ["[nbody]", 'G = "G"', f"masses = {list(nbody.masses)}", "[run]", 'method = ["stormer-verlet"]',
-            "h = 0.05", "steps = 100", f"y0 = {[float(v) for v in y0]}"]
-    path = tmp_path / "star2.toml"
-    path.write_text("\n".join(text).replace("'", '"') + "\n")
-    scene = mg.load_scene(path)
+    scene, y0 = star_scene(tmp_path)
     T = 20.0
     ref = bench.reference(scene.system, y0, T)
     base = mg.generate(mg.discretize(scene.system, "stormer-verlet"))

@@ -42,6 +42,22 @@ def star_and_planets(eps: float, n_planets: int = 2):
     return system, nbody, y0
 
 
+def star_scene(tmp_path, eps: float = 1e-3, n_planets: int = 2):
+    """:func:`star_and_planets` as a scene file with its ``[nbody]`` table: ``(scene, y0)``."""
+    from methodgen.scene import load_scene
+
+    system, nbody, y0 = star_and_planets(eps, n_planets)
+    text = "\n".join([
+        f'name = "star{n_planets}"', f'description = "a star and {n_planets} planets"', "[system]",
+        f'H = "{system.source}"', f"q = {[s.name for s in system.q]}", f"p = {[s.name for s in system.p]}",
+        "[params]", *(f"{k} = {v!r}" for k, v in system.param_values.items()),
+        "[nbody]", 'G = "G"', f"masses = {list(nbody.masses)}",
+        "[run]", 'method = "stormer-verlet"', "h = 0.05", "steps = 40", f"y0 = {list(map(float, y0))}"])
+    path = tmp_path / f"star{n_planets}.toml"
+    path.write_text(text.replace("'", '"') + "\n")
+    return load_scene(path), y0
+
+
 def reference(system, y0, T):
     """DOP853 at rtol 1e-13 (numerical; ~1e-13 off on these short runs)."""
     from scipy.integrate import solve_ivp
@@ -573,16 +589,7 @@ def test_bench_rows(tmp_path):
     from methodgen.build import build
     from methodgen.scene import load_scene
 
-    system, nbody, y0 = star_and_planets(1e-3)
-    text = "\n".join([
-        'name = "star2"', 'description = "a star and two planets"', "[system]",
-        f'H = "{system.source}"', f"q = {[s.name for s in system.q]}", f"p = {[s.name for s in system.p]}",
-        "[params]", *(f"{k} = {v!r}" for k, v in system.param_values.items()),
-        "[nbody]", 'G = "G"', 'masses = ["m0", "m1", "m2"]',
-        "[run]", 'method = "stormer-verlet"', "h = 0.05", "steps = 40", f"y0 = {list(map(float, y0))}"])
-    path = tmp_path / "star2.toml"
-    path.write_text(text)
-    scene = load_scene(path)
+    scene, y0 = star_scene(tmp_path)
     base = build(scene.system, "stormer-verlet", path=tmp_path / "sv.py")
     ref = bench.reference(scene.system, y0, 2.0)
     notes = []

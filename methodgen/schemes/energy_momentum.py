@@ -67,6 +67,7 @@ from ..derive import _cache, _partials, first_integrals, separable_split
 from ..divdiff import divided_difference
 from ..families import term_families
 from ..problem import Hamiltonian
+from ..zeros import _clearly_nonzero
 from .base import Scheme, Traits, bilinear_invariants, gradient_scheme, loop_family, next_symbol
 from .discrete_gradients import (_is_polynomial, additive_terms, linear_form_gradient,
                                  linear_form_term)
@@ -142,7 +143,9 @@ def _as_function_of_form(term: sp.Expr, q) -> tuple[sp.Expr, sp.Symbol, sp.Expr]
                 if V.has(sp.zoo, sp.nan, sp.oo) or (V.free_symbols & set(q)):
                     continue
                 diff = term - V.xreplace({s: E})
-                if not _numerically_nonzero(diff, qs) and sp.simplify(diff) == 0:
+                # (the project's numerical screen rejects first: simplify of a large sum that is
+                # not a function of the form can take seconds)
+                if not _clearly_nonzero(diff) and sp.simplify(diff) == 0:
                     return E, s, V
                 break
     return None
@@ -166,22 +169,6 @@ def _same_on_a_level_set(expr: sp.Expr, E: sp.Expr, qs) -> bool:
     except (TypeError, ValueError, ZeroDivisionError, OverflowError):
         return True
     return not abs(va - vb) > 1e-12 * max(1.0, abs(va), abs(vb))
-
-
-def _numerically_nonzero(expr: sp.Expr, qs) -> bool:
-    """``expr`` is seen to be nonzero at a rational point (30 digits): a cheap rejection
-    before ``simplify``, which can take seconds on a large sum that is not a function of the
-    form.  Only ever a rejection: a 0 here proves nothing (the exact test follows)."""
-    point = {v: sp.Rational(7 + 3 * i, 11 + 2 * i) for i, v in enumerate(sorted(qs, key=str))}
-    rest = sorted(expr.free_symbols - set(point), key=str)
-    point.update({v: sp.Rational(5 + i, 4 + i) for i, v in enumerate(rest)})
-    try:
-        val = complex(expr.evalf(30, subs=point))
-    except (TypeError, ValueError, ZeroDivisionError, OverflowError):
-        return False
-    scale = max(1.0, max((abs(complex(a.evalf(30, subs=point))) for a in sp.Add.make_args(expr)),
-                         default=1.0))
-    return abs(val) > 1e-20 * scale
 
 
 def _classify(t: sp.Expr, q) -> list[_Term] | None:
