@@ -41,6 +41,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING
 
 from ._version import __version__
+from .abi import STATUS
 from .errors import GenerationError, InputError, StorageError, UntrustedCacheError
 from .kernelsource import SOURCE_ATTR
 from .progress import phase
@@ -227,6 +228,7 @@ def _environment():
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
     from .lower_rows import row_body
 
+    env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.abi)
     env.globals["row_body"] = row_body   # loops over like rows in compiled kernels
     return env
 

@@ -43,7 +43,7 @@ from . import nbabi as _rt
 
 __all__ = ["run_fused", "enabled", "false_alarm"]
 
-_f8, _i8, _V, _M = _rt._f8, _rt._i8, _rt._V, _rt._M
+_f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 _T3 = _t.float64[:, :, ::1]
 
 #: signature of the compiled loop: Y, C, G (B, ·), traj (rows, B, DIM), p, kick_a, drift,

@@ -29,6 +29,7 @@ import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
+from .abi import PostLayout, float_config_sources, int_config_values, post_layout
 from .compensate import compensate, compensation_symbols
 from .lower_loops import (acc_symbol, force_plan, jacobian_row_scales, jacobian_via_sums, loop_prefix, potential_via_sums,
                           sum_pattern, table_names)
@@ -332,6 +333,22 @@ class ModuleIR:
     @property
     def n_constraints(self) -> int:
         return len(self.constraints)
+
+    @property
+    def post(self) -> PostLayout:
+        """Where each value sits in the output of the post kernel (:mod:`methodgen.abi`)."""
+        return post_layout(self)
+
+    @property
+    def int_config(self) -> dict:
+        """The compiled runtime's int configuration, by name (:func:`methodgen.abi.int_config_values`)."""
+        return int_config_values(self)
+
+    @property
+    def float_config(self) -> dict:
+        """The compiled runtime's float configuration, by name, as the Python source of the
+        module's constants (:func:`methodgen.abi.float_config_sources`)."""
+        return float_config_sources(self)
 
     @property
     def unknown_vars(self) -> tuple[str, ...]:

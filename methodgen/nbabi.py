@@ -2,9 +2,9 @@
 and run on its fused loop.
 
 A generated numba module (:mod:`methodgen.nbruntime`'s route) imports this module as ``_rt``.
-It holds the runtime's contract as plain data -- the kernels' signatures
-(:data:`KERNEL_TYPES`, :mod:`methodgen.ktypes`), the layout of the configuration arrays
-(:data:`CFG`, :data:`FCFG`), the status codes -- and :func:`run`, which runs a call on the
+It re-exports the runtime's contract (:mod:`methodgen.abi`: the kernels' signatures
+:data:`KERNEL_TYPES`, the configuration arrays' names :data:`CFG`, :data:`FCFG`, the status
+codes) and holds :func:`run`, which runs a call on the
 module's fused loop (:mod:`methodgen.fused`: machine code from llvmlite, called through
 ctypes) and imports the numba runtime only when that loop does not apply or hands the call
 back.  So a cached module that runs fused never imports numba (0.18 s of a 0.3 s warm start).
@@ -14,8 +14,8 @@ decorators :func:`jit` (a module's few numba-compiled functions), by a kernel th
 cannot translate, and by :mod:`methodgen.nbruntime` (any name not defined here is looked up
 there: ``_rt.stack_buffer`` in a numba-compiled kernel, ``_rt.handle`` …).
 
-:data:`SOURCE_SHA256` covers this file and ``nbruntime.py``: the compiled runtime reads the
-configuration through the positions defined here, so a change of either is a new runtime
+:data:`SOURCE_SHA256` covers this file, ``abi.py`` and ``nbruntime.py``: the compiled runtime reads the
+configuration through the positions defined in :mod:`methodgen.abi`, so a change of any is a new runtime
 (its cached machine code is rebuilt, and modules generated for the old one refuse to load).
 
 This module imports numpy and the standard library only.
@@ -28,7 +28,7 @@ import os
 
 import numpy
 
-from . import ktypes as _t
+from . import abi as _abi
 from . import nbcache as _nbcache
 
 __all__ = ["KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256", "MIN_BATCH", "int_config", "float_config",
@@ -39,74 +39,25 @@ _HERE = os.path.dirname(os.path.abspath(__file__))
 
 def _digest() -> str:
     h = hashlib.sha256()
-    for name in ("nbabi.py", "nbruntime.py"):
+    for name in ("abi.py", "nbabi.py", "nbruntime.py"):
         with open(os.path.join(_HERE, name), "rb") as f:
             h.update(hashlib.sha256(f.read()).digest())
     return h.hexdigest()
 
 
-#: SHA-256 over this file and ``nbruntime.py``: the stamp of the runtime's cached machine code
+#: SHA-256 over this file, ``abi.py`` and ``nbruntime.py``: the stamp of the runtime's cached machine code
 #: and the runtime a generated module names.
 SOURCE_SHA256 = _digest()
 
-# --- kernel types ----------------------------------------------------------------------------
+# --- the contract (methodgen.abi), re-exported for the generated modules' ``_rt.`` -------------
 
-_f8 = _t.float64
-_i8 = _t.int64
-_V = _t.float64[::1]
-_M = _t.float64[:, ::1]
-
-#: Signatures of the kernels (see :mod:`methodgen.nbruntime`), as plain data.
-KERNEL_TYPES = {
-    "guess": _t.void(_V, _f8, _V, _V),
-    "res": _t.void(_V, _V, _V, _f8, _V, _V),
-    "resjac": _t.void(_V, _V, _V, _f8, _V, _V, _M),
-    "scale": _f8(_V, _f8, _V),
-    "post": _t.void(_V, _V, _V, _V, _f8, _f8, _f8, _V, _V),
-    "hs": _t.void(_V, _V, _V),
-    "check": _t.void(_V, _V, _V),
-}
-
-# --- configuration ---------------------------------------------------------------------------
-
-#: Positions in the int configuration array ``cfg`` of :func:`run`.
-CFG = {name: i for i, name in enumerate((
-    "N",            # unknowns of the step equations (0: explicit)
-    "DIM",          # state length
-    "STAGES",       # stages of the composition (1: the base method)
-    "NF",           # first-same-as-last force components following Δy in post
-    "LERR",         # local error estimate: 0 none, 1 "direct", 2 "carry"
-    "KLERR",        # components of a carried estimate
-    "POST_EXTRA",   # where the local-error values start in post
-    "POST_DOMAIN",  # where the domain conditions start
-    "NDOMAIN",      # how many domain conditions
-    "POST_TT",      # where g, the level-set defect and its scale start
-    "TT_GUARD",     # 1: time-transformation guard
-    "POST_EJ",      # where H and its size at y1 start
-    "EJUMP",        # 1: energy-jump test
-    "POST_LEN",     # length of post's output
-    "HAS_SCALE",    # 1: the module has a scale kernel (floor of the unknowns' size)
-    "RESOLUTION",   # 0 none, 1 "full", 2 "reduced"
-    "KIND",         # 0 Newton, 1 linearly implicit, 2 explicit
-    "KL", "KU",     # bandwidths of the Newton matrix
-))}
-#: Positions in the float configuration array ``fcfg`` of :func:`run`.
-FCFG = {name: i for i, name in enumerate((
-    "LERR2", "LERR_SCALE", "MAX_LEVEL_DEFECT", "MAX_ENERGY_JUMP", "MAX_RESOLUTION",
-    "NEWTON_FAILURE_RESOLUTION", "MAX_PREDICTOR_DISAGREEMENT", "REUSE_RATE", "AUTO_RATE",
-    "AUTO_HOLD",
-))}
-
-#: Status codes (the generated module's _OK, _DIVERGED, ... have the same values).
-STATUS = {name: i for i, name in enumerate((
-    "OK", "DIVERGED", "NOT_CONVERGED", "UNRESOLVED", "MISPREDICTED", "LINEAR_FAILED", "NON_FINITE",
-    "OUT_OF_DOMAIN", "LOCAL_ERROR", "SLOW", "UNRESOLVED_START", "TIME_SCALE", "ENERGY_JUMP"))}
-
-_EPS = 2.220446049250313e-16
-# Newton stops when the increment is at round-off level relative to the unknown, or when
-# increments stop decreasing once below sqrt(eps) (the generated modules' _TOL_*).
-_TOL_ROUNDOFF = 4.0 * _EPS
-_TOL_PLATEAU = 1.4901161193847656e-08
+KERNEL_TYPES = _abi.KERNEL_TYPES
+CFG = _abi.CFG
+FCFG = _abi.FCFG
+STATUS = _abi.STATUS
+_EPS = _abi.EPS
+_TOL_ROUNDOFF = _abi.TOL_ROUNDOFF
+_TOL_PLATEAU = _abi.TOL_PLATEAU
 
 #: Explicit batches of at least this many trajectories take methodgen.nbbatch's lock-step block.
 MIN_BATCH = 16

@@ -55,6 +55,7 @@ from numba.core.typing.typeof import typeof_impl as _typeof_impl
 from numba.experimental.function_type import _get_wrapper_address
 from numba.extending import intrinsic as _intrinsic
 
+from . import ktypes as _kt
 from . import nbabi as _abi
 from .llvmkernels import LLVMKernel
 from .nbcache import flush_deferred as _flush_deferred
@@ -85,7 +86,7 @@ _B = _t.boolean
 
 #: numba signatures of the kernels (see the module docstring; methodgen.nbabi.KERNEL_TYPES as
 #: numba's types).
-KERNEL_TYPES = {k: _abi._t.to_numba(v) for k, v in _abi.KERNEL_TYPES.items()}
+KERNEL_TYPES = {k: _kt.to_numba(v) for k, v in _abi.KERNEL_TYPES.items()}
 _F = {k: _t.FunctionType(v) for k, v in KERNEL_TYPES.items()}
 
 

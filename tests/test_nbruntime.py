@@ -160,10 +160,10 @@ def test_status_codes_match_the_modules(tmp_path):
 def test_the_runtime_is_stamped_with_its_content_hash():
     locator = nbruntime.loop_for()._cache._impl.locator
     assert locator.get_source_stamp() == ("methodgen.nbruntime", nbruntime.SOURCE_SHA256)
-    # the stamp covers the runtime and the interface whose layout it compiles in (nbabi)
+    # the stamp covers the runtime and the contract whose layout it compiles in (abi, nbabi)
     import hashlib
     h = hashlib.sha256()
-    for name in ("nbabi.py", "nbruntime.py"):
+    for name in ("abi.py", "nbabi.py", "nbruntime.py"):
         with open(os.path.join(os.path.dirname(nbruntime.__file__), name), "rb") as f:
             h.update(hashlib.sha256(f.read()).digest())
     assert h.hexdigest() == nbruntime.SOURCE_SHA256
