@@ -183,24 +183,23 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
         kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
         compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
     """Steps ``n0 .. n1-1`` of every trajectory (see :func:`methodgen.nbruntime.run_loop` for
-    the arguments): on the module's fused loop when its kernels came through LLVM IR
-    (:mod:`methodgen.fused`, which hands back to the shared runtime's loop on any failure),
-    else on that loop."""
+    the arguments): on the module's compiled stepper when its kernels came through LLVM IR
+    (:mod:`methodgen.fused`), else on the numba runtime's loop.  ``METHODGEN_STEPPER=python``
+    runs the stepper's source as plain Python instead (the reference; not solver "reuse")."""
     from . import fused, llvmkernels
 
-    handed_back = None
-    if isinstance(post_k, llvmkernels.LLVMKernel):
-        handed_back = fused.run_fused((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos,
-                                      gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
-                                      check_resolution, solver, use_tol, tol, compensated, its, fstat, every, smode)
-        if handed_back is True:
+    # METHODGEN_STEPPER=python: the same stepper executed as Python (the reference; slow)
+    python = os.environ.get("METHODGEN_STEPPER", "").strip() == "python" and not (cfg[CFG["KIND"]] == 0 and solver == 3)
+    if python or isinstance(post_k, llvmkernels.LLVMKernel):
+        if fused.run_fused((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos,
+                           gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
+                           check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
+                           python=python):
             return
     from . import nbruntime
     nbruntime.run_loop(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas,
                        ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution,
                        solver, use_tol, tol, compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
-    if handed_back is not None and (fstat[:, 0] == STATUS["OK"]).all():
-        fused.false_alarm(handed_back)
 
 
 def res_rows(res, Z, Y, h, p, R):

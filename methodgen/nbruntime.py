@@ -769,8 +769,8 @@ def loop_for(n=None):
     There were four copies, three with N = 1, 2, 3 a constant (unrolled Newton loops, the
     closed-form solve folded: a fifth of a 2-unknown step faster), 21-25 s of compilation
     each.  Since a module's fused loop (methodgen.fused) runs almost every call with N a
-    constant of its own, this loop only takes what that one hands back or does not apply to
-    (solver "reuse", kernels numba compiled, ``METHODGEN_FUSED=0``): one copy, compiled once."""
+    constant of its own, this loop only takes what that one does not apply to (solver "reuse",
+    kernels numba compiled, ``METHODGEN_FUSED=0``): one copy, compiled once."""
     f = _COMPILED.get(None)
     if f is None:
         # minutes and ~1 GB on a loaded machine the first time (then numba's cache): reported as

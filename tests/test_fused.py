@@ -1,8 +1,9 @@
-"""An explicit module's loop with its post kernel inlined (methodgen.fused).
+"""The stepper compiled with a module's kernels inlined (methodgen.stepper, methodgen.fused).
 
-The fused loop is an accelerator of the shared runtime: on every step that passes every
-check it gives the runtime's numbers bitwise; on a step where any check would fail it hands
-the whole call back, so failures are reported by the runtime exactly as before.
+It gives the numba runtime's numbers bitwise, failures included: a failing step is recorded
+by the stepper itself (status, step, iteration, value, stage), never handed to another
+implementation; a resolution verdict that needs eigenvalues stops the loop, which asks its
+driver for the spectral radius and resumes at that stage.
 """
 
 from __future__ import annotations
@@ -66,10 +67,10 @@ def test_fused_loop_is_bitwise_the_runtime(monkeypatch, case):
     assert np.array_equal(runs["1"][0], runs["1"][2])
 
 
-def test_a_failing_step_is_reported_by_the_runtime_as_before(monkeypatch):
-    """Kepler at e = 0.99 with a step that jumps over the pericentre: the fused loop stops and
-    hands the call back; the error, its step, its check and the rows before it are those of
-    the runtime alone."""
+def test_a_failing_step_is_reported_by_the_stepper_as_by_the_runtime(monkeypatch):
+    """Kepler at e = 0.99 with a step that jumps over the pericentre: the stepper records the
+    failure itself; the error, its step, its check and the rows before it are those of the
+    numba runtime."""
     mod = mg.build(mg.load_scene("kepler").system, "stormer-verlet", backend="numba", order=4)
     got = {}
     for fused in ("1", "0"):
@@ -79,7 +80,7 @@ def test_a_failing_step_is_reported_by_the_runtime_as_before(monkeypatch):
             mod.integrate(APO, 0.2, 200)
         e = info.value
         got[fused] = (e.step, e.check, str(e), e.trajectory.tobytes())
-        assert len(calls) == 1                     # fused: stopped, then the runtime ran the call
+        assert (calls == []) == (fused == "1"), (fused, calls)   # the runtime never ran a fused call
     assert got["1"] == got["0"]
     # control: resolved, the same run completes on the fused path alone
     monkeypatch.setenv("METHODGEN_FUSED", "1")
@@ -138,9 +139,9 @@ def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
 
 
 @pytest.mark.parametrize("why", ["not-converged", "unresolved"])
-def test_an_implicit_failure_is_reported_by_the_runtime_as_before(monkeypatch, why):
-    """Newton stopped by maxiter, or a step the Newton matrix says is unresolved: the fused
-    loop hands the call back, and the error (type, step, message, rows) is the runtime's."""
+def test_an_implicit_failure_is_reported_by_the_stepper_as_by_the_runtime(monkeypatch, why):
+    """Newton stopped by maxiter, or a step the Newton matrix says is unresolved: the stepper
+    records it, and the error (type, step, message, rows) is the numba runtime's."""
     scene = mg.load_scene("henon-heiles-2d")
     mod = mg.build(scene.system, "energy-momentum", backend="numba")
     y0 = np.array(scene.y0, float)
@@ -153,18 +154,17 @@ def test_an_implicit_failure_is_reported_by_the_runtime_as_before(monkeypatch, w
             mod.integrate(y0, h, 100, **kw)
         e = info.value
         got[fused] = (type(e).__name__, getattr(e, "step", None), str(e))
-        assert len(calls) == 1
+        assert (calls == []) == (fused == "1"), (fused, calls)
     assert got["1"] == got["0"]
     assert got["1"][0] == ("ConvergenceError" if why == "not-converged" else "ResolutionError")
 
 
-def test_an_undecided_resolution_bound_goes_to_the_runtime(monkeypatch):
+def test_an_undecided_resolution_bound_stops_and_resumes(monkeypatch):
     """Light, soft, non-separable oscillators (midpoint, 4 unknowns): the norms of J - I are
-    ~10 while its spectral radius is ~0.15, so the fused loop, which has no eigenvalue solver,
-    cannot decide the resolution check and hands each call back; the runtime's eigenvalues pass
-    it, bitwise the same run.  After three such calls the module goes to the runtime directly.
-    Control: unit masses at h = 0.5, where the row sums exceed the threshold but the column-sum
-    bound decides the check, stay fused."""
+    ~10 while its spectral radius is ~0.15, so the row-sum bound cannot decide the resolution
+    check: the stepper stops, its driver takes ρ from the eigenvalues, and the stepper resumes
+    at that stage -- bitwise the numba runtime's run, which is never called.  Control: unit
+    masses at h = 0.5, where the row sums decide, run in one drive."""
     from methodgen import fused as fz
     drives = []
     real = fz._drive
@@ -176,21 +176,22 @@ def test_an_undecided_resolution_bound_goes_to_the_runtime(monkeypatch):
     monkeypatch.setattr(fz, "_drive", drive)
     H = "(p1**2 + p2**2)/(2*m) + k*(q1**2 + q2**2)/2 + c*q1*p2 + k*q1**4"
     y0 = np.array([0.3, 0.0, 0.0, 0.01])
-    for m, h, steps, want_drives, want_calls in ((0.01, 0.2, 20, [1, 1, 1, 0, 0], [1] * 5),
-                                                 (1.0, 0.5, 50, [1] * 5, [0] * 5)):
+    for m, h, steps, asks in ((0.01, 0.2, 20, True), (1.0, 0.5, 50, False)):
         mod = mg.build_text(H, ["q1", "q2"], ["p1", "p2"], "midpoint", params={"m": m, "k": m, "c": 0.1 * m},
                             name=f"osc2_{int(m * 100)}", backend="numba")
         monkeypatch.setenv("METHODGEN_FUSED", "0")
-        ref = mod.integrate(y0, h, steps)
+        info0 = {}
+        ref = mod.integrate(y0, h, steps, info=info0)
         monkeypatch.setenv("METHODGEN_FUSED", "1")
-        seen_drives, seen_calls = [], []
-        for _ in range(5):
-            calls = _counting(monkeypatch)
-            del drives[:]
-            assert np.array_equal(mod.integrate(y0, h, steps), ref)
-            seen_drives.append(len(drives))
-            seen_calls.append(len(calls))
-        assert (seen_drives, seen_calls) == (want_drives, want_calls), m
+        calls = _counting(monkeypatch)
+        del drives[:]
+        info1 = {}
+        assert np.array_equal(mod.integrate(y0, h, steps, info=info1), ref)
+        assert np.array_equal(info1["newton_iterations"], info0["newton_iterations"])
+        assert calls == []
+        assert (len(drives) > 1) == asks, (m, len(drives))
+        if asks:
+            assert len(drives) == steps + 1            # one question per step, then the end
 
 
 @pytest.mark.parametrize("method, kw", [("energy-momentum", {"order": 4}), ("stormer-verlet", {"order": 6})])
@@ -232,3 +233,38 @@ def test_every_solver_and_stopping_rule_is_the_runtimes(monkeypatch, solver, tol
         assert (calls == []) == (fused == "1" and solver != "reuse"), (fused, calls)
     assert np.array_equal(got["1"][0], got["0"][0])
     assert np.array_equal(got["1"][1], got["0"][1])
+
+
+def test_the_asked_spectral_radius_decides(monkeypatch):
+    """Hénon–Heiles energy-momentum at h = 2.5: the stepper asks for ρ, and the answer decides
+    the run -- the error (its h·ω) is the numba runtime's.  Negative control: a driver that
+    answers half the spectral radius lets the unresolved step pass (the error changes), so the
+    answer is what the stepper used."""
+    from methodgen import fused as fz
+    scene = mg.load_scene("henon-heiles-2d")
+    mod = mg.build(scene.system, "energy-momentum", backend="numba")
+    y0 = np.array(scene.y0, float)
+
+    def error():
+        with pytest.raises(Exception) as info:
+            mod.integrate(y0, 2.5, 100)
+        return type(info.value).__name__, info.value.step, str(info.value)
+
+    monkeypatch.setenv("METHODGEN_FUSED", "0")
+    ref = error()
+    monkeypatch.setenv("METHODGEN_FUSED", "1")
+    asked = []
+    real = fz.spectral_h_omega
+
+    def spectral(J, resol):
+        asked.append(1)
+        return real(J, resol)
+
+    monkeypatch.setattr(fz, "spectral_h_omega", spectral)
+    assert error() == ref and asked
+    monkeypatch.setattr(fz, "spectral_h_omega", lambda J, resol: 0.5 * real(J, resol))
+    try:
+        wrong = error()
+    except BaseException as exc:   # (no error at all: the run passed)
+        wrong = repr(exc)
+    assert wrong != ref
