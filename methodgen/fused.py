@@ -13,7 +13,7 @@ The stepper records every failure itself (status, step, iteration, value, stage:
 numba runtime, bitwise).  Where a resolution verdict needs the spectral radius of a Newton
 matrix, it stops and asks; :func:`run_fused` computes ρ from the eigenvalues (LAPACK, as the
 numba runtime does) and calls it again from that stage.  Modules it does not apply to (a
-kernel numba compiled, solver "reuse", arrays that are not C-contiguous float64) take the
+kernel numba compiled, internal arrays that are not C-contiguous float64) take the
 numba runtime; explicit batches of at least ``nbbatch.MIN_BATCH`` take the lock-step block of
 :mod:`methodgen.nbbatch` before this.
 
@@ -44,10 +44,11 @@ _T3 = _t.float64[:, :, ::1]
 #: signature of the compiled stepper (:func:`methodgen.stepper.stepper`): Y, C, G, K (B, ·),
 #: traj (rows, B, DIM), p, kick_a, drift, kick_b, h, n0, n1, every, nxt0, row0,
 #: check_resolution, compensated, stop (2), iterations (B, n1 - n0), solver modes (B, STAGES),
+#: "reuse"'s valid flags (B, STAGES), factors (B·STAGES, N·N) and permutations (B·STAGES, N),
 #: failures (B, 4), failure values (B), the question (4), the Newton matrix asked about,
 #: maxiter, solver, use_tol, tol, B, b0, nr, k0, nxtr, rowr
 LOOP_SIG = _t.void(_M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _i8, _i8, _V,
-                   _M, _M, _M, _V, _V, _M, _i8, _i8, _i8, _f8, _i8, _i8, _i8, _i8, _i8, _i8)
+                   _M, _M, _M, _M, _M, _M, _V, _V, _M, _i8, _i8, _i8, _f8, _i8, _i8, _i8, _i8, _i8, _i8)
 
 
 def enabled() -> bool:
@@ -149,21 +150,21 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios) -> dict:
               "_KLERR": int(cfg[C["KLERR"]]), "_NK": max(int(cfg[C["KLERR"]]), 1),
               "_LIDX": numpy.array(list(lerr_index) or [0], dtype=numpy.int64),
               "_RATIOS": numpy.array(ratios, dtype=numpy.float64), "_GAMMA0": float(gammas[0]),
-              "_NFR": fr, "_LERR_SCALE": float(fcfg[F["LERR_SCALE"]]),
+              "_NFR": fr, "_LERR_SCALE": float(fcfg[F["LERR_SCALE"]]), "_REUSE_RATE": float(fcfg[F["REUSE_RATE"]]),
               "_DPOS": numpy.array([int(bool(v)) for v in domain_pos] or [0], dtype=numpy.int64),
               "_rt": _rt, "math": math}
     consts.update({"_S_" + name: code for name, code in _STATUS.items()})
     for name, k in zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels):
         consts[name] = getattr(k, "py_func", None)
     # the helpers, with their constants resolved in this loop's configuration
-    for f in (_stepper.solve, _stepper.resolution):
+    for f in (_stepper.solve, _stepper.resolution, _stepper.lu, _stepper.lu_solve):
         consts[f.__name__] = types.FunctionType(f.__code__, consts, f.__name__)
     return consts
 
 
 def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p,
-              maxiter, check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode, *,
-              python=False):
+              maxiter, check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode, slu_ok,
+              sLU, spiv, *, python=False):
     """Steps ``n0 .. n1-1`` on the module's compiled stepper (the arguments of
     :func:`methodgen.nbruntime.run`; ``kernels`` = guess, res, resjac, post, hs, check, scale):
     True when it ran them (``Y``, ``C``, ``FRC``, ``traj``, ``its``, ``smode``, ``fstat``,
@@ -180,16 +181,25 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         loop = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
         drive = _call
     else:
-        if (not enabled() or (kind == 0 and solver == 3)
+        if (not enabled()
                 or not all(isinstance(k, _lk.LLVMKernel) for k in needed)
                 or n1 <= n0
                 or not all(a.dtype.char == "d" and a.flags.c_contiguous
-                           for a in (Y, C, FRC, traj, p, kick_a, drift, kick_b))):
+                           for a in (Y, C, FRC, p, kick_a, drift, kick_b))):
             return None
         loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
         if loop is None:
             return None
         drive = _drive
+    nxt0 = (n0 // every + 1) * every
+    r0 = 0                     # the row the stepper's traj starts at
+    user_rows = None
+    if not (traj.dtype.char == "d" and traj.flags.c_contiguous):
+        # a caller's ``out`` of another layout: the stepper writes a contiguous copy of the
+        # rows this call can reach
+        r0 = nxt0 // every
+        user_rows = traj[r0:n1 // every + 1]
+        traj = numpy.ascontiguousarray(user_rows, dtype=numpy.float64)
     B = Y.shape[0]
     n = int(cfg[CFG["N"]])
     nk = max(int(cfg[CFG["KLERR"]]), 1)
@@ -205,14 +215,22 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     in_place = kind != 2 and its.flags.c_contiguous and not its.any()
     itsf = its.view(numpy.float64) if in_place else numpy.zeros((B, n1 - n0) if kind != 2 else (1, 1))
     smf = smode.astype(numpy.float64) if kind == 0 else numpy.zeros((1, 1))
-    nxt0 = (n0 // every + 1) * every
+    reuse = kind == 0 and solver == 3
+    if reuse:
+        S = smode.shape[1]
+        m = max(n, 1)
+        okf = slu_ok.astype(numpy.float64)
+        luf = numpy.ascontiguousarray(sLU, dtype=numpy.float64).reshape(B * S, m * m)
+        pvf = spiv.astype(numpy.float64).reshape(B * S, m)
+    else:
+        okf, luf, pvf = (numpy.zeros((1, 1)),) * 3
     b0, nr, k0, limit = 0, -1, 0, n1
     while True:
         nxtr = (max(nr, 0) // every + 1) * every
         drive(loop, Y, C, FRC, K, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(limit), int(every),
-              nxt0, nxt0 // every, int(bool(check_resolution)), int(bool(compensated)), st, itsf, smf, fst, fvl,
+              nxt0, nxt0 // every - r0, int(bool(check_resolution)), int(bool(compensated)), st, itsf, smf, okf, luf, pvf, fst, fvl,
               dec, jout, int(maxiter), int(solver), int(bool(use_tol)), float(tol), B, b0, nr, k0, nxtr,
-              nxtr // every)
+              nxtr // every - r0)
         if not st[0]:
             break
         # the stepper asks for the spectral radius of J - I at trajectory b, step n, stage k:
@@ -225,8 +243,14 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         its += itsf.astype(numpy.int64)
     if kind == 0:
         smode[...] = smf.astype(numpy.int64)
+    if reuse:
+        slu_ok[...] = okf.astype(numpy.int64)
+        sLU[...] = luf.reshape(sLU.shape)
+        spiv[...] = pvf.reshape(spiv.shape).astype(numpy.int64)
     fstat[...] = fst.astype(numpy.int64)
     fval[...] = fvl
+    if user_rows is not None:
+        user_rows[...] = traj
     return True
 
 

@@ -434,6 +434,10 @@ class _Translator:
         if isinstance(node, ast.BinOp) and type(node.op) in (ast.Add, ast.Sub, ast.Mult):
             x, y = self.int_expr(node.left), self.int_expr(node.right)
             return {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(node.op)](x, y)
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "int"
+                and len(node.args) == 1 and not node.keywords):
+            # a float holding an integer (a row permutation kept in a float64 array)
+            return b.fptosi(self.expr(node.args[0]), _I64)
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("min", "max")
                 and len(node.args) >= 2 and not node.keywords):
             # integer min / max, left to right as numba's do_minmax

@@ -185,16 +185,16 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     """Steps ``n0 .. n1-1`` of every trajectory (see :func:`methodgen.nbruntime.run_loop` for
     the arguments): on the module's compiled stepper when its kernels came through LLVM IR
     (:mod:`methodgen.fused`), else on the numba runtime's loop.  ``METHODGEN_STEPPER=python``
-    runs the stepper's source as plain Python instead (the reference; not solver "reuse")."""
+    runs the stepper's source as plain Python instead (the reference)."""
     from . import fused, llvmkernels
 
     # METHODGEN_STEPPER=python: the same stepper executed as Python (the reference; slow)
-    python = os.environ.get("METHODGEN_STEPPER", "").strip() == "python" and not (cfg[CFG["KIND"]] == 0 and solver == 3)
+    python = os.environ.get("METHODGEN_STEPPER", "").strip() == "python"
     if python or isinstance(post_k, llvmkernels.LLVMKernel):
         if fused.run_fused((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos,
                            gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
                            check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
-                           python=python):
+                           slu_ok, sLU, spiv, python=python):
             return
     from . import nbruntime
     nbruntime.run_loop(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas,

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["stepper", "solve", "resolution"]
+__all__ = ["stepper", "solve", "resolution", "lu", "lu_solve"]
 
 # The names below that this file does not define (``numba``, ``_rt``, the upper-case
 # constants and the kernels) are bound by methodgen.fused when it compiles the loop.
@@ -41,14 +41,16 @@ __all__ = ["stepper", "solve", "resolution"]
 
 
 def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _chk, _comp, _st, _its, _smode,
-            _fst, _fval, _dec, _jout, _maxiter, _solver, _usetol, _tol, _nbt, _b0, _nr, _k0, _nxtr, _rowr):
+            _sluok, _sLU, _spiv, _fst, _fval, _dec, _jout, _maxiter, _solver, _usetol, _tol, _nbt, _b0, _nr, _k0, _nxtr, _rowr):
     """Steps ``_n0 .. _n1-1`` of trajectories ``_b0 .. _nbt-1``.
 
     ``_Y``, ``_C``, ``_G`` (B, ·): state, compensation, carried force, updated in place;
     ``_K`` (B, NK + 2): the carried estimate's b and H with its size, left for a resumed call;
     ``_T`` (rows, B, DIM): saved rows (row ``n // every`` after step ``n - 1``); ``_its``
     (B, n1 - n0): Newton iterations per step; ``_smode`` (B, STAGES): "auto" Newton steps
-    left; ``_fst`` (B, 4): status, step, iteration, stage of a failure, ``_fval`` (B,) its
+    left; ``_sluok`` (B, STAGES), ``_sLU`` (B·STAGES, N·N), ``_spiv`` (B·STAGES, N): solver
+    "reuse"'s kept LU factors per trajectory and stage, whether they are valid, and their row
+    permutation; ``_fst`` (B, 4): status, step, iteration, stage of a failure, ``_fval`` (B,) its
     value; ``_st``: 1 when the loop stopped to ask for a spectral radius (``_dec``: trajectory,
     step, stage; ``_jout``: the Newton matrix), else 0.  A resumed call (``_nr >= 0``) starts
     trajectory ``_b0`` at step ``_nr``, stage ``_k0``, with ρ = ``_dec[3]`` for that stage.
@@ -66,6 +68,9 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
     _ejs = numba.carray(_rt.stack_buffer(2), (2,))
     _rr = numba.carray(_rt.stack_buffer(2), (2,))
     _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
+    _LU0 = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ * _NZ,))   # "reuse": the factors at the
+    _pv0 = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))                # stage's start (a stage asked again)
+    _okb = numba.carray(_rt.stack_buffer(1), (1,))
     _g0 = numba.carray(_rt.stack_buffer(_NK), (_NK,))
     # the trajectory's state, compensation and carried force in stack buffers while it runs:
     # LLVM keeps them in registers across the stages (the caller's rows it must reload after
@@ -148,8 +153,14 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                 _status = _S_LINEAR_FAILED
                                 _val = math.nan
                 elif _KIND == 0:
-                    # Newton's method (solvers 0 newton, 1 simplified, 2 fixed point, 4 auto)
-                    _mode0 = _smode[_b, _k]      # this stage's solver state, for a stage asked again
+                    # Newton's method (solvers 0 newton, 1 simplified, 2 fixed point, 3 reuse,
+                    # 4 auto); this stage's solver state, for a stage asked again
+                    _mode0 = _smode[_b, _k]
+                    _bk = _b * _STAGES + _k
+                    _luok0 = 0.0
+                    if _solver == 3:
+                        _luok0 = _sluok[_b, _k]
+                    _snap = 0
                     guess(_yl, _hs, _p, _z)
                     for _i in range(_N):
                         _zp[_i] = _z[_i]
@@ -165,17 +176,47 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                     _done = 0
                     while _it < _maxiter:
                         _it += 1
+                        # (one call site per kernel: each is inlined where it is called)
+                        _fp = 0
                         if _solver == 2 or (_solver == 4 and _newton == 0):
-                            # fixed point z <- F(z) for R(z) = z - F(z): the increment is R
+                            _fp = 1
+                        _jac = 0
+                        if _fp == 0:
+                            if _solver == 3:
+                                if _sluok[_b, _k] == 0.0:
+                                    _jac = 1
+                            elif _solver == 0 or _solver == 4 or _have == 0:
+                                _jac = 1
+                        if _jac != 0:
+                            resjac(_z, _yl, _cl, _hs, _p, _r, _J)
+                            _have = 1
+                        else:
                             res(_z, _yl, _cl, _hs, _p, _r)
+                        if _fp != 0:
+                            # fixed point z <- F(z) for R(z) = z - F(z): the increment is R
                             for _i in range(_N):
                                 _dz[_i] = _r[_i]
-                        else:
-                            if _solver == 0 or _solver == 4 or _have == 0:
-                                resjac(_z, _yl, _cl, _hs, _p, _r, _J)
-                                _have = 1
+                        elif _solver == 3:
+                            # simplified Newton whose LU factors are kept over steps: refreshed
+                            # at the current iterate when an iteration contracts by less than
+                            # REUSE_RATE, and from the predictor when an iterate diverges
+                            if _jac != 0:
+                                if _snap == 0:
+                                    for _i in range(_N * _N):
+                                        _LU0[_i] = _sLU[_bk, _i]
+                                    for _i in range(_N):
+                                        _pv0[_i] = _spiv[_bk, _i]
+                                    _snap = 1
+                                lu(_J, _sLU[_bk], _spiv[_bk], _okb)
+                                if _okb[0] != 0.0:
+                                    _sluok[_b, _k] = 1.0
+                                    lu_solve(_sLU[_bk], _spiv[_bk], _r, _dz)
+                                else:
+                                    for _i in range(_N):
+                                        _dz[_i] = math.nan
                             else:
-                                res(_z, _yl, _cl, _hs, _p, _r)
+                                lu_solve(_sLU[_bk], _spiv[_bk], _r, _dz)
+                        else:
                             solve(_J, _r, _dz, _wa, _wb)
                         for _i in range(_N):
                             _z[_i] -= _dz[_i]
@@ -202,24 +243,18 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                             _prev = math.inf
                             continue
                         if not _nd <= 1e300:
-                            # diverged: unresolved at the start value, or diverged
-                            _status = _S_DIVERGED
-                            if _RESOL != 0 and _chk != 0:
-                                resjac(_zp, _yl, _cl, _hs, _p, _r, _J)
-                                if _asked != 2:
-                                    resolution(_J, _rr, _NFR)
-                                    _rho = _rr[0]
-                                    if _rr[1] != 0.0:
-                                        _asked = 1
-                                if _asked != 1 and _rho > _NFR:
-                                    _status = _S_UNRESOLVED_START
-                                    _val = _rho
-                            if _status == _S_DIVERGED:
-                                _val = 0.0
+                            if _solver == 3 and _have == 0:
+                                # factors kept from earlier steps led astray: start again from
+                                # the predictor with fresh ones
+                                _sluok[_b, _k] = 0.0
                                 for _i in range(_N):
-                                    _v = abs(_r[_i])
-                                    if _v > _val or _v != _v:
-                                        _val = _v
+                                    _z[_i] = _zp[_i]
+                                _prev = math.inf
+                                continue
+                            if _solver == 3:
+                                _sluok[_b, _k] = 0.0
+                            # diverged (below: unresolved at the start value, or diverged)
+                            _status = _S_DIVERGED
                             _done = 2
                             break
                         _conv = 0
@@ -256,10 +291,14 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                 _smode[_b, _k] -= 1.0
                             _done = 1
                             break
+                        if _solver == 3 and _nd > _REUSE_RATE * _prev:
+                            _sluok[_b, _k] = 0.0     # contracting too slowly: factor at this iterate
                         _prev = _nd
                     if _done == 0:
                         # maxiter reached: slow (the residual already near round-off), not
                         # resolved at the start value, or not converged
+                        if _solver == 3:
+                            _sluok[_b, _k] = 0.0
                         res(_z, _yl, _cl, _hs, _p, _r)
                         _rn = 0.0
                         for _i in range(_N):
@@ -279,22 +318,37 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                         _it = _maxiter
                         if _usetol == 0 and (_rn <= _TOL_PLATEAU * max(_zn, _floor) or _rn <= _TOL_ROUNDOFF * _yn):
                             _status = _S_SLOW
-                            _val = _rn
                         else:
                             _status = _S_NOT_CONVERGED
-                            _val = _rn
-                            if _RESOL != 0 and _chk != 0:
-                                resjac(_zp, _yl, _cl, _hs, _p, _r, _J)
-                                if _asked != 2:
-                                    resolution(_J, _rr, _NFR)
-                                    _rho = _rr[0]
-                                    if _rr[1] != 0.0:
-                                        _asked = 1
-                                if _asked != 1 and _rho > _NFR:
-                                    _status = _S_UNRESOLVED_START
-                                    _val = _rho
+                        _val = _rn
+                    if _status == _S_DIVERGED or _status == _S_NOT_CONVERGED:
+                        # is the step resolved at the start value at all?
+                        if _RESOL != 0 and _chk != 0:
+                            resjac(_zp, _yl, _cl, _hs, _p, _r, _J)
+                            if _asked != 2:
+                                resolution(_J, _rr, _NFR)
+                                _rho = _rr[0]
+                                if _rr[1] != 0.0:
+                                    _asked = 1
+                            if _asked != 1 and _rho > _NFR:
+                                _status = _S_UNRESOLVED_START
+                                _val = _rho
+                        if _status == _S_DIVERGED:
+                            # the residual's size (at the start value where it was evaluated)
+                            _val = 0.0
+                            for _i in range(_N):
+                                _v = abs(_r[_i])
+                                if _v > _val or _v != _v:
+                                    _val = _v
                     if _asked == 1:
                         _smode[_b, _k] = _mode0
+                        if _solver == 3:
+                            _sluok[_b, _k] = _luok0
+                        if _snap != 0:
+                            for _i in range(_N * _N):
+                                _sLU[_bk, _i] = _LU0[_i]
+                            for _i in range(_N):
+                                _spiv[_bk, _i] = _pv0[_i]
                 if _asked == 1:
                     # ask the driver for the spectral radius of J - I; this stage is computed
                     # again, from the state below, when it calls back
@@ -553,3 +607,57 @@ def resolution(_Jr, _rr, _lim):
         _rr[0] = 2.0 * norm
     else:
         _rr[0] = 2.0 * math.sqrt(norm)
+
+
+def lu(_Jm, _LU, _pv, _okb):
+    """LU factorisation with partial pivoting (within the band KL, KU) of ``_Jm`` into ``_LU``
+    (N·N, row-major; the row permutation in ``_pv``, as floats); ``_okb[0]`` = 0 for an exactly
+    singular matrix (solver "reuse")."""
+    for i in range(_N):
+        _pv[i] = i
+        for j in range(_N):
+            _LU[i * _N + j] = _Jm[i, j]
+    _okb[0] = 1.0
+    for col in range(_N):
+        if _okb[0] != 0.0:
+            best = abs(_LU[col * _N + col])
+            pr = col
+            for i in range(col + 1, min(_N, col + _KL + 1)):
+                v = abs(_LU[i * _N + col])
+                if v > best:
+                    best = v
+                    pr = i
+            if not best > 0.0:
+                _okb[0] = 0.0
+            else:
+                if pr != col:
+                    for j in range(_N):
+                        t = _LU[col * _N + j]
+                        _LU[col * _N + j] = _LU[pr * _N + j]
+                        _LU[pr * _N + j] = t
+                    t = _pv[col]
+                    _pv[col] = _pv[pr]
+                    _pv[pr] = t
+                inv = 1.0 / _LU[col * _N + col]
+                high = min(_N, col + _KL + _KU + 1)   # columns a pivot row can reach (the band)
+                for i in range(col + 1, min(_N, col + _KL + 1)):
+                    f = _LU[i * _N + col] * inv
+                    _LU[i * _N + col] = f
+                    if f != 0.0:
+                        for j in range(col + 1, high):
+                            _LU[i * _N + j] -= f * _LU[col * _N + j]
+
+
+def lu_solve(_LU, _pv, _b, _x):
+    """Solve J x = b from the factors of :func:`lu` (forward, then back substitution)."""
+    for i in range(_N):
+        s = _b[int(_pv[i])]
+        for j in range(i):
+            s -= _LU[i * _N + j] * _x[j]
+        _x[i] = s
+    for ii in range(_N):
+        i = _N - 1 - ii
+        s = _x[i]
+        for j in range(i + 1, min(_N, i + _KL + _KU + 1)):
+            s -= _LU[i * _N + j] * _x[j]
+        _x[i] = s / _LU[i * _N + i]

@@ -58,7 +58,8 @@ def _run(monkeypatch, mod, y0, h, steps, mode, **kw):
 
 CASES = [("kepler-sv4", 40, {}), ("logh-sv4", 40, {}), ("kepler-em2", 30, {}), ("hh2d-em4", 20, {}),
          ("hh2d-em4", 20, {"solver": "auto"}), ("hh2d-em4", 20, {"solver": "fixed-point"}),
-         ("hh2d-em4", 20, {"solver": "simplified"}), ("hh-kahan", 30, {}), ("kepler-gauss2", 20, {}),
+         ("hh2d-em4", 20, {"solver": "simplified"}), ("hh2d-em4", 20, {"solver": "reuse"}),
+         ("kepler-gauss2", 20, {"solver": "reuse"}), ("hh-kahan", 30, {}), ("kepler-gauss2", 20, {}),
          ("dp-rattle", 20, {}), ("osc-undecided", 10, {}),
          # failures: a step over the pericentre (local error), maxiter, an unresolved Newton matrix
          ("kepler-sv4", 200, {"y0": APO, "h": 0.2}), ("hh2d-em4", 20, {"maxiter": 2, "solver": "newton"}),
