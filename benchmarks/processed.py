@@ -27,7 +27,7 @@ import numpy as np
 
 import methodgen as mg
 from methodgen import peers
-from methodgen.processing import build_processed
+from methodgen.build import build_processed
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from projection_vs_em import cpu_at  # noqa: E402

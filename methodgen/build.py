@@ -31,12 +31,12 @@ from ._version import __version__
 from .emit import (cache_dir, cache_root_of, check_cache_folder, emit_source, file_status, generator_hash,
                    load_if_current, load_module, module_filename, resolve_backend, signature,
                    template_hash, warn_regenerating, write_atomic, write_module)
-from .errors import InputError, MethodgenError, StorageError
+from .errors import InputError, MethodgenError, MethodNotApplicable, StorageError
 
 if TYPE_CHECKING:  # the derivation is imported by the cold path only (see build_text)
     from .problem import Hamiltonian
 
-__all__ = ["build", "build_text", "generate", "default_path", "generated_dir", "scene_module_path",
+__all__ = ["build", "build_text", "build_processed", "generate", "default_path", "generated_dir", "scene_module_path",
            "scene_targets", "target_key", "scene_system_name", "text_key"]
 
 
@@ -242,7 +242,6 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
 
     if composition in PROCESSED_FAMILIES:
         # three modules of one base scheme (kernel, pre- and post-processor): methodgen.processing
-        from .processing import build_processed
 
         if path is not None:
             raise InputError(f"path= does not apply to the processed composition {composition!r}: it is "
@@ -586,3 +585,46 @@ def build_text(H: str, q, p, method: str, *, params=None, constraints=(), name: 
         except _IndexTrouble as exc:
             _warn_no_index(exc, stacklevel=2)
     return module
+
+
+def build_processed(system, method: str, order: int = 8, family: str = "blanes-casas-murua", *,
+                    backend: str = "numpy", progress=None, **options) -> ProcessedIntegrator:
+    """Build the processed composition of ``method`` on ``system``.
+
+    Parameters
+    ----------
+    system : Hamiltonian
+    method : str
+        A method that is symmetric of order 2 on ``system`` (as for ``order=`` in
+        :func:`methodgen.discretize`).
+    order : {6, 8}
+    family : str
+        One of :data:`PROCESSED`.
+    backend : {"numpy", "numba"}
+    progress : callable, optional
+        As for :func:`methodgen.build` (the phases of each module's generation).
+    **options
+        Method options, passed to :func:`methodgen.discretize`.
+
+    Returns
+    -------
+    ProcessedIntegrator
+    """
+    from .processing import ProcessedIntegrator, processed_composition
+    from .schemes import SYMMETRIC_METHODS, applicable_methods, discretize
+
+    try:
+        proc = processed_composition(order, family)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    base = discretize(system, method, **options)
+    t = base.traits
+    if not (t.symmetric and t.order == 2) or base.composition is not None:
+        ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
+        raise MethodNotApplicable(
+            f"a processed composition needs a symmetric method of order 2; {method} is "
+            f"{'not symmetric' if not t.symmetric else f'of order {t.order}'} for this system. "
+            f"Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
+    mods = [generate(base.compose(proc.composition(role)), backend=backend, progress=progress)
+            for role in ("kernel", "pre-processor", "post-processor")]
+    return ProcessedIntegrator(proc, *mods)

@@ -59,7 +59,7 @@ import numpy as np
 from .compositions import DPS, PROCESSED_FAMILIES, Composition, order_of_defects, sequence_defects
 
 __all__ = ["PROCESSED", "Processed", "processed_composition", "order_defects", "achieved_order",
-           "ProcessedIntegrator", "build_processed"]
+           "ProcessedIntegrator"]
 
 
 def _mirror(half):
@@ -182,7 +182,7 @@ def achieved_order(proc: Processed, tol: float = 1e-14, upto: int | None = None)
 class ProcessedIntegrator:
     """``y_n = π(K_h^n(π⁻¹(y0)))`` from three generated modules of one base scheme.
 
-    Built by :func:`build_processed`.  ``integrate`` takes the arguments of a generated
+    Built by :func:`methodgen.build.build_processed`.  ``integrate`` takes the arguments of a generated
     module's ``integrate`` (``params``, ``save_every``, ``check_resolution``, ``solver``, …;
     not ``t_eval``, ``out`` or ``extended``) and returns the post-processed rows.
 
@@ -317,47 +317,3 @@ class ProcessedIntegrator:
             if "newton_iterations" in kinfo:   # the kernel's, per kernel step
                 info["newton_iterations"] = kinfo["newton_iterations"]
         return Y
-
-
-def build_processed(system, method: str, order: int = 8, family: str = "blanes-casas-murua", *,
-                    backend: str = "numpy", progress=None, **options) -> ProcessedIntegrator:
-    """Build the processed composition of ``method`` on ``system``.
-
-    Parameters
-    ----------
-    system : Hamiltonian
-    method : str
-        A method that is symmetric of order 2 on ``system`` (as for ``order=`` in
-        :func:`methodgen.discretize`).
-    order : {6, 8}
-    family : str
-        One of :data:`PROCESSED`.
-    backend : {"numpy", "numba"}
-    progress : callable, optional
-        As for :func:`methodgen.build` (the phases of each module's generation).
-    **options
-        Method options, passed to :func:`methodgen.discretize`.
-
-    Returns
-    -------
-    ProcessedIntegrator
-    """
-    from .build import generate
-    from .errors import InputError, MethodNotApplicable
-    from .schemes import SYMMETRIC_METHODS, applicable_methods, discretize
-
-    try:
-        proc = processed_composition(order, family)
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
-    base = discretize(system, method, **options)
-    t = base.traits
-    if not (t.symmetric and t.order == 2) or base.composition is not None:
-        ok = [m for m in applicable_methods(system) if m in SYMMETRIC_METHODS]
-        raise MethodNotApplicable(
-            f"a processed composition needs a symmetric method of order 2; {method} is "
-            f"{'not symmetric' if not t.symmetric else f'of order {t.order}'} for this system. "
-            f"Symmetric methods that apply: {', '.join(ok) if ok else '(none)'}")
-    mods = [generate(base.compose(proc.composition(role)), backend=backend, progress=progress)
-            for role in ("kernel", "pre-processor", "post-processor")]
-    return ProcessedIntegrator(proc, *mods)

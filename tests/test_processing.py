@@ -25,8 +25,9 @@ import pytest
 import methodgen as mg
 from conftest import HH_T, HH_Y0, KEPLER_Y0
 from methodgen.errors import InputError, MethodNotApplicable
-from methodgen.processing import (PROCESSED, Processed, ProcessedIntegrator, achieved_order,
-                                  build_processed, order_defects, processed_composition)
+from methodgen.build import build_processed
+from methodgen.processing import (PROCESSED, Processed, ProcessedIntegrator, achieved_order, order_defects,
+                                  processed_composition)
 
 CASES = [(f, o) for f, orders in PROCESSED.items() for o in orders]
 

@@ -234,5 +234,5 @@ def composition_for(order, family: str | None = None):
         raise InputError(f"the {family} family is a processed composition (a kernel between two processors, "
                          f"three generated modules): methodgen.build(system, method, order={order}, "
                          f"composition={family!r}) builds it, not one composed scheme "
-                         "(methodgen.processing.build_processed)")
+                         "(methodgen.build.build_processed)")
     return _composition(order, family)
