@@ -33,7 +33,7 @@ __all__ = [
     "__version__", "Hamiltonian", "PoissonSystem", "discretize", "generate", "build", "build_text",
     "Scheme", "Traits", "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
     "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
-    "GenerationError", "time_transform", "autonomise", "wisdom_holman",
+    "GenerationError", "time_transform", "autonomise", "wisdom_holman", "cite",
 ]
 
 
@@ -50,7 +50,7 @@ def _lazy_names():
         "discretize": ".schemes", "method_names": ".schemes",
         "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
         "autonomise": ".timetransform", "time_transform": ".timetransform",
-        "verify": ".verify", "wisdom_holman": ".nbody",
+        "verify": ".verify", "wisdom_holman": ".nbody", "cite": ".cite",
     }
     found: list[frozenset] = []
 

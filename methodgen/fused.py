@@ -235,7 +235,11 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
             break
         # the stepper asks for the spectral radius of J - I at trajectory b, step n, stage k:
         # computed here, then that stage again with it
+        asked = (b0, nr, k0)
         b0, nr, k0, limit = (int(v) for v in dec)
+        if (b0, nr, k0) == asked:
+            # a stage given its answer must not ask again: a defect of the stepper, not of the run
+            raise RuntimeError(f"methodgen.stepper asked twice at trajectory {b0}, step {nr}, stage {k0}")
         dec[3] = spectral_h_omega(jout[:n, :n], resol)
     if in_place:
         its[...] = itsf        # (numpy copies overlapping operands first)
