@@ -1,4 +1,4 @@
-"""Per-step cost of numba modules on the shared runtime against the template route.
+"""Per-step cost of numba modules on the stepper against the template route.
 
 Not a test: run it and read the table (CPU time, least of the repeats; on a shared
 machine compare only rows of one run).
@@ -6,7 +6,7 @@ machine compare only rows of one run).
     python benchmarks/nbruntime_step_cost.py [--steps N] [--repeat R] [--route shared|template|both]
 
 For each configuration a module is generated into a fresh folder on each route: the
-shared runtime (methodgen.nbruntime, the default route) and, where it still exists, the
+stepper (methodgen.stepper compiled per module, the default route) and, where it still exists, the
 template route (one compiled loop per module, ``templates/numba_runtime.py.j2``) by
 forcing ``methodgen.emit.shared_runtime_supports`` to False *in this script only*.  Each
 row gives µs per step, Newton iterations per step, and whether the two routes' trajectories

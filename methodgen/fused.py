@@ -1,6 +1,6 @@
 """The stepper compiled for one module, with its kernels inlined (LLVM IR), and its driver.
 
-On the numba runtime (:func:`methodgen.nbruntime.run`) every stage is a call through a
+On the numba runtime (:func:`methodgen.nbabi.run`) every stage is a call through a
 function pointer, and an implicit stage's Newton iteration calls its residual and Jacobian
 kernels the same way: about 13 ns a call, a third of an explicit step of Kepler's
 Störmer–Verlet composed to order 10 (35 stages) and half of a Hénon–Heiles energy-momentum
@@ -52,8 +52,8 @@ LOOP_SIG = _t.void(_M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8,
 
 
 def enabled() -> bool:
-    """The fused loop is used unless ``METHODGEN_FUSED=0`` (or the kernels take numba)."""
-    return os.environ.get("METHODGEN_FUSED", "1").strip() != "0" and _lk.enabled()
+    """The stepper is compiled unless the kernels take numba (``METHODGEN_KERNELS=numba``)."""
+    return _lk.enabled()
 
 
 def _drive(loop, *args):
@@ -166,7 +166,7 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
               maxiter, check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode, slu_ok,
               sLU, spiv, *, python=False):
     """Steps ``n0 .. n1-1`` on the module's compiled stepper (the arguments of
-    :func:`methodgen.nbruntime.run`; ``kernels`` = guess, res, resjac, post, hs, check, scale):
+    :func:`methodgen.nbabi.run`; ``kernels`` = guess, res, resjac, post, hs, check, scale):
     True when it ran them (``Y``, ``C``, ``FRC``, ``traj``, ``its``, ``smode``, ``fstat``,
     ``fval`` as the numba runtime leaves them, failures included); None when it does not apply.
     ``python``: run the same stepper as plain Python (:func:`python_stepper`) instead."""
@@ -177,20 +177,24 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         ([check] if int(cfg[CFG["LERR"]]) == 2 else []) + \
         ([scale] if kind == 0 and int(cfg[CFG["HAS_SCALE"]]) else []) + \
         ([resjac] if kind == 1 else [guess, res, resjac] if kind == 0 else [])
+    if n1 <= n0:
+        fstat[:, 0] = _STATUS["OK"]
+        return True
     if python:
         loop = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
         drive = _call
     else:
-        if (not enabled()
-                or not all(isinstance(k, _lk.LLVMKernel) for k in needed)
-                or n1 <= n0
-                or not all(a.dtype.char == "d" and a.flags.c_contiguous
-                           for a in (Y, C, FRC, p, kick_a, drift, kick_b))):
+        if not enabled() or not all(isinstance(k, _lk.LLVMKernel) for k in needed):
             return None
         loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
         if loop is None:
             return None
         drive = _drive
+    # the stepper's arrays are C-contiguous float64: inputs of another layout are copied (the
+    # state, compensation and force back at the end)
+    p, kick_a, drift, kick_b = (numpy.ascontiguousarray(a, dtype=numpy.float64) for a in (p, kick_a, drift, kick_b))
+    state = (Y, C, FRC)
+    Y, C, FRC = (numpy.ascontiguousarray(a, dtype=numpy.float64) for a in state)
     nxt0 = (n0 // every + 1) * every
     r0 = 0                     # the row the stepper's traj starts at
     user_rows = None
@@ -255,6 +259,9 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     fval[...] = fvl
     if user_rows is not None:
         user_rows[...] = traj
+    for mine, theirs in zip((Y, C, FRC), state):
+        if mine is not theirs:
+            theirs[...] = mine
     return True
 
 

@@ -182,24 +182,47 @@ def materialize(namespace: dict):
 def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
         kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
         compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
-    """Steps ``n0 .. n1-1`` of every trajectory (see :func:`methodgen.nbruntime.run_loop` for
-    the arguments): on the module's compiled stepper when its kernels came through LLVM IR
-    (:mod:`methodgen.fused`), else on the numba runtime's loop.  ``METHODGEN_STEPPER=python``
-    runs the stepper's source as plain Python instead (the reference)."""
-    from . import fused, llvmkernels
+    """Steps ``n0 .. n1-1`` of every trajectory on the module's stepper (:mod:`methodgen.stepper`),
+    compiled with its kernels inlined (:mod:`methodgen.fused`).
 
-    # METHODGEN_STEPPER=python: the same stepper executed as Python (the reference; slow)
+    The arguments: the kernels; the configuration (:mod:`methodgen.abi`); the stage
+    coefficients; ``traj`` (rows, B, DIM): row ``n // every`` gets the state after step
+    ``n - 1``; ``Y``, ``C``, ``FRC`` (B, ·): state, compensation, carried force, updated in
+    place; ``h``, ``p``; Newton's ``maxiter``, ``check_resolution``, ``solver`` code, ``use_tol``,
+    ``tol``; ``compensated``; ``its`` (B, n1 - n0) iterations per step; ``fstat`` (B, 4) status,
+    step, iteration, stage and ``fval`` (B) value of a failure; ``every``; the solver state
+    ``smode``, ``slu_ok``, ``sLU``, ``spiv``.
+
+    Where the stepper cannot be compiled with these kernels (a kernel the LLVM translator
+    refused, compiled by numba instead, or ``METHODGEN_KERNELS=numba``) it runs as plain Python
+    with them: the same source and results, about a hundred times slower, said once per module
+    in a warning.  ``METHODGEN_STEPPER=python`` runs it so always (the reference)."""
+    from . import fused
+
+    args = ((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+            kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
+            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
     python = os.environ.get("METHODGEN_STEPPER", "").strip() == "python"
-    if python or isinstance(post_k, llvmkernels.LLVMKernel):
-        if fused.run_fused((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos,
-                           gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter,
-                           check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode,
-                           slu_ok, sLU, spiv, python=python):
+    if not python:
+        if fused.run_fused(*args):
             return
-    from . import nbruntime
-    nbruntime.run_loop(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas,
-                       ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution,
-                       solver, use_tol, tol, compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
+        _warn_python(post_k)
+    fused.run_fused(*args, python=True)
+
+
+_WARNED: set = set()
+
+
+def _warn_python(post_k) -> None:
+    """Say once per module that its stepper runs as Python (a kernel numba compiled)."""
+    import warnings
+
+    where = getattr(getattr(post_k, "py_func", post_k), "__module__", None) or "a module"
+    if where not in _WARNED:
+        _WARNED.add(where)
+        warnings.warn(f"{where}: the integration loop runs as Python (its kernels were compiled by numba, "
+                      "not through LLVM IR: METHODGEN_KERNELS=numba, or a construct the translator refuses): "
+                      "the same results, about a hundred times slower", RuntimeWarning, stacklevel=3)
 
 
 def res_rows(res, Z, Y, h, p, R):

@@ -1,6 +1,6 @@
 """Lock-step batched integration for explicit methods (numba backend).
 
-:func:`methodgen.nbruntime.run` integrates a batch one trajectory after the
+:func:`methodgen.nbabi.run` integrates a batch one trajectory after the
 other, calling the module's ``post`` kernel (a first-class function: an opaque
 call) once per stage per trajectory.  For explicit stages (``KIND == 2``:
 Störmer–Verlet, its compositions, the splitting families) every trajectory
@@ -19,7 +19,7 @@ give bitwise the same rows; ``tests/test_ensemble.py`` checks it.
 The checks are the same (finiteness, domain conditions, time-transformation
 guard, local error, energy jump), evaluated for every lane after every stage:
 a branch-free count of failing lanes, and only when it is not zero a scalar pass
-that records each failing lane as :func:`methodgen.nbruntime.run` would
+that records each failing lane as :func:`methodgen.nbabi.run` would
 (``fstat[b] = (status, step, index/0, stage)``, ``fval[b]``).  A lane that
 fails stops there (its state is the one after the failing stage, as on the
 one-trajectory path); the other lanes of its block finish that step, and every
@@ -106,7 +106,7 @@ use_block = _abi.use_block
 def _lane_status(PS, YS, NE2, ND2, EJS, l, L, DIM, NDOMAIN, PD, domain_pos, TT_GUARD, PT, MLD, LERR, LERR2,
                  LERR_SCALE, PJ, EJUMP, MEJ, check_resolution):
     """(status, index, value) of lane ``l`` after a stage: the first failing check in the
-    order of :func:`methodgen.nbruntime.run`, or ``_OK``."""
+    order of :func:`methodgen.nbabi.run`, or ``_OK``."""
     for i in range(DIM):
         if not math.isfinite(YS[i * L + l]):
             return _NON_FINITE, 0, math.nan
@@ -152,7 +152,7 @@ def _run_block(post_block, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas,
                traj, n0, n1, Y, C, FRC, h, p, check_resolution, compensated, fstat, fval, every, lanes):
     """Steps ``n0 .. n1-1`` of every trajectory of an explicit method, ``lanes`` trajectories
     in lock-step: the arguments and their meaning are those of
-    :func:`methodgen.nbruntime.run` (without the Newton solver's), ``Y``, ``C``, ``FRC``
+    :func:`methodgen.nbabi.run` (without the Newton solver's), ``Y``, ``C``, ``FRC``
     (B, ·) updated in place, the failures recorded in ``fstat``, ``fval``."""
     DIM = cfg[_C_DIM]
     STAGES = cfg[_C_STAGES]

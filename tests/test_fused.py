@@ -1,6 +1,7 @@
 """The stepper compiled with a module's kernels inlined (methodgen.stepper, methodgen.fused).
 
-It gives the numba runtime's numbers bitwise, failures included: a failing step is recorded
+Compared with the same stepper run as Python (its reference, METHODGEN_STEPPER=python) it gives
+the same numbers bitwise, failures included: a failing step is recorded
 by the stepper itself (status, step, iteration, value, stage), never handed to another
 implementation; a resolution verdict that needs eigenvalues stops the loop, which asks its
 driver for the spectral radius and resumes at that stage.
@@ -17,27 +18,32 @@ import methodgen as mg
 
 pytest.importorskip("numba")
 
-from methodgen import nbruntime  # noqa: E402
 
 E = 0.99
 APO = np.array([1 + E, 0.0, 0.0, 0.0, math.sqrt((1 - E) / (1 + E)), 0.0])
 
 
 def _counting(monkeypatch):
-    """Count the calls of the shared runtime's compiled loop."""
+    """Count the runs of the stepper as Python (the reference the compiled one is compared to)."""
+    from methodgen import fused
     calls = []
-    real = nbruntime.loop_for
+    real = fused.python_stepper
 
-    def loop_for(n=None):
-        calls.append(n)
-        return real()
+    def python_stepper(*args):
+        calls.append(1)
+        return real(*args)
 
-    monkeypatch.setattr(nbruntime, "loop_for", loop_for)
+    monkeypatch.setattr(fused, "python_stepper", python_stepper)
     return calls
 
 
+def _mode(monkeypatch, fused):
+    """"1": the compiled stepper; "0": the same stepper run as Python."""
+    monkeypatch.setenv("METHODGEN_STEPPER", "" if fused == "1" else "python")
+
+
 @pytest.mark.parametrize("case", ["kepler-sv10", "hh-sv8-rkn", "logh-sv6"])
-def test_fused_loop_is_bitwise_the_runtime(monkeypatch, case):
+def test_compiled_stepper_is_bitwise_the_python_stepper(monkeypatch, case):
     if case == "logh-sv6":
         L = mg.time_transform(mg.load_scene("kepler").system, form="log")
         mod = mg.build(L, "stormer-verlet", backend="numba", order=6)
@@ -52,7 +58,7 @@ def test_fused_loop_is_bitwise_the_runtime(monkeypatch, case):
     Y0 = np.stack([y0, y0 * (1 + 1e-3)])
     runs = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         one = mod.integrate(y0, h, 400)
         batch = mod.integrate(Y0, h, 300, save_every=7)
@@ -67,23 +73,23 @@ def test_fused_loop_is_bitwise_the_runtime(monkeypatch, case):
     assert np.array_equal(runs["1"][0], runs["1"][2])
 
 
-def test_a_failing_step_is_reported_by_the_stepper_as_by_the_runtime(monkeypatch):
+def test_a_failing_step_is_reported_by_the_stepper_itself(monkeypatch):
     """Kepler at e = 0.99 with a step that jumps over the pericentre: the stepper records the
     failure itself; the error, its step, its check and the rows before it are those of the
     numba runtime."""
     mod = mg.build(mg.load_scene("kepler").system, "stormer-verlet", backend="numba", order=4)
     got = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         with pytest.raises(mod.ResolutionError) as info:
             mod.integrate(APO, 0.2, 200)
         e = info.value
         got[fused] = (e.step, e.check, str(e), e.trajectory.tobytes())
-        assert (calls == []) == (fused == "1"), (fused, calls)   # the runtime never ran a fused call
+        assert (calls == []) == (fused == "1"), (fused, calls)   # the compiled run never fell back to Python
     assert got["1"] == got["0"]
     # control: resolved, the same run completes on the fused path alone
-    monkeypatch.setenv("METHODGEN_FUSED", "1")
+    _mode(monkeypatch, "1")
     calls = _counting(monkeypatch)
     assert np.all(np.isfinite(mod.integrate(APO, 0.2, 200, check_resolution=False)))
     assert calls == []
@@ -100,7 +106,7 @@ def _state_bytes(info):
 
 
 @pytest.mark.parametrize("case", ["kepler-em2", "hh2d-em8", "hh-kahan", "kepler-gauss3", "hh2d-ec3", "dp-rattle"])
-def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
+def test_implicit_stages_compiled_are_bitwise_the_python_stepper(monkeypatch, case):
     """Newton's method inlined with the kernels (solvers "newton" and "auto", the carried
     local-error estimate, Gauss' stage system, energy collocation, RATTLE with its scale
     kernel inlined as an expression) and the linearly implicit
@@ -120,7 +126,7 @@ def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
     Y0 = np.stack([y0, mod.project(y1) if hasattr(mod, "project") else y1])
     runs = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         i1, i2, i3 = {}, {}, {}
         one = mod.integrate(y0, h, 300, info=i1)
@@ -139,16 +145,16 @@ def test_implicit_stages_fused_are_bitwise_the_runtime(monkeypatch, case):
 
 
 @pytest.mark.parametrize("why", ["not-converged", "unresolved"])
-def test_an_implicit_failure_is_reported_by_the_stepper_as_by_the_runtime(monkeypatch, why):
+def test_an_implicit_failure_is_reported_by_the_stepper_itself(monkeypatch, why):
     """Newton stopped by maxiter, or a step the Newton matrix says is unresolved: the stepper
-    records it, and the error (type, step, message, rows) is the numba runtime's."""
+    records it, and the error (type, step, message, rows) is the Python stepper's."""
     scene = mg.load_scene("henon-heiles-2d")
     mod = mg.build(scene.system, "energy-momentum", backend="numba")
     y0 = np.array(scene.y0, float)
     h, kw = (scene.h, {"maxiter": 2, "solver": "newton"}) if why == "not-converged" else (2.5, {})
     got = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         with pytest.raises(Exception) as info:
             mod.integrate(y0, h, 100, **kw)
@@ -163,7 +169,7 @@ def test_an_undecided_resolution_bound_stops_and_resumes(monkeypatch):
     """Light, soft, non-separable oscillators (midpoint, 4 unknowns): the norms of J - I are
     ~10 while its spectral radius is ~0.15, so the row-sum bound cannot decide the resolution
     check: the stepper stops, its driver takes ρ from the eigenvalues, and the stepper resumes
-    at that stage -- bitwise the numba runtime's run, which is never called.  Control: unit
+    at that stage -- bitwise the Python stepper's run, which is never called.  Control: unit
     masses at h = 0.5, where the row sums decide, run in one drive."""
     from methodgen import fused as fz
     drives = []
@@ -179,10 +185,10 @@ def test_an_undecided_resolution_bound_stops_and_resumes(monkeypatch):
     for m, h, steps, asks in ((0.01, 0.2, 20, True), (1.0, 0.5, 50, False)):
         mod = mg.build_text(H, ["q1", "q2"], ["p1", "p2"], "midpoint", params={"m": m, "k": m, "c": 0.1 * m},
                             name=f"osc2_{int(m * 100)}", backend="numba")
-        monkeypatch.setenv("METHODGEN_FUSED", "0")
+        _mode(monkeypatch, "0")
         info0 = {}
         ref = mod.integrate(y0, h, steps, info=info0)
-        monkeypatch.setenv("METHODGEN_FUSED", "1")
+        _mode(monkeypatch, "1")
         calls = _counting(monkeypatch)
         del drives[:]
         info1 = {}
@@ -197,7 +203,7 @@ def test_an_undecided_resolution_bound_stops_and_resumes(monkeypatch):
 @pytest.mark.parametrize("method, kw", [("energy-momentum", {"order": 4}), ("stormer-verlet", {"order": 6})])
 def test_a_batch_of_any_size_runs_fused(monkeypatch, method, kw):
     """The number of trajectories is a run-time bound of the loop: a batch of 12 (implicit; and
-    explicit below nbbatch's lock-step size) runs fused, bitwise the runtime's, iterations
+    explicit below nbbatch's lock-step size) runs fused, bitwise the Python stepper's, iterations
     included (counted in place, in the caller's zeroed array)."""
     scene = mg.load_scene("henon-heiles-2d")
     mod = mg.build(scene.system, method, backend="numba", **kw)
@@ -205,7 +211,7 @@ def test_a_batch_of_any_size_runs_fused(monkeypatch, method, kw):
     Y = y0 * (1 + 1e-3 * np.arange(12)[:, None])
     got = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         info = {}
         a = mod.integrate(Y, scene.h, 200, save_every=3, info=info)
@@ -217,15 +223,15 @@ def test_a_batch_of_any_size_runs_fused(monkeypatch, method, kw):
 
 @pytest.mark.parametrize("solver", ["newton", "simplified", "fixed-point", "reuse", "auto"])
 @pytest.mark.parametrize("tol", [None, 1e-12])
-def test_every_solver_and_stopping_rule_is_the_runtimes(monkeypatch, solver, tol):
-    """Each solver with the round-off stopping rule and with a tolerance: bitwise the runtime's
-    trajectory and iterations, on the compiled stepper alone (the runtime is never called)."""
+def test_every_solver_and_stopping_rule_compiled_and_as_python(monkeypatch, solver, tol):
+    """Each solver with the round-off stopping rule and with a tolerance: bitwise the Python stepper's
+    trajectory and iterations, on the compiled stepper alone (no Python fallback)."""
     scene = mg.load_scene("henon-heiles-2d")
     mod = mg.build(scene.system, "energy-momentum", backend="numba", order=4)
     y0 = np.array(scene.y0, float)
     got = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         info = {}
         got[fused] = (mod.integrate(y0, scene.h, 150, solver=solver, tol=tol, info=info),
@@ -237,7 +243,7 @@ def test_every_solver_and_stopping_rule_is_the_runtimes(monkeypatch, solver, tol
 
 def test_the_asked_spectral_radius_decides(monkeypatch):
     """Hénon–Heiles energy-momentum at h = 2.5: the stepper asks for ρ, and the answer decides
-    the run -- the error (its h·ω) is the numba runtime's.  Negative control: a driver that
+    the run -- the error (its h·ω) is the Python stepper's.  Negative control: a driver that
     answers half the spectral radius lets the unresolved step pass (the error changes), so the
     answer is what the stepper used."""
     from methodgen import fused as fz
@@ -250,9 +256,9 @@ def test_the_asked_spectral_radius_decides(monkeypatch):
             mod.integrate(y0, 2.5, 100)
         return type(info.value).__name__, info.value.step, str(info.value)
 
-    monkeypatch.setenv("METHODGEN_FUSED", "0")
+    _mode(monkeypatch, "0")
     ref = error()
-    monkeypatch.setenv("METHODGEN_FUSED", "1")
+    _mode(monkeypatch, "1")
     asked = []
     real = fz.spectral_h_omega
 
@@ -273,7 +279,7 @@ def test_the_asked_spectral_radius_decides(monkeypatch):
 @pytest.mark.parametrize("case", ["hh2d-em4", "kepler-gauss2", "oss-em2"])
 def test_solver_reuse_runs_on_the_stepper(monkeypatch, case):
     """Solver "reuse" (LU factors kept over steps and calls, refreshed when an iteration
-    contracts slowly or diverges): on the compiled stepper, bitwise the numba runtime's --
+    contracts slowly or diverges): on the compiled stepper, bitwise the Python stepper's --
     rows, iterations and the kept factors, permutations and flags -- in two chunks."""
     name, method, kw = {"hh2d-em4": ("henon-heiles-2d", "energy-momentum", {"order": 4}),
                         "kepler-gauss2": ("kepler", "gauss", {"stages": 2}),
@@ -283,7 +289,7 @@ def test_solver_reuse_runs_on_the_stepper(monkeypatch, case):
     y0 = np.array(scene.y0, float)
     runs = {}
     for fused in ("1", "0"):
-        monkeypatch.setenv("METHODGEN_FUSED", fused)
+        _mode(monkeypatch, fused)
         calls = _counting(monkeypatch)
         info = {}
         first = mod.integrate(y0, scene.h, 150, solver="reuse", info=info)
@@ -303,7 +309,7 @@ def test_a_strided_out_runs_on_the_stepper(monkeypatch):
     scene = mg.load_scene("kepler")
     mod = mg.build(scene.system, "energy-momentum", backend="numba")
     y0 = np.array(scene.y0, float)
-    monkeypatch.setenv("METHODGEN_FUSED", "1")
+    _mode(monkeypatch, "1")
     ref = mod.integrate(y0, scene.h, 300, save_every=3)
     calls = _counting(monkeypatch)
     big = np.full((ref.shape[0], 12), -7.0)

@@ -158,7 +158,7 @@ def test_status_codes_match_the_modules(tmp_path):
 # --- cache stamp -------------------------------------------------------------------------
 
 def test_the_runtime_is_stamped_with_its_content_hash():
-    locator = nbruntime.loop_for()._cache._impl.locator
+    locator = nbruntime.stand_in("hs")._cache._impl.locator
     assert locator.get_source_stamp() == ("methodgen.nbruntime", nbruntime.SOURCE_SHA256)
     # the stamp covers the runtime and the contract whose layout it compiles in (abi, nbabi)
     import hashlib
@@ -231,34 +231,26 @@ def test_stale_runtime_negative_control(tmp_path, user_cache_dir):
     assert edited == (1111, 1, 0)
 
 
-def test_a_cached_runtime_serves_a_new_system_without_recompiling(tmp_path):
-    """In a fresh process with the runtime cached, a new module compiles its kernels only: the
-    shared runtime's loop (fused loop off) is loaded from the cache; on the fused loop no numba
-    dispatcher is compiled or loaded at all (not even the stand-ins of missing kernels)."""
+def test_a_numba_module_runs_without_compiling_or_loading_a_numba_function(tmp_path):
+    """In a fresh process, a numba module's steps run on its compiled stepper: no numba
+    dispatcher is compiled or loaded (not even the stand-ins of missing kernels), and numba is
+    not imported.  Control: the stepper's machine code is there (fused._LOOPS)."""
     scene = mg.load_scene("double-well")
     path = tmp_path / module_filename("dw", "midpoint", "numba")
     mg.generate(mg.discretize(scene.system, "midpoint"), path, backend="numba")
     code = textwrap.dedent(f"""
-        import os, numpy as np
-        from methodgen import nbruntime as rt, fused
+        import sys, numpy as np
+        from methodgen import fused
         from methodgen.emit import load_module
         m = load_module({str(path)!r})
         m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
-        if os.environ["METHODGEN_FUSED"] == "0":
-            L = rt.loop_for()
-            print(sum(L.stats.cache_misses.values()), sum(L.stats.cache_hits.values()))
-        else:
-            # the fused loop ran the steps: no numba dispatcher was compiled or loaded
-            assert fused._LOOPS and not rt._COMPILED and not rt._compiled, (rt._COMPILED, rt._compiled)
-            print(0, 1)
+        assert fused._LOOPS
+        print("numba" in sys.modules)
     """)
-    # the runtime's loop, compiled (and cached) here: no other test may have needed it yet
-    nbruntime.loop_for()
-    for flag in ("0", "1"):
-        env = dict(os.environ, METHODGEN_FUSED=flag)
-        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        assert proc.stdout.split() == ["0", "1"], flag
+    env = {k: v for k, v in os.environ.items() if k not in ("METHODGEN_KERNELS", "METHODGEN_STEPPER")}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split() == ["False"]
 
 
 # --- the runtime a module was generated for ----------------------------------------------
@@ -447,43 +439,6 @@ def test_stage_kernels_keep_their_work_arrays_on_the_stack(tmp_path):
         a = nb.integrate(y0, scene.h, 200, solver=solver)
         assert np.array_equal(a, heap.integrate(y0, scene.h, 200, solver=solver)), solver
         assert not np.array_equal(a, heap.integrate(y0, np.nextafter(scene.h, 1.0), 200, solver=solver)), solver
-
-
-# --- kernel handles: addresses resolved once -------------------------------------------------
-
-def test_kernels_are_unboxed_without_looking_up_their_overloads(tmp_path, monkeypatch):
-    """A module's kernels reach the compiled loop as nbruntime.KernelHandle objects whose
-    machine-code address was resolved once: a later integrate call looks up no compiled
-    overload (numba would otherwise do it for each of the seven kernels at every call, about
-    0.3 ms), and the trajectory is bitwise the one with the dispatchers passed as they are."""
-    from numba.core.dispatcher import Dispatcher
-
-    monkeypatch.setenv("METHODGEN_KERNELS", "numba")   # (kernels through LLVM are handles already)
-    scene, mod = _module(tmp_path, "henon-heiles-2d", "energy-momentum")
-    y0 = np.array(scene.y0, float)
-    ref = mod.integrate(y0, 0.05, 40)               # compiles, makes the handles
-    calls = []
-    real = Dispatcher.get_compile_result
-
-    def counting(self, sig):
-        calls.append(self)
-        return real(self, sig)
-
-    monkeypatch.setattr(Dispatcher, "get_compile_result", counting)
-    again = mod.integrate(y0, 0.05, 40)
-    assert calls == []
-    assert np.array_equal(again, ref)
-    # the handle of a kernel is made once and reused
-    sig = nbruntime.KERNEL_TYPES["post"]
-    assert nbruntime.handle(mod._nb_post, sig) is nbruntime.handle(mod._nb_post, sig)
-    assert isinstance(nbruntime.handle(mod._nb_post, sig), nbruntime.KernelHandle)
-    # control: with the dispatchers passed as they are, numba looks each kernel's overload up
-    # at the call (for its addresses); the numbers are the same
-    monkeypatch.setattr(nbruntime, "handle",
-                        lambda kernel, sig: kernel.compiled() if isinstance(kernel, nbruntime._Missing) else kernel)
-    raw = mod.integrate(y0, 0.05, 40)
-    assert len(calls) >= 7
-    assert np.array_equal(raw, ref)
 
 
 def test_a_continued_run_skips_the_initial_check_and_control(kepler, monkeypatch):

@@ -314,23 +314,3 @@ def test_the_cli_compile_phase_names_its_module(tmp_path, capsys, monkeypatch):
     out = io.StringIO()
     StderrReporter(threshold=0, stream=out)("compile", 0.0, False)
     assert out.getvalue() == "methodgen: compile …\n"
-
-
-def test_the_shared_runtime_build_is_a_reported_phase(monkeypatch):
-    """The compiled runtime's first build (minutes on a loaded machine, then numba's cache) is
-    reported like every other phase; control: once built in the process, nothing is reported."""
-    pytest.importorskip("numba")
-    from methodgen import nbruntime, progress
-
-    got = []
-    previous = progress.install(lambda name, elapsed, done: got.append((name, done)))
-    try:
-        nbruntime.loop_for()                       # built (or loaded) once in this process
-        got.clear()
-        nbruntime.loop_for()
-        assert got == []                           # control: already there, no phase
-        monkeypatch.setattr(nbruntime, "_COMPILED", {})
-        nbruntime.loop_for()
-    finally:
-        progress.install(previous)
-    assert got == [("compile runtime (once per machine)", False), ("compile runtime (once per machine)", True)]

@@ -45,7 +45,6 @@ def _module(case):
 
 def _run(monkeypatch, mod, y0, h, steps, mode, **kw):
     """(rows, iterations, error) of a run on the compiled stepper or the stepper as Python."""
-    monkeypatch.setenv("METHODGEN_FUSED", "1")
     monkeypatch.setenv("METHODGEN_STEPPER", "python" if mode == "python" else "")
     info = {}
     try:

@@ -88,19 +88,20 @@ print(json.dumps({"y": y[-1].tolist(), "module": mod.__file__,
 
 
 def test_a_cached_numba_module_runs_fused_without_importing_numba(tmp_path):
-    """A cached numba module on its fused loop (kernels and loop machine code from the caches)
-    imports neither SymPy nor numba (its import alone was 0.18 s of a 0.3 s warm start): the
-    runtime's interface it reads is methodgen.nbabi, plain data.  Control: with the fused loop
-    off (METHODGEN_FUSED=0) the call goes to the numba runtime, which imports numba, and gives
-    the same bits."""
+    """A cached numba module on its compiled stepper (kernels and loop machine code from the
+    caches) imports neither SymPy nor numba (its import alone was 0.18 s of a 0.3 s warm start):
+    the runtime's interface it reads is methodgen.nbabi, plain data.  Control: with every
+    kernel compiled by numba (METHODGEN_KERNELS=numba) numba is imported, and the stepper,
+    run as Python with those kernels, gives the same bits."""
     pytest.importorskip("numba")
     cache = tmp_path / "cache"
     env = {**os.environ, "METHODGEN_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
-    env.pop("METHODGEN_FUSED", None)
+    env.pop("METHODGEN_KERNELS", None)
+    env.pop("METHODGEN_STEPPER", None)
 
     def run(**extra):
-        out = subprocess.run([sys.executable, "-c", NUMBA_PROBE, H], capture_output=True, text=True,
-                             env={**env, **extra}, cwd=tmp_path, check=True)
+        out = subprocess.run([sys.executable, "-W", "ignore::RuntimeWarning", "-c", NUMBA_PROBE, H],
+                             capture_output=True, text=True, env={**env, **extra}, cwd=tmp_path, check=True)
         return json.loads(out.stdout)
 
     cold = run()
@@ -108,8 +109,8 @@ def test_a_cached_numba_module_runs_fused_without_importing_numba(tmp_path):
     warm = run()
     assert warm["loaded"] == [], warm["loaded"]
     assert warm["y"] == cold["y"] and warm["module"] == cold["module"] and warm["module"].endswith("_numba.py")
-    off = run(METHODGEN_FUSED="0")
-    assert off["loaded"] == ["methodgen.nbruntime", "numba"] and off["y"] == warm["y"]
+    off = run(METHODGEN_KERNELS="numba", METHODGEN_CACHE=str(tmp_path / "cache-numba"))
+    assert "numba" in off["loaded"] and off["y"] == warm["y"]
 
 
 GUARD_PROBE = r"""
@@ -145,7 +146,6 @@ def test_a_deferred_cache_guard_is_installed_before_numba_compiles(tmp_path):
     pytest.importorskip("numba")
     cache = tmp_path / "cache"
     env = {**os.environ, "METHODGEN_CACHE": str(cache), "PYTHONPATH": str(ROOT)}
-    env.pop("METHODGEN_FUSED", None)
 
     def run(mode):
         out = subprocess.run([sys.executable, "-c", GUARD_PROBE, H, mode], capture_output=True, text=True,
