@@ -20,12 +20,14 @@ machine code and modules generated for another contract are rebuilt, never mixed
 
 from __future__ import annotations
 
+import hashlib
+import os
 from dataclasses import dataclass
 
 from . import ktypes as _t
 
 __all__ = ["PostLayout", "post_layout", "CFG", "FCFG", "STATUS", "KERNEL_TYPES", "int_config_values", "float_config_sources",
-           "EPS", "TOL_ROUNDOFF", "TOL_PLATEAU"]
+           "EPS", "TOL_ROUNDOFF", "TOL_PLATEAU", "RUNTIME_SHA256"]
 
 # --- the post kernel's output ------------------------------------------------------------------
 
@@ -231,3 +233,20 @@ KERNEL_TYPES = {
     "hs": _t.void(_V, _V, _V),
     "check": _t.void(_V, _V, _V),
 }
+
+
+# --- the runtime's stamp -----------------------------------------------------------------------
+
+def _runtime_digest() -> str:
+    here = os.path.dirname(os.path.abspath(__file__))
+    h = hashlib.sha256()
+    for name in ("abi.py", "nbabi.py", "nbruntime.py"):
+        with open(os.path.join(here, name), "rb") as f:
+            h.update(hashlib.sha256(f.read()).digest())
+    return h.hexdigest()
+
+
+#: SHA-256 over this file, ``nbabi.py`` and ``nbruntime.py`` (read, not imported): the stamp of
+#: numba's cached code of the runtime and the runtime a generated numba module names (a module
+#: generated for another refuses to load).
+RUNTIME_SHA256 = _runtime_digest()

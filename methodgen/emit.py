@@ -24,7 +24,6 @@
 
 from __future__ import annotations
 
-import errno
 import functools
 import hashlib
 import hmac
@@ -32,8 +31,6 @@ import importlib.machinery
 import importlib.util
 import os
 import re
-import secrets
-import stat
 import sys
 import warnings
 from pathlib import Path
@@ -42,10 +39,11 @@ from typing import TYPE_CHECKING
 
 from ._version import __version__
 from .abi import STATUS
-from .errors import GenerationError, InputError, StorageError, UntrustedCacheError
+from .errors import GenerationError, InputError, UntrustedCacheError
 from .kernelsource import SOURCE_ATTR
 from .progress import phase
-from .runio import find_orphans, make_temp, storage_error
+from .store import (HEADER_KEYED, KEY_FILE, _cache_key, _check_folder, _keyed_tag, cache_dir,  # noqa: F401
+                    cache_root_of, check_cache_folder, untagged, write_atomic, write_module)
 
 if TYPE_CHECKING:  # imported where rendering needs them (never on the loading path)
     from .lower import Kernel, ModuleIR
@@ -63,11 +61,6 @@ _TEMPLATES = {"numpy": "module.py.j2", "numba": "numba_module.py.j2"}
 
 HEADER_SIGNATURE = "# signature: "
 HEADER_CONTENT = "# content-sha256: "
-#: First line of a module in the per-user cache only (never in generated/): HMAC-SHA256 of
-#: the rest of the file and its name under the user's secret key (see :func:`file_status`).
-HEADER_KEYED = "# methodgen-hmac-sha256: "
-#: The per-user secret, in the cache root (mode 0600).
-KEY_FILE = ".methodgen-key"
 
 
 def template_dir() -> Path:
@@ -197,20 +190,6 @@ def resolve_backend(backend: str, stacklevel: int = 3) -> str:
     return backend
 
 
-def cache_dir() -> Path:
-    """Per-user cache for generated modules (``$METHODGEN_CACHE`` or the XDG cache)."""
-    env = os.environ.get("METHODGEN_CACHE")
-    if env:
-        # "~/x" is the home folder's x (as a shell would expand it), never a folder named "~".
-        try:
-            return Path(env).expanduser()
-        except RuntimeError as exc:   # "~nosuchuser/x": pathlib cannot find that home folder
-            raise StorageError(f"METHODGEN_CACHE={env}: cannot expand ~ ({exc}: no such user, or no "
-                               "home folder); give the cache folder without ~", path=env, errno=errno.ENOENT) from None
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "methodgen"
-
-
 # --- rendering --------------------------------------------------------------
 
 def _environment():
@@ -284,8 +263,8 @@ def runtime_sha256() -> str:
     """The shared runtime's ``SOURCE_SHA256`` (:data:`methodgen.nbabi.SOURCE_SHA256`: over
     ``nbabi.py`` and ``nbruntime.py``), without importing
     numba.  A numba module on the shared runtime records it and refuses another runtime."""
-    from .nbabi import SOURCE_SHA256
-    return SOURCE_SHA256
+    from .abi import RUNTIME_SHA256
+    return RUNTIME_SHA256
 
 
 def render(ir: ModuleIR, backend: str = "numpy") -> str:
@@ -360,226 +339,6 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     digest = hashlib.sha256(text.encode()).hexdigest()
     return HEADER_CONTENT + digest + "\n" + text
-
-
-# --- files --------------------------------------------------------------------
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (temporary file + ``os.replace``).
-
-    The file gets ordinary permissions (0644 less the umask).  The temporary
-    file ``.NAME.HOST-PID.XXXXXXXX.tmp`` is locked while it exists, so the
-    leftover of a killed process can be recognised (:func:`methodgen.runio.find_orphans`).
-
-    Raises
-    ------
-    StorageError
-        One line naming ``path`` and the cause (disk full, no permission, a
-        missing folder or a file in the way); also an ``OSError``.
-    """
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = make_temp(path.parent, path.name)
-    except OSError as exc:
-        raise storage_error(exc, "write", path) from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-            os.replace(tmp, path)  # still locked: never taken for an orphan
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(exc, OSError):
-            raise storage_error(exc, "write", path) from None
-        raise
-
-
-# --- the per-user cache: who wrote a file ---------------------------------------
-
-def cache_root_of(path) -> Path | None:
-    """The cache root (resolved) when ``path`` lies in the per-user cache, else None."""
-    try:
-        root = cache_dir().resolve()
-        Path(path).resolve().relative_to(root)
-    except (ValueError, OSError, RuntimeError):
-        return None
-    return root
-
-
-def _check_folder(folder: Path) -> None:
-    try:
-        st = os.stat(folder)
-    except FileNotFoundError:
-        return
-    except OSError as exc:
-        raise storage_error(exc, "use cache folder", folder) from None
-    if not stat.S_ISDIR(st.st_mode):
-        raise StorageError(f"cannot use cache folder {folder}: it is not a folder", folder, errno.ENOTDIR)
-    if os.name == "nt":  # pragma: no cover - no POSIX owners and modes to check
-        return
-    uid = os.geteuid() if hasattr(os, "geteuid") else None
-    if uid is not None and st.st_uid != uid:
-        raise UntrustedCacheError(
-            f"cache folder {folder} belongs to uid {st.st_uid}, not to you (uid {uid}); methodgen does "
-            "not import code from a folder someone else controls — set METHODGEN_CACHE to a folder of "
-            "your own")
-    if st.st_mode & 0o022:
-        who = " and ".join(w for w, bit in (("group", 0o020), ("others", 0o002)) if st.st_mode & bit)
-        raise UntrustedCacheError(
-            f"cache folder {folder} is writable by {who} (mode {stat.S_IMODE(st.st_mode):04o}); methodgen "
-            f"does not import code from a folder others can write to — run: chmod go-w {folder} "
-            "(or set METHODGEN_CACHE to a private folder)")
-
-
-def check_cache_folder(path) -> Path | None:
-    """Refuse a cache others could plant code in; no-op outside the cache.
-
-    For a ``path`` in the per-user cache, the cache root, the file's folder and
-    its ``__pycache__`` (numba keeps compiled code there) must belong to the
-    user and not be writable by group or others — the rule of ssh's
-    ``StrictModes`` and pip's cache.  Below a root that others cannot even
-    enter (mode ``0700``), nothing else needs checking.
-
-    Returns
-    -------
-    Path or None
-        The cache root, or None when ``path`` is not in the cache.
-
-    Raises
-    ------
-    UntrustedCacheError
-        A folder that is not the user's or is group/other-writable.
-    """
-    root = cache_root_of(path)
-    if root is None:
-        return None
-    _check_folder(root)
-    try:
-        closed = not (os.stat(root).st_mode & 0o011)
-    except OSError:
-        closed = False
-    if not closed:
-        folder = Path(path).resolve().parent
-        for d in ([folder] if folder != root else []) + [folder / "__pycache__"]:
-            _check_folder(d)
-    return root
-
-
-def _read_key(keyfile: Path) -> bytes | None:
-    try:
-        fd = os.open(keyfile, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        raise UntrustedCacheError(f"cannot read the cache key {keyfile}: {exc.strerror or exc} (a "
-                                  "symbolic link or no permission); remove it to get a new one") from None
-    try:
-        st = os.fstat(fd)
-        data = os.read(fd, 256)
-    finally:
-        os.close(fd)
-    uid = os.geteuid() if hasattr(os, "geteuid") else st.st_uid
-    private = os.name == "nt" or (st.st_uid == uid and not st.st_mode & 0o077)
-    if not stat.S_ISREG(st.st_mode) or not private:
-        raise UntrustedCacheError(
-            f"cache key {keyfile} is not a private file of yours (mode {stat.S_IMODE(st.st_mode):04o}, uid "
-            f"{st.st_uid}); anyone who can read it can forge cached modules — remove it (a new key is "
-            "made and the cache regenerated)")
-    try:
-        key = bytes.fromhex(data.decode("ascii").strip())
-    except (UnicodeDecodeError, ValueError):
-        key = b""
-    if len(key) < 32:
-        raise UntrustedCacheError(f"cache key {keyfile} is damaged; remove it (a new key is made and the "
-                                  "cache regenerated)")
-    return key
-
-
-def _cache_key(root: Path, create: bool) -> bytes | None:
-    """The user's secret key of the cache ``root``; made (0600, atomically) on first use if ``create``."""
-    keyfile = root / KEY_FILE
-    key = _read_key(keyfile)
-    if key is not None or not create:
-        return key
-    try:
-        fd, tmp = make_temp(root, KEY_FILE)
-    except OSError as exc:
-        raise storage_error(exc, "create the cache key in", root) from None
-    try:
-        if hasattr(os, "fchmod"):
-            os.fchmod(fd, 0o600)
-        os.write(fd, (secrets.token_hex(32) + "\n").encode("ascii"))
-        os.fsync(fd)
-        try:
-            os.link(tmp, keyfile)  # atomic and never over a key another process made first
-        except FileExistsError:
-            pass
-        except OSError:  # pragma: no cover - no hard links here: rename (last writer wins)
-            if not keyfile.exists():
-                os.replace(tmp, keyfile)
-    except OSError as exc:
-        raise storage_error(exc, "create the cache key", keyfile) from None
-    finally:
-        os.close(fd)
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-    return _read_key(keyfile)
-
-
-def _keyed_tag(key: bytes, name: str, text: str) -> str:
-    return hmac.new(key, b"methodgen-module-v1\0" + name.encode() + b"\0" + text.encode(),
-                    hashlib.sha256).hexdigest()
-
-
-def untagged(text: str) -> str:
-    """A module's text without the cache-only key line (what :func:`render` emitted)."""
-    return text.partition("\n")[2] if text.startswith(HEADER_KEYED) else text
-
-
-def write_module(path, text: str) -> None:
-    """Write a generated module; in the per-user cache, with the user's key tag.
-
-    Outside the cache (``generated/``, a path of the user's choosing) the bytes
-    are exactly ``text`` (deterministic, committable).  In the cache the
-    folder is checked (:func:`check_cache_folder`), the key made on first use,
-    temporary files of killed writers removed, and the first line becomes
-    ``# methodgen-hmac-sha256: …``.
-
-    Raises
-    ------
-    StorageError, UntrustedCacheError
-    """
-    path = Path(path)
-    text = untagged(text)
-    root = cache_root_of(path)
-    if root is not None:
-        if not root.exists():
-            try:
-                root.mkdir(mode=0o700, parents=True, exist_ok=True)
-            except OSError as exc:
-                raise storage_error(exc, "create cache folder", root) from None
-        check_cache_folder(path)
-        key = _cache_key(root, create=True)
-        try:
-            path.parent.mkdir(mode=0o755, parents=True, exist_ok=True)
-        except OSError as exc:
-            raise storage_error(exc, "create cache folder", path.parent) from None
-        for orphan, _, fd in find_orphans(path.parent, path.name):
-            try:
-                os.unlink(orphan)  # the temporary file of a killed generation: nothing to keep
-            except OSError:
-                pass
-            finally:
-                os.close(fd)
-        text = HEADER_KEYED + _keyed_tag(key, path.name, text) + "\n" + text
-    write_atomic(path, text)
 
 
 def _classify(path: Path, text: str, expected_signature: str | None) -> str:

@@ -32,8 +32,8 @@ import numpy
 
 from . import ktypes as _t
 from . import llvmkernels as _lk
-from . import nbabi as _rt
 from . import stepper as _stepper
+from . import abi as _abi
 from .abi import STATUS as _STATUS
 
 __all__ = ["run_fused", "enabled"]
@@ -42,13 +42,13 @@ _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 _T3 = _t.float64[:, :, ::1]
 
 #: signature of the compiled stepper (:func:`methodgen.stepper.stepper`): Y, C, G, K (B, ·),
-#: traj (rows, B, DIM), p, kick_a, drift, kick_b, h, n0, n1, every, nxt0, row0,
-#: check_resolution, compensated, stop (2), iterations (B, n1 - n0), solver modes (B, STAGES),
+#: traj (rows, B, DIM), p, kick_a, drift, kick_b, h, n0, n1, every, nxt0, row0, stop (2), iterations (B, n1 - n0), solver modes (B, STAGES),
 #: "reuse"'s valid flags (B, STAGES), factors (B·STAGES, N·N) and permutations (B·STAGES, N),
 #: failures (B, 4), failure values (B), the question (4), the Newton matrix asked about,
-#: maxiter, solver, use_tol, tol, B, b0, nr, k0, nxtr, rowr
-LOOP_SIG = _t.void(_M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _i8, _i8, _V,
-                   _M, _M, _M, _M, _M, _M, _V, _V, _M, _i8, _i8, _i8, _f8, _i8, _i8, _i8, _i8, _i8, _i8)
+#: maxiter, tol, B, b0, nr, k0, nxtr, rowr (solver, use_tol, check_resolution and compensated are
+#: constants of each compiled loop)
+LOOP_SIG = _t.void(_M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _V,
+                   _M, _M, _M, _M, _M, _M, _V, _V, _M, _i8, _f8, _i8, _i8, _i8, _i8, _i8, _i8)
 
 
 def enabled() -> bool:
@@ -77,7 +77,7 @@ def spectral_h_omega(J, resol: int) -> float:
     return 2.0 * rho if resol == 1 else 2.0 * math.sqrt(rho)
 
 
-def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
+def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options):
     """The loop for this module's kernels and configuration, compiled on first use (or loaded
     from the machine-code cache); None where it does not apply."""
     # keyed by what the loop is compiled from: the kernels' machine code (their symbols name
@@ -85,10 +85,10 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
     # kernels are freed) and the constants bound into it
     key = (tuple(getattr(k, "symbol", None) or ("id", id(k)) for k in kernels),
            cfg.tobytes(), fcfg.tobytes(), tuple(lerr_index), tuple(map(bool, domain_pos)),
-           tuple(map(float, gammas)), tuple(map(float, ratios)))
+           tuple(map(float, gammas)), tuple(map(float, ratios)), options)
     got = _LOOPS.get(key)
     if got is None:
-        consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
+        consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
         try:
             got = _lk.compile_kernel(types.FunctionType(_stepper.stepper.__code__, consts, "stepper"), LOOP_SIG,
                                      globals_=consts, c_entry=True)
@@ -112,11 +112,11 @@ class _Stack:
         return buf.reshape(shape)
 
 
-def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
+def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options):
     """:func:`methodgen.stepper.stepper` bound to a module's kernels (their Python functions) and
     configuration, to run as plain Python: the same source as the compiled loop, the reference
     it is tested against (slow: an interpreter's loop)."""
-    consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
+    consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
     consts.update(numba=_Stack, _rt=_Stack)
     # the kernels as callables: compiled ones (numba compiles an LLVM kernel's source on its
     # first call from Python, with the same arithmetic), so that a comparison with the compiled
@@ -125,11 +125,13 @@ def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios):
     return types.FunctionType(_stepper.stepper.__code__, consts, "stepper")
 
 
-def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios) -> dict:
+def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options) -> dict:
     """The stepper's globals for a module: its configuration as constants (:mod:`methodgen.abi`),
-    the status codes, its kernels' Python functions and the helpers bound to the same."""
-    C = _rt.CFG
-    F = _rt.FCFG
+    the run's options that select code (``options``: solver code, use_tol, check_resolution,
+    compensated, as ints), the status codes, its kernels' Python functions and the helpers
+    bound to the same."""
+    C = _abi.CFG
+    F = _abi.FCFG
     n = int(cfg[C["N"]])
     fr = float(fcfg[F["NEWTON_FAILURE_RESOLUTION"]])
     resol = int(cfg[C["RESOLUTION"]])
@@ -146,14 +148,15 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios) -> dict:
               "_AUTO_RATE": float(fcfg[F["AUTO_RATE"]]), "_AUTO_HOLD1": int(fcfg[F["AUTO_HOLD"]]) + 1,
               # the threshold of nbruntime._resolution (x**2 there is x*x: numba's static power)
               "_RTHRESH": 0.5 * fr if resol == 1 else (0.5 * fr) * (0.5 * fr),
-              "_TOL_ROUNDOFF": _rt._TOL_ROUNDOFF, "_TOL_PLATEAU": _rt._TOL_PLATEAU,
+              "_TOL_ROUNDOFF": _abi.TOL_ROUNDOFF, "_TOL_PLATEAU": _abi.TOL_PLATEAU,
               "_KLERR": int(cfg[C["KLERR"]]), "_NK": max(int(cfg[C["KLERR"]]), 1),
               "_LIDX": numpy.array(list(lerr_index) or [0], dtype=numpy.int64),
               "_RATIOS": numpy.array(ratios, dtype=numpy.float64), "_GAMMA0": float(gammas[0]),
               "_NFR": fr, "_LERR_SCALE": float(fcfg[F["LERR_SCALE"]]), "_REUSE_RATE": float(fcfg[F["REUSE_RATE"]]),
               "_DPOS": numpy.array([int(bool(v)) for v in domain_pos] or [0], dtype=numpy.int64),
-              "_rt": _rt, "math": math}
+              "math": math}
     consts.update({"_S_" + name: code for name, code in _STATUS.items()})
+    consts.update(zip(("_solver", "_usetol", "_chk", "_comp"), options))
     for name, k in zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels):
         consts[name] = getattr(k, "py_func", None)
     # the helpers, with their constants resolved in this loop's configuration
@@ -170,7 +173,7 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     True when it ran them (``Y``, ``C``, ``FRC``, ``traj``, ``its``, ``smode``, ``fstat``,
     ``fval`` as the numba runtime leaves them, failures included); None when it does not apply.
     ``python``: run the same stepper as plain Python (:func:`python_stepper`) instead."""
-    CFG = _rt.CFG
+    CFG = _abi.CFG
     kind = int(cfg[CFG["KIND"]])
     guess, res, resjac, post_k, hs, check, scale = kernels
     needed = [post_k] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
@@ -180,13 +183,14 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     if n1 <= n0:
         fstat[:, 0] = _STATUS["OK"]
         return True
+    options = (int(solver), int(bool(use_tol)), int(bool(check_resolution)), int(bool(compensated)))
     if python:
-        loop = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
+        loop = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
         drive = _call
     else:
         if not enabled() or not all(isinstance(k, _lk.LLVMKernel) for k in needed):
             return None
-        loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios)
+        loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
         if loop is None:
             return None
         drive = _drive
@@ -232,9 +236,8 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     while True:
         nxtr = (max(nr, 0) // every + 1) * every
         drive(loop, Y, C, FRC, K, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(limit), int(every),
-              nxt0, nxt0 // every - r0, int(bool(check_resolution)), int(bool(compensated)), st, itsf, smf, okf, luf, pvf, fst, fvl,
-              dec, jout, int(maxiter), int(solver), int(bool(use_tol)), float(tol), B, b0, nr, k0, nxtr,
-              nxtr // every - r0)
+              nxt0, nxt0 // every - r0, st, itsf, smf, okf, luf, pvf, fst, fvl, dec, jout, int(maxiter), float(tol),
+              B, b0, nr, k0, nxtr, nxtr // every - r0)
         if not st[0]:
             break
         # the stepper asks for the spectral radius of J - I at trajectory b, step n, stage k:

@@ -18,7 +18,7 @@ uncacheable (:func:`key` returns None: compiled as before).
 
 **Trust.** Object code is executable, so it is read only from the per-user cache
 (``$METHODGEN_CACHE`` or the XDG cache, ``llvm/`` in it) under the rules of the module
-cache (:func:`methodgen.emit.check_cache_folder`: folders of this user that others cannot
+cache (:func:`methodgen.store.check_cache_folder`: folders of this user that others cannot
 write to) and only with the HMAC-SHA256 tag of the user's cache key (the key that tags
 cached modules).  A file without a valid tag, or any error reading or writing, means no
 cache: the kernel is compiled as if there were none (never an error, never a stale load).
@@ -114,11 +114,11 @@ def key(py_func, sig, globals_, c_entry, state) -> str | None:
 def _folder_and_key(create: bool):
     """(the cache's llvm/ folder, the user's cache key), or None where the cache cannot be
     trusted or used."""
-    from . import emit
+    from . import store
     from .errors import StorageError, UntrustedCacheError
 
     try:
-        root = emit.cache_dir()
+        root = store.cache_dir()
         folder = root / "llvm"
         if create:
             root.mkdir(mode=0o700, parents=True, exist_ok=True)
@@ -126,9 +126,9 @@ def _folder_and_key(create: bool):
         if not folder.is_dir():
             return None
         root = root.resolve()
-        emit._check_folder(root)
-        emit._check_folder(folder)
-        secret = emit._cache_key(root, create=create)
+        store._check_folder(root)
+        store._check_folder(folder)
+        secret = store._cache_key(root, create=create)
     except (OSError, RuntimeError, StorageError, UntrustedCacheError):
         return None
     if secret is None:

@@ -578,6 +578,19 @@ class _Translator:
             if a is None or b is None or (type(node.op) in (ast.FloorDiv, ast.Mod) and b == 0):
                 return None
             return self._CONST_OPS[type(node.op)](a, b)
+        if isinstance(node, ast.BoolOp):
+            # ``and`` / ``or`` of comparisons (no side effects): decided at translation time when
+            # one operand decides it (False in an ``and``, True in an ``or``) or all are known
+            vals = [self.const_eval(v) for v in node.values]
+            decisive = 0 if isinstance(node.op, ast.And) else 1
+            if any(v is not None and bool(v) == bool(decisive) for v in vals):
+                return decisive
+            if all(v is not None for v in vals):
+                return 1 - decisive
+            return None
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+            v = self.const_eval(node.operand)
+            return None if v is None else int(not v)
         if isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _CMP:
             a, b = self.const_eval(node.left), self.const_eval(node.comparators[0])
             if a is None or b is None:
@@ -1101,11 +1114,12 @@ class LLVMKernel:
 def _numba_for(py_func):
     """numba, ready to compile a function of ``py_func``'s module: its cache guard installed and
     its lazily compiled functions made dispatchers (:func:`methodgen.nbabi.materialize`)."""
-    from . import nbabi
-
     g = getattr(py_func, "__globals__", None)
-    if g is not None:
-        nbabi.materialize(g)
+    # a generated module's runtime interface (methodgen.nbabi, imported as _rt) prepares it;
+    # looked up in the module, not imported here (llvmkernels sits below the runtime)
+    prepare = getattr(g.get("_rt"), "materialize", None) if g is not None else None
+    if prepare is not None:
+        prepare(g)
     return _nbcache.numba()
 
 

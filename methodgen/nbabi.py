@@ -34,20 +34,11 @@ from . import nbcache as _nbcache
 __all__ = ["KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256", "MIN_BATCH", "int_config", "float_config",
            "no_kernel", "run", "use_block", "jit", "materialize", "res_rows", "jac_rows"]
 
-_HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def _digest() -> str:
-    h = hashlib.sha256()
-    for name in ("abi.py", "nbabi.py", "nbruntime.py"):
-        with open(os.path.join(_HERE, name), "rb") as f:
-            h.update(hashlib.sha256(f.read()).digest())
-    return h.hexdigest()
-
-
-#: SHA-256 over this file, ``abi.py`` and ``nbruntime.py``: the stamp of the runtime's cached machine code
-#: and the runtime a generated module names.
-SOURCE_SHA256 = _digest()
+#: The runtime's stamp (:data:`methodgen.abi.RUNTIME_SHA256`): the stamp of its cached machine
+#: code and the runtime a generated module names.
+SOURCE_SHA256 = _abi.RUNTIME_SHA256
 
 # --- the contract (methodgen.abi), re-exported for the generated modules' ``_rt.`` -------------
 

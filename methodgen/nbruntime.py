@@ -38,20 +38,20 @@ from numba.experimental.function_type import _get_wrapper_address
 from numba.extending import intrinsic as _intrinsic
 
 from . import ktypes as _kt
-from . import nbabi as _abi
+from . import abi as _abi
 from .llvmkernels import LLVMKernel
 from .nbcache import flush_deferred as _flush_deferred
 from .nbcache import install_stamp_guard as _install_stamp_guard
 from .nbcache import source_digest as _source_digest
 
-__all__ = ["run", "handle", "KernelHandle", "res_rows", "jac_rows", "int_config", "float_config", "KERNEL_TYPES",
-           "CFG", "FCFG", "STATUS", "SOURCE_SHA256", "no_kernel", "stack_buffer", "stand_in"]
+__all__ = ["handle", "KernelHandle", "res_rows", "jac_rows", "KERNEL_TYPES", "CFG", "FCFG", "STATUS",
+           "SOURCE_SHA256", "stack_buffer", "stand_in"]
 
 # --- cache stamp ---------------------------------------------------------------------
 
 #: SHA-256 over this file and nbabi.py (the configuration layout it reads): the stamp of its
 #: cached machine code (:data:`methodgen.nbabi.SOURCE_SHA256`).
-SOURCE_SHA256 = _abi.SOURCE_SHA256
+SOURCE_SHA256 = _abi.RUNTIME_SHA256
 
 _install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256)
 _flush_deferred()   # numba is imported now: the guards generated modules deferred
@@ -127,7 +127,7 @@ def handle(kernel, sig):
     (a handle or an LLVM kernel passed is returned as it is)."""
     if isinstance(kernel, (KernelHandle, LLVMKernel)):
         return kernel
-    if isinstance(kernel, _abi._Missing):
+    if hasattr(kernel, "kind") and hasattr(kernel, "compiled"):   # nbabi.no_kernel's stand-in marker
         kernel = kernel.compiled()
     key = (id(kernel), id(sig))   # (hashing a numba signature costs microseconds)
     h = _HANDLES.get(key)
@@ -186,8 +186,6 @@ def stand_in(kind: str):
     return _once("no_" + kind, KERNEL_TYPES[kind], _NO[kind])
 
 
-no_kernel = _abi.no_kernel
-_Missing = _abi._Missing
 
 
 @_intrinsic
@@ -218,7 +216,6 @@ FCFG = _abi.FCFG
 STATUS = _abi.STATUS
 
 
-run = _abi.run
 
 
 def _res_rows(res, Z, Y, h, p, R):
@@ -253,5 +250,3 @@ def jac_rows(resjac, Z, Y, h, p, R, J):
 
 # --- configuration arrays (Python) ----------------------------------------------------------
 
-int_config = _abi.int_config
-float_config = _abi.float_config

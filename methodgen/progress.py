@@ -183,7 +183,7 @@ class StderrReporter:
         if not self._history:
             return None
         if self._history is True:
-            from .emit import cache_dir
+            from .store import cache_dir
 
             return cache_dir() / HISTORY_FILE
         return Path(self._history)

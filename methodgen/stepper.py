@@ -40,8 +40,8 @@ __all__ = ["stepper", "solve", "resolution", "lu", "lu_solve"]
 # flake8: noqa: F821
 
 
-def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _chk, _comp, _st, _its, _smode,
-            _sluok, _sLU, _spiv, _fst, _fval, _dec, _jout, _maxiter, _solver, _usetol, _tol, _nbt, _b0, _nr, _k0, _nxtr, _rowr):
+def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _st, _its, _smode,
+            _sluok, _sLU, _spiv, _fst, _fval, _dec, _jout, _maxiter, _tol, _nbt, _b0, _nr, _k0, _nxtr, _rowr):
     """Steps ``_n0 .. _n1-1`` of trajectories ``_b0 .. _nbt-1``.
 
     ``_Y``, ``_C``, ``_G`` (B, ·): state, compensation, carried force, updated in place;
@@ -56,6 +56,11 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
     trajectory ``_b0`` at step ``_nr``, stage ``_k0``, with ρ = ``_dec[3]`` for that stage.
     ``_nxt0``, ``_nxtr``: the first step after ``_n0`` (``_nr``) whose state is kept, a multiple
     of ``_every``; ``_row0``, ``_rowr``: its row, ``_nxt0 // _every``.
+
+    The run's options that select code -- ``_solver`` (0 newton, 1 simplified, 2 fixed point,
+    3 reuse, 4 auto), ``_usetol``, ``_chk`` (check_resolution), ``_comp`` (compensated) -- are
+    constants of the compiled loop, like the configuration: each combination is its own
+    machine code, compiled when first used, holding only the branches it takes.
     """
     _z = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
     _zp = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
@@ -173,25 +178,85 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                     _newton = 0
                     if _solver == 4 and _smode[_b, _k] > 0.0:
                         _newton = 1
-                    _done = 0
-                    while _it < _maxiter:
-                        _it += 1
-                        # (one call site per kernel: each is inlined where it is called)
+                    # One call site per kernel (each is inlined where it is called): the
+                    # iterations (phase 0), then for a failure R at the last iterate (phase 2,
+                    # maxiter reached) and the Newton matrix at the start value (phase 1, is the
+                    # step resolved there at all?) through the same sites.
+                    _phase = 0
+                    while True:
+                        if _phase == 0:
+                            if _it >= _maxiter:
+                                _phase = 2
+                                if _solver == 3:
+                                    _sluok[_b, _k] = 0.0
+                            else:
+                                _it += 1
                         _fp = 0
-                        if _solver == 2 or (_solver == 4 and _newton == 0):
-                            _fp = 1
                         _jac = 0
-                        if _fp == 0:
-                            if _solver == 3:
+                        if _phase == 1:
+                            _jac = 1
+                        elif _phase == 0:
+                            if _solver == 2 or (_solver == 4 and _newton == 0):
+                                _fp = 1
+                            elif _solver == 3:
                                 if _sluok[_b, _k] == 0.0:
                                     _jac = 1
                             elif _solver == 0 or _solver == 4 or _have == 0:
                                 _jac = 1
                         if _jac != 0:
                             resjac(_z, _yl, _cl, _hs, _p, _r, _J)
-                            _have = 1
+                            if _phase == 0:
+                                _have = 1
                         else:
                             res(_z, _yl, _cl, _hs, _p, _r)
+                        if _phase == 1:
+                            # the failure's verdict: unresolved at the start value (ρ above the
+                            # threshold of a Newton failure), else the failure as it was
+                            if _asked != 2:
+                                resolution(_J, _rr, _NFR)
+                                _rho = _rr[0]
+                                if _rr[1] != 0.0:
+                                    _asked = 1
+                            if _asked != 1 and _rho > _NFR:
+                                _status = _S_UNRESOLVED_START
+                                _val = _rho
+                            elif _status == _S_DIVERGED:
+                                _val = 0.0                # the residual's size at the start value
+                                for _i in range(_N):
+                                    _v = abs(_r[_i])
+                                    if _v > _val or _v != _v:
+                                        _val = _v
+                            break
+                        if _phase == 2:
+                            # maxiter reached: slow (the residual already near round-off), not
+                            # resolved at the start value, or not converged
+                            _rn = 0.0
+                            for _i in range(_N):
+                                _v = abs(_r[_i])
+                                if _v > _rn or _v != _v:
+                                    _rn = _v
+                            _zn = 0.0
+                            for _i in range(_N):
+                                _v = abs(_z[_i])
+                                if _v > _zn or _v != _v:
+                                    _zn = _v
+                            _yn = 0.0
+                            for _i in range(_DIM):
+                                _v = abs(_yl[_i])
+                                if _v > _yn or _v != _v:
+                                    _yn = _v
+                            _it = _maxiter
+                            _val = _rn
+                            if _usetol == 0 and (_rn <= _TOL_PLATEAU * max(_zn, _floor) or _rn <= _TOL_ROUNDOFF * _yn):
+                                _status = _S_SLOW
+                                break
+                            _status = _S_NOT_CONVERGED
+                            if _RESOL != 0 and _chk != 0:
+                                for _i in range(_N):
+                                    _z[_i] = _zp[_i]    # (z is not used after a failure)
+                                _phase = 1
+                                continue
+                            break
                         if _fp != 0:
                             # fixed point z <- F(z) for R(z) = z - F(z): the increment is R
                             for _i in range(_N):
@@ -200,6 +265,7 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                             # simplified Newton whose LU factors are kept over steps: refreshed
                             # at the current iterate when an iteration contracts by less than
                             # REUSE_RATE, and from the predictor when an iterate diverges
+                            _okb[0] = 1.0
                             if _jac != 0:
                                 if _snap == 0:
                                     for _i in range(_N * _N):
@@ -210,12 +276,11 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                 lu(_J, _sLU[_bk], _spiv[_bk], _okb)
                                 if _okb[0] != 0.0:
                                     _sluok[_b, _k] = 1.0
-                                    lu_solve(_sLU[_bk], _spiv[_bk], _r, _dz)
-                                else:
-                                    for _i in range(_N):
-                                        _dz[_i] = math.nan
-                            else:
+                            if _okb[0] != 0.0:
                                 lu_solve(_sLU[_bk], _spiv[_bk], _r, _dz)
+                            else:
+                                for _i in range(_N):
+                                    _dz[_i] = math.nan
                         else:
                             solve(_J, _r, _dz, _wa, _wb)
                         for _i in range(_N):
@@ -253,9 +318,18 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                 continue
                             if _solver == 3:
                                 _sluok[_b, _k] = 0.0
-                            # diverged (below: unresolved at the start value, or diverged)
+                            # diverged: unresolved at the start value, or diverged
                             _status = _S_DIVERGED
-                            _done = 2
+                            if _RESOL != 0 and _chk != 0:
+                                for _i in range(_N):
+                                    _z[_i] = _zp[_i]    # (z is not used after a failure)
+                                _phase = 1
+                                continue
+                            _val = 0.0                    # the residual's size at the last iterate
+                            for _i in range(_N):
+                                _v = abs(_r[_i])
+                                if _v > _val or _v != _v:
+                                    _val = _v
                             break
                         _conv = 0
                         if _usetol != 0:
@@ -289,57 +363,10 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                         _val = _dis
                             if _asked != 1 and _status == _S_OK and _newton != 0:
                                 _smode[_b, _k] -= 1.0
-                            _done = 1
                             break
                         if _solver == 3 and _nd > _REUSE_RATE * _prev:
                             _sluok[_b, _k] = 0.0     # contracting too slowly: factor at this iterate
                         _prev = _nd
-                    if _done == 0:
-                        # maxiter reached: slow (the residual already near round-off), not
-                        # resolved at the start value, or not converged
-                        if _solver == 3:
-                            _sluok[_b, _k] = 0.0
-                        res(_z, _yl, _cl, _hs, _p, _r)
-                        _rn = 0.0
-                        for _i in range(_N):
-                            _v = abs(_r[_i])
-                            if _v > _rn or _v != _v:
-                                _rn = _v
-                        _zn = 0.0
-                        for _i in range(_N):
-                            _v = abs(_z[_i])
-                            if _v > _zn or _v != _v:
-                                _zn = _v
-                        _yn = 0.0
-                        for _i in range(_DIM):
-                            _v = abs(_yl[_i])
-                            if _v > _yn or _v != _v:
-                                _yn = _v
-                        _it = _maxiter
-                        if _usetol == 0 and (_rn <= _TOL_PLATEAU * max(_zn, _floor) or _rn <= _TOL_ROUNDOFF * _yn):
-                            _status = _S_SLOW
-                        else:
-                            _status = _S_NOT_CONVERGED
-                        _val = _rn
-                    if _status == _S_DIVERGED or _status == _S_NOT_CONVERGED:
-                        # is the step resolved at the start value at all?
-                        if _RESOL != 0 and _chk != 0:
-                            resjac(_zp, _yl, _cl, _hs, _p, _r, _J)
-                            if _asked != 2:
-                                resolution(_J, _rr, _NFR)
-                                _rho = _rr[0]
-                                if _rr[1] != 0.0:
-                                    _asked = 1
-                            if _asked != 1 and _rho > _NFR:
-                                _status = _S_UNRESOLVED_START
-                                _val = _rho
-                        if _status == _S_DIVERGED:
-                            # the residual's size (at the start value where it was evaluated)
-                            _val = 0.0
-                            for _i in range(_N):
-                                _v = abs(_r[_i])
-                                if _v > _val or _v != _v:
-                                    _val = _v
                     if _asked == 1:
                         _smode[_b, _k] = _mode0
                         if _solver == 3:
@@ -394,23 +421,37 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                 # first-same-as-last: the force at this stage's end starts the next stage
                 for _i in range(_NF):
                     _gl[_i] = _out[_DIM + _i]
+                # the checks at the stage's end: a failure is recorded (status, step, iteration
+                # or condition, value) and ends the trajectory's run
                 if _bad != 0.0:
-                    _status = _S_NON_FINITE
-                    _val = math.nan
-                if _status == _S_OK:
-                    for _j in range(_NDOMAIN):
-                        if _status == _S_OK:
-                            _v = _out[_PD + _j]
-                            if (_DPOS[_j] != 0 and not (_v > 0.0)) or (_DPOS[_j] == 0 and not (_v >= 0.0)):
-                                _status = _S_OUT_OF_DOMAIN
-                                _it = _j
-                                _val = _v
-                if _status == _S_OK and _TT_GUARD:
+                    _fst[_b, 0] = _S_NON_FINITE
+                    _fst[_b, 1] = _n
+                    _fst[_b, 2] = 0
+                    _fval[_b] = math.nan
+                    _failed = 1
+                    break
+                _jbad = -1
+                for _j in range(_NDOMAIN):
+                    _v = _out[_PD + _j]
+                    if (_DPOS[_j] != 0 and not (_v > 0.0)) or (_DPOS[_j] == 0 and not (_v >= 0.0)):
+                        _jbad = _j
+                        break
+                if _jbad >= 0:
+                    _fst[_b, 0] = _S_OUT_OF_DOMAIN
+                    _fst[_b, 1] = _n
+                    _fst[_b, 2] = _jbad
+                    _fval[_b] = _out[_PD + _jbad]
+                    _failed = 1
+                    break
+                if _TT_GUARD:
                     if not (_out[_PT] > 0.0) or (_chk != 0 and abs(_out[_PT + 1]) > _MLD * _out[_PT + 2]):
-                        _status = _S_TIME_SCALE
-                        _it = 0
-                        _val = _out[_PT]
-                if _status == _S_OK and _LERR != 0 and _chk != 0:
+                        _fst[_b, 0] = _S_TIME_SCALE
+                        _fst[_b, 1] = _n
+                        _fst[_b, 2] = 0
+                        _fval[_b] = _out[_PT]
+                        _failed = 1
+                        break
+                if _LERR != 0 and _chk != 0:
                     if _LERR == 1:
                         _ne2 = _out[_PE]
                         _nd2 = _out[_PE + 1]
@@ -422,26 +463,22 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                             _ne2 += _e * _e
                         _nd2 = _out[_PE]
                     if _ne2 > _LERR2 * _nd2:
-                        _status = _S_LOCAL_ERROR
-                        _it = 0
-                        _val = _LERR_SCALE * math.sqrt(_ne2 / _nd2)
-                if _status == _S_OK and _EJUMP:
+                        _fst[_b, 0] = _S_LOCAL_ERROR
+                        _fst[_b, 1] = _n
+                        _fst[_b, 2] = 0
+                        _fval[_b] = _LERR_SCALE * math.sqrt(_ne2 / _nd2)
+                        _failed = 1
+                        break
+                if _EJUMP:
                     if _chk != 0 and abs(_out[_PJ] - _e0) > _MEJ * _e1:
-                        _status = _S_ENERGY_JUMP
-                        _it = 0
-                        _val = abs(_out[_PJ] - _e0) / _e1
-                    else:
-                        _e0 = _out[_PJ]
-                        _e1 = _out[_PJ + 1]
-                if _status != _S_OK:
-                    _fst[_b, 0] = _status
-                    _fst[_b, 1] = _n
-                    if _status == _S_NON_FINITE:
-                        _it = 0
-                    _fst[_b, 2] = _it
-                    _fval[_b] = _val
-                    _failed = 1
-                    break
+                        _fst[_b, 0] = _S_ENERGY_JUMP
+                        _fst[_b, 1] = _n
+                        _fst[_b, 2] = 0
+                        _fval[_b] = abs(_out[_PJ] - _e0) / _e1
+                        _failed = 1
+                        break
+                    _e0 = _out[_PJ]
+                    _e1 = _out[_PJ + 1]
                 _k += 1
             if _stop != 0:
                 break

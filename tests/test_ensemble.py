@@ -115,7 +115,7 @@ def _interpreted_block_run(mod, Y0, h, steps):
     fstat = np.zeros((Bn, 4), dtype=np.int64)
     fval = np.zeros(Bn)
     nbbatch._run_block.py_func(
-        mod._py_post_block, mod._nb_hs, nbruntime.no_kernel("check"), mod._CFG, mod._FCFG, mod._LERR_INDEX,
+        mod._py_post_block, mod._nb_hs, nbabi.no_kernel("check"), mod._CFG, mod._FCFG, mod._LERR_INDEX,
         mod._DOMAIN_POSITIVE, mod._STAGE_GAMMAS, mod._STAGE_RATIOS, mod._KICK_A, mod._DRIFT, mod._KICK_B,
         traj, 0, steps, Y, C, FRC, h, np.array([1.0, 1.0]), True, True, fstat, fval, 1, mod._BLOCK_LANES)
     return traj, fstat

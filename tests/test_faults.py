@@ -273,9 +273,9 @@ def test_disk_full_while_generating_the_module(tmp_path, capsys, monkeypatch):
     """Was: an 18-line OSError traceback.  The write goes to /dev/full: a real ENOSPC."""
     if not os.path.exists("/dev/full"):
         pytest.skip("needs /dev/full")
-    import methodgen.emit as emit
+    import methodgen.store as store
 
-    real = emit.make_temp
+    real = store.make_temp
 
     def make_temp(folder, name):
         fd, tmp = real(folder, name)
@@ -286,7 +286,7 @@ def test_disk_full_while_generating_the_module(tmp_path, capsys, monkeypatch):
         os.close(full)
         return fd, tmp
 
-    monkeypatch.setattr(emit, "make_temp", make_temp)
+    monkeypatch.setattr(store, "make_temp", make_temp)
     f = scene_file(tmp_path, "p**2/2 + q**4/4", (0.5, 0.1), name="quartic")
     code, out, err = main(capsys, "run", f)
     assert code == cli.EXIT_NUMERICAL and out == ""

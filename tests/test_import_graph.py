@@ -1,10 +1,9 @@
-"""The package's import graph: no import cycle beyond the ones still being taken apart.
+"""The package's import graph: no import cycle.
 
 Every ``import`` of a methodgen module inside methodgen -- at the top of a module or inside a
 function -- is an edge; a strongly connected component of more than one module is a cycle.
-The cycle that remains (the compiled runtime's modules, which go with the numba route) is listed here so
-that it does not grow and no new one appears; removing one means
-deleting its line.  The negative control adds one upward edge and sees it caught.
+There is none (the last, through the compiled runtime's modules, went with the numba loop).
+The negative control adds one upward edge and sees it caught.
 """
 
 from __future__ import annotations
@@ -16,11 +15,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent / "methodgen"
 
-#: cycles still in the package (each component must lie inside one of these)
-KNOWN_CYCLES = (
-    {"methodgen.emit", "methodgen.fused", "methodgen.llvmcache", "methodgen.llvmkernels",
-     "methodgen.nbabi", "methodgen.nbruntime", "methodgen.progress"},
-)
+#: cycles still in the package (each component must lie inside one of these): none
+KNOWN_CYCLES = ()
 
 
 def _modules() -> dict:
@@ -99,17 +95,10 @@ def _unexpected(graph) -> list[set]:
     return [c for c in cycles(graph) if not any(c <= known for known in KNOWN_CYCLES)]
 
 
-def test_no_import_cycle_beyond_the_known_ones():
+def test_no_import_cycle():
     graph = import_graph()
     assert len(graph) > 50 and "methodgen.schemes.energy_momentum" in graph
     assert _unexpected(graph) == []
-
-
-def test_known_cycles_are_still_there():
-    """A known cycle that is gone must be deleted from the list (the list only shrinks)."""
-    found = cycles(import_graph())
-    for known in KNOWN_CYCLES:
-        assert any(c & known for c in found), f"{sorted(known)} is no longer a cycle: remove it from the list"
 
 
 @pytest.mark.parametrize("edge", [("methodgen.problem", "methodgen.derive"),

@@ -142,10 +142,10 @@ def test_explicit_stage_reads_its_steps_from_the_stage_coefficients(tmp_path):
 
 def test_configuration_is_checked_by_name():
     with pytest.raises(ValueError, match="missing .*'N'"):
-        nbruntime.int_config(**{k: 0 for k in nbruntime.CFG if k != "N"})
+        nbabi.int_config(**{k: 0 for k in nbruntime.CFG if k != "N"})
     with pytest.raises(ValueError, match="unknown .*'BOGUS'"):
-        nbruntime.float_config(**{k: 0.0 for k in nbruntime.FCFG}, BOGUS=1.0)
-    cfg = nbruntime.int_config(**{k: i for k, i in nbruntime.CFG.items()})
+        nbabi.float_config(**{k: 0.0 for k in nbruntime.FCFG}, BOGUS=1.0)
+    cfg = nbabi.int_config(**{k: i for k, i in nbruntime.CFG.items()})
     assert cfg.tolist() == list(range(len(nbruntime.CFG)))
 
 
