@@ -165,6 +165,8 @@ def test_renderers(kepler):
         assert {"claim", "status", "seconds"} <= set(c) and c["status"] in ("proved", "refuted", "numerical")
     assert "| # | claim |" in rep.markdown()
     assert r"\begin{description}" in rep.latex()
+    # a notebook renders the report (IPython's display protocol): its Markdown
+    assert rep._repr_markdown_() == rep.markdown()
 
 
 def _cli(*args):

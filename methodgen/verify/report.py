@@ -258,6 +258,10 @@ class Report:
                 lines.append(f"   - {k}: {_md_escape(str(v))}")
         return "\n".join(lines) + "\n"
 
+    def _repr_markdown_(self) -> str:
+        """The report in a notebook: :meth:`markdown` (Jupyter renders it, formulas by MathJax)."""
+        return self.markdown()
+
     def latex(self) -> str:
         """A LaTeX fragment (``description`` list) for a course handout."""
         out = [rf"\subsection*{{Verification: {_tex_escape(self.title)}}}"]
