@@ -160,7 +160,7 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options) 
     for name, k in zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels):
         consts[name] = getattr(k, "py_func", None)
     # the helpers, with their constants resolved in this loop's configuration
-    for f in (_stepper.solve, _stepper.resolution, _stepper.lu, _stepper.lu_solve):
+    for f in (_stepper.solve, _stepper.resolution, _stepper.lu, _stepper.lu_solve, _stepper.amax):
         consts[f.__name__] = types.FunctionType(f.__code__, consts, f.__name__)
     return consts
 

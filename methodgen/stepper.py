@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["stepper", "solve", "resolution", "lu", "lu_solve"]
+__all__ = ["stepper", "solve", "resolution", "lu", "lu_solve", "amax"]
 
 # The names below that this file does not define (``numba``, ``_rt``, the upper-case
 # constants and the kernels) are bound by methodgen.fused when it compiles the loop.
@@ -221,25 +221,13 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                 _status = _S_UNRESOLVED_START
                                 _val = _rho
                             elif _status == _S_DIVERGED:
-                                _val = 0.0                # the residual's size at the start value
-                                for _i in range(_N):
-                                    _v = abs(_r[_i])
-                                    if _v > _val or _v != _v:
-                                        _val = _v
+                                _val = amax(_r)    # the residual's size at the start value
                             break
                         if _phase == 2:
                             # maxiter reached: slow (the residual already near round-off), not
                             # resolved at the start value, or not converged
-                            _rn = 0.0
-                            for _i in range(_N):
-                                _v = abs(_r[_i])
-                                if _v > _rn or _v != _v:
-                                    _rn = _v
-                            _zn = 0.0
-                            for _i in range(_N):
-                                _v = abs(_z[_i])
-                                if _v > _zn or _v != _v:
-                                    _zn = _v
+                            _rn = amax(_r)
+                            _zn = amax(_z)
                             _yn = 0.0
                             for _i in range(_DIM):
                                 _v = abs(_yl[_i])
@@ -285,16 +273,8 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                             solve(_J, _r, _dz, _wa, _wb)
                         for _i in range(_N):
                             _z[_i] -= _dz[_i]
-                        _nd = 0.0
-                        for _i in range(_N):
-                            _v = abs(_dz[_i])
-                            if _v > _nd or _v != _v:
-                                _nd = _v
-                        _nz = 0.0
-                        for _i in range(_N):
-                            _v = abs(_z[_i])
-                            if _v > _nz or _v != _v:
-                                _nz = _v
+                        _nd = amax(_dz)
+                        _nz = amax(_z)
                         _nz = max(_nz, _floor)
                         if _solver == 4 and _newton == 0 and (not _nd <= 1e300 or (_it >= 2 and _nd > _AUTO_RATE * _prev)):
                             # the fixed point diverges or contracts slowly: Newton's method from
@@ -325,11 +305,7 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
                                     _z[_i] = _zp[_i]    # (z is not used after a failure)
                                 _phase = 1
                                 continue
-                            _val = 0.0                    # the residual's size at the last iterate
-                            for _i in range(_N):
-                                _v = abs(_r[_i])
-                                if _v > _val or _v != _v:
-                                    _val = _v
+                            _val = amax(_r)    # the residual's size at the last iterate
                             break
                         _conv = 0
                         if _usetol != 0:
@@ -698,3 +674,13 @@ def lu_solve(_LU, _pv, _b, _x):
         for j in range(i + 1, min(_N, i + _KL + _KU + 1)):
             s -= _LU[i * _N + j] * _x[j]
         _x[i] = s / _LU[i * _N + i]
+
+
+def amax(_v):
+    """Max-norm of ``_v[:N]`` that propagates NaN (a NaN entry must fail every later test)."""
+    m = 0.0
+    for i in range(_N):
+        a = abs(_v[i])
+        if a > m or a != a:
+            m = a
+    return m
