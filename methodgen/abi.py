@@ -155,13 +155,15 @@ CFG = {name: i for i, name in enumerate((
     "RESOLUTION",   # 0 none, 1 "full", 2 "reduced"
     "KIND",         # 0 Newton, 1 linearly implicit, 2 explicit
     "KL", "KU",     # bandwidths of the Newton matrix
+    "PROJ",         # invariants projected on (methodgen.projection): 0 none
+    "PROJ_SYM",     # 1: symmetric projection, 0: standard
 ))}
 
 #: Positions in the float configuration array ``fcfg`` of the compiled runtime.
 FCFG = {name: i for i, name in enumerate((
     "LERR2", "LERR_SCALE", "MAX_LEVEL_DEFECT", "MAX_ENERGY_JUMP", "MAX_RESOLUTION",
     "NEWTON_FAILURE_RESOLUTION", "MAX_PREDICTOR_DISAGREEMENT", "REUSE_RATE", "AUTO_RATE",
-    "AUTO_HOLD",
+    "AUTO_HOLD", "PROJ_TOL", "PROJ_PLATEAU", "PROJ_NOISE",
 ))}
 
 _LERR_CODES = {None: 0, "direct": 1, "carry": 2}
@@ -179,7 +181,8 @@ def int_config_values(ir) -> dict:
         TT_GUARD=int(post.tt_guard), POST_EJ=post.ej, EJUMP=int(post.energy_jump), POST_LEN=post.length,
         HAS_SCALE=int("scale" in ir.scalar), RESOLUTION=_RESOLUTION_CODES[ir.resolution] if n else 0,
         KIND=2 if not n else (1 if ir.kind == "linear" else 0),
-        KL=ir.band[0] if n else 0, KU=ir.band[1] if n else 0)
+        KL=ir.band[0] if n else 0, KU=ir.band[1] if n else 0,
+        PROJ=len(ir.projection), PROJ_SYM=int(bool(ir.projection and ir.projection_symmetric)))
     return {name: values[name] for name in CFG}
 
 
@@ -196,7 +199,10 @@ def float_config_sources(ir) -> dict:
         NEWTON_FAILURE_RESOLUTION="_NEWTON_FAILURE_RESOLUTION" if ir.resolution else "0.0",
         MAX_PREDICTOR_DISAGREEMENT="MAX_PREDICTOR_DISAGREEMENT" if ir.resolution else "0.0",
         REUSE_RATE="_REUSE_RATE" if newton else "0.0", AUTO_RATE="_AUTO_RATE" if newton else "0.0",
-        AUTO_HOLD="_AUTO_HOLD" if newton else "0")
+        AUTO_HOLD="_AUTO_HOLD" if newton else "0",
+        PROJ_TOL="_PROJ_TOL" if ir.projection else "0.0",
+        PROJ_PLATEAU="_PROJ_PLATEAU" if ir.projection else "0.0",
+        PROJ_NOISE="_PROJ_NOISE" if ir.projection else "0.0")
     return {name: values[name] for name in FCFG}
 
 
@@ -232,6 +238,10 @@ KERNEL_TYPES = {
     "post": _t.void(_V, _V, _V, _V, _f8, _f8, _f8, _V, _V),
     "hs": _t.void(_V, _V, _V),
     "check": _t.void(_V, _V, _V),
+    # a projected step (methodgen.projection): the first-same-as-last force at (y, c), and
+    # g, G = ∂g/∂y (row by row) and the metric w at y
+    "force": _t.void(_V, _V, _V, _V),
+    "proj": _t.void(_V, _V, _V),
 }
 
 

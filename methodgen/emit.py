@@ -256,7 +256,7 @@ def shared_runtime_supports(ir: ModuleIR) -> bool:
     (Gauss, energy collocation: ``ir.stage``) run here with their stage loops compiled for the
     runtime's kernel types (``numba_kernels.stage_kernel``).
     """
-    return ir.kind in ("explicit", "newton", "linear") and not ir.projection
+    return ir.kind in ("explicit", "newton", "linear")
 
 
 def runtime_sha256() -> str:

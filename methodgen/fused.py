@@ -41,13 +41,13 @@ __all__ = ["run_fused", "enabled"]
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 _T3 = _t.float64[:, :, ::1]
 
-#: signature of the compiled stepper (:func:`methodgen.stepper.stepper`): Y, C, G, K (B, ·),
+#: signature of the compiled stepper (:func:`methodgen.stepper.stepper`): Y, C, G, K, PJ (B, ·),
 #: traj (rows, B, DIM), p, kick_a, drift, kick_b, h, n0, n1, every, nxt0, row0, stop (2), iterations (B, n1 - n0), solver modes (B, STAGES),
 #: "reuse"'s valid flags (B, STAGES), factors (B·STAGES, N·N) and permutations (B·STAGES, N),
 #: failures (B, 4), failure values (B), the question (4), the Newton matrix asked about,
 #: maxiter, tol, B, b0, nr, k0, nxtr, rowr (solver, use_tol, check_resolution and compensated are
 #: constants of each compiled loop)
-LOOP_SIG = _t.void(_M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _V,
+LOOP_SIG = _t.void(_M, _M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _V,
                    _M, _M, _M, _M, _M, _M, _V, _V, _M, _i8, _f8, _i8, _i8, _i8, _i8, _i8, _i8)
 
 
@@ -63,6 +63,9 @@ def _drive(loop, *args):
 
 
 _LOOPS: dict = {}
+
+#: The kernels of a module, in the order run_fused takes them (methodgen.abi.KERNEL_TYPES).
+KERNEL_NAMES = ("guess", "res", "resjac", "post", "hs", "check", "scale", "force", "proj")
 
 
 def spectral_h_omega(J, resol: int) -> float:
@@ -121,7 +124,7 @@ def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, o
     # the kernels as callables: compiled ones (numba compiles an LLVM kernel's source on its
     # first call from Python, with the same arithmetic), so that a comparison with the compiled
     # loop tests the stepper alone
-    consts.update(zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels))
+    consts.update(zip(KERNEL_NAMES, kernels))
     return types.FunctionType(_stepper.stepper.__code__, consts, "stepper")
 
 
@@ -135,6 +138,7 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options) 
     n = int(cfg[C["N"]])
     fr = float(fcfg[F["NEWTON_FAILURE_RESOLUTION"]])
     resol = int(cfg[C["RESOLUTION"]])
+    pm = int(cfg[C["PROJ"]])
     consts = {"_PL": max(int(cfg[C["POST_LEN"]]), 1), "_STAGES": int(cfg[C["STAGES"]]),
               "_DIM": int(cfg[C["DIM"]]), "_NF": int(cfg[C["NF"]]), "_NDOMAIN": int(cfg[C["NDOMAIN"]]),
               "_PD": int(cfg[C["POST_DOMAIN"]]), "_TT_GUARD": int(cfg[C["TT_GUARD"]]),
@@ -154,32 +158,42 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options) 
               "_RATIOS": numpy.array(ratios, dtype=numpy.float64), "_GAMMA0": float(gammas[0]),
               "_NFR": fr, "_LERR_SCALE": float(fcfg[F["LERR_SCALE"]]), "_REUSE_RATE": float(fcfg[F["REUSE_RATE"]]),
               "_DPOS": numpy.array([int(bool(v)) for v in domain_pos] or [0], dtype=numpy.int64),
+              "_PROJ": pm, "_PM": max(pm, 1), "_PSYM": int(cfg[C["PROJ_SYM"]]),
+              "_PGV": max(pm, 1) * (1 + int(cfg[C["DIM"]])) + int(cfg[C["DIM"]]),
+              "_PTOL": float(fcfg[F["PROJ_TOL"]]), "_PPLAT": float(fcfg[F["PROJ_PLATEAU"]]),
+              "_PNOISE": float(fcfg[F["PROJ_NOISE"]]),
               "math": math}
     consts.update({"_S_" + name: code for name, code in _STATUS.items()})
     consts.update(zip(("_solver", "_usetol", "_chk", "_comp"), options))
-    for name, k in zip(("guess", "res", "resjac", "post", "hs", "check", "scale"), kernels):
+    for name, k in zip(KERNEL_NAMES, kernels):
         consts[name] = getattr(k, "py_func", None)
     # the helpers, with their constants resolved in this loop's configuration
-    for f in (_stepper.solve, _stepper.resolution, _stepper.lu, _stepper.lu_solve, _stepper.amax):
+    for f in (_stepper.project, _stepper.small_solve, _stepper.solve, _stepper.resolution, _stepper.lu,
+              _stepper.lu_solve, _stepper.amax):
         consts[f.__name__] = types.FunctionType(f.__code__, consts, f.__name__)
     return consts
 
 
 def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p,
               maxiter, check_resolution, solver, use_tol, tol, compensated, its, fstat, fval, every, smode, slu_ok,
-              sLU, spiv, *, python=False):
+              sLU, spiv, PJ=None, *, python=False):
     """Steps ``n0 .. n1-1`` on the module's compiled stepper (the arguments of
-    :func:`methodgen.nbabi.run`; ``kernels`` = guess, res, resjac, post, hs, check, scale):
+    :func:`methodgen.nbabi.run`; ``kernels`` as :data:`KERNEL_NAMES`; ``PJ`` (B, 2 PM) a projected
+    module's levels and multipliers, updated):
     True when it ran them (``Y``, ``C``, ``FRC``, ``traj``, ``its``, ``smode``, ``fstat``,
     ``fval`` as the numba runtime leaves them, failures included); None when it does not apply.
     ``python``: run the same stepper as plain Python (:func:`python_stepper`) instead."""
     CFG = _abi.CFG
     kind = int(cfg[CFG["KIND"]])
-    guess, res, resjac, post_k, hs, check, scale = kernels
-    needed = [post_k] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
-        ([check] if int(cfg[CFG["LERR"]]) == 2 else []) + \
-        ([scale] if kind == 0 and int(cfg[CFG["HAS_SCALE"]]) else []) + \
-        ([resjac] if kind == 1 else [guess, res, resjac] if kind == 0 else [])
+    guess, res, resjac, post_k, hs, check, scale, force, proj = kernels
+    pm = int(cfg[CFG["PROJ"]])
+    if pm:
+        needed = [post_k, proj] + ([force] if int(cfg[CFG["NF"]]) else [])
+    else:
+        needed = [post_k] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
+            ([check] if int(cfg[CFG["LERR"]]) == 2 else []) + \
+            ([scale] if kind == 0 and int(cfg[CFG["HAS_SCALE"]]) else []) + \
+            ([resjac] if kind == 1 else [guess, res, resjac] if kind == 0 else [])
     if n1 <= n0:
         fstat[:, 0] = _STATUS["OK"]
         return True
@@ -220,8 +234,10 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     jout = numpy.zeros((max(n, 1), max(n, 1)))
     # the iterations: counted as floats (the translated code's arrays are float64) in place of
     # its, when its is zeros (its usual state: 0 has the same bits as 0.0), else in a copy
-    in_place = kind != 2 and its.flags.c_contiguous and not its.any()
-    itsf = its.view(numpy.float64) if in_place else numpy.zeros((B, n1 - n0) if kind != 2 else (1, 1))
+    counted = kind != 2 or pm          # (an explicit step has no iterations; a projected one has)
+    in_place = counted and its.flags.c_contiguous and not its.any()
+    itsf = its.view(numpy.float64) if in_place else numpy.zeros((B, n1 - n0) if counted else (1, 1))
+    PJ = numpy.zeros((1, 2)) if PJ is None else PJ
     smf = smode.astype(numpy.float64) if kind == 0 else numpy.zeros((1, 1))
     reuse = kind == 0 and solver == 3
     if reuse:
@@ -235,7 +251,7 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     b0, nr, k0, limit = 0, -1, 0, n1
     while True:
         nxtr = (max(nr, 0) // every + 1) * every
-        drive(loop, Y, C, FRC, K, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(limit), int(every),
+        drive(loop, Y, C, FRC, K, PJ, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(limit), int(every),
               nxt0, nxt0 // every - r0, st, itsf, smf, okf, luf, pvf, fst, fvl, dec, jout, int(maxiter), float(tol),
               B, b0, nr, k0, nxtr, nxtr // every - r0)
         if not st[0]:
@@ -250,7 +266,7 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         dec[3] = spectral_h_omega(jout[:n, :n], resol)
     if in_place:
         its[...] = itsf        # (numpy copies overlapping operands first)
-    elif kind != 2:
+    elif counted:
         its += itsf.astype(numpy.int64)
     if kind == 0:
         smode[...] = smf.astype(numpy.int64)

@@ -922,7 +922,7 @@ class _Translator:
         args = []
         for a in node.args:
             arr = self.array_arg(a)
-            args.append(("a", arr) if arr is not None else ("f", self.expr(a)))
+            args.append(("a", arr) if arr is not None else self.any_expr(a))
         outer = self.scope
         saved_assigned = self.loop_assigned
         self.scope = _Scope(self.f, getattr(py, "__globals__", {}))
@@ -930,7 +930,7 @@ class _Translator:
             if kind == "a":
                 self.scope.arrays[p] = v
             else:
-                self.store_name(p, v, "f")
+                self.store_name(p, v, kind)     # an integer (a count) stays one
         self.inline_depth += 1
         self.loop_assigned = self._assigned_in_loops(fdef.body)
         try:

@@ -172,7 +172,7 @@ def materialize(namespace: dict):
 
 def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
         kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv):
+        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv, *, force_k=None, proj_k=None, PJ=None):
     """Steps ``n0 .. n1-1`` of every trajectory on the module's stepper (:mod:`methodgen.stepper`),
     compiled with its kernels inlined (:mod:`methodgen.fused`).
 
@@ -182,7 +182,9 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     place; ``h``, ``p``; Newton's ``maxiter``, ``check_resolution``, ``solver`` code, ``use_tol``,
     ``tol``; ``compensated``; ``its`` (B, n1 - n0) iterations per step; ``fstat`` (B, 4) status,
     step, iteration, stage and ``fval`` (B) value of a failure; ``every``; the solver state
-    ``smode``, ``slu_ok``, ``sLU``, ``spiv``.
+    ``smode``, ``slu_ok``, ``sLU``, ``spiv``; for a projected module (:mod:`methodgen.projection`)
+    its ``force_k`` (first-same-as-last, where the base step has it) and ``proj_k`` kernels and
+    ``PJ`` (B, 2 PM): the levels to keep, then the multipliers (updated).
 
     Where the stepper cannot be compiled with these kernels (a kernel the LLVM translator
     refused, compiled by numba instead, or ``METHODGEN_KERNELS=numba``) it runs as plain Python
@@ -190,9 +192,9 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     in a warning.  ``METHODGEN_STEPPER=python`` runs it so always (the reference)."""
     from . import fused
 
-    args = ((guess, res, resjac, post_k, hs, check, scale), cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+    args = ((guess, res, resjac, post_k, hs, check, scale, force_k or no_kernel("force"), proj_k or no_kernel("proj")), cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
             kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv)
+            compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv, PJ)
     python = os.environ.get("METHODGEN_STEPPER", "").strip() == "python"
     if not python:
         if fused.run_fused(*args):

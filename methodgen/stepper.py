@@ -33,19 +33,20 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["stepper", "solve", "resolution", "lu", "lu_solve", "amax"]
+__all__ = ["stepper", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax"]
 
 # The names below that this file does not define (``numba``, ``_rt``, the upper-case
 # constants and the kernels) are bound by methodgen.fused when it compiles the loop.
 # flake8: noqa: F821
 
 
-def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _st, _its, _smode,
+def stepper(_Y, _C, _G, _K, _PJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _st, _its, _smode,
             _sluok, _sLU, _spiv, _fst, _fval, _dec, _jout, _maxiter, _tol, _nbt, _b0, _nr, _k0, _nxtr, _rowr):
     """Steps ``_n0 .. _n1-1`` of trajectories ``_b0 .. _nbt-1``.
 
     ``_Y``, ``_C``, ``_G`` (B, ·): state, compensation, carried force, updated in place;
     ``_K`` (B, NK + 2): the carried estimate's b and H with its size, left for a resumed call;
+    ``_PJ`` (B, 2 PM): a projected step's levels g(y_start), then its multipliers λ (updated);
     ``_T`` (rows, B, DIM): saved rows (row ``n // every`` after step ``n - 1``); ``_its``
     (B, n1 - n0): Newton iterations per step; ``_smode`` (B, STAGES): "auto" Newton steps
     left; ``_sluok`` (B, STAGES), ``_sLU`` (B·STAGES, N·N), ``_spiv`` (B·STAGES, N): solver
@@ -80,6 +81,21 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
     # the trajectory's state, compensation and carried force in stack buffers while it runs:
     # LLVM keeps them in registers across the stages (the caller's rows it must reload after
     # every store, not knowing that _Y, _C and _G do not overlap); written back at its end
+    # a projected step's work (methodgen.projection; PM = 1 where there is none)
+    _pres = numba.carray(_rt.stack_buffer(3), (3,))
+    _py1 = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _pc1 = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _pyt = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _pct = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _plag = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _pgv = numba.carray(_rt.stack_buffer(_PGV), (_PGV,))
+    _pgv1 = numba.carray(_rt.stack_buffer(_PGV), (_PGV,))
+    _pD0 = numba.carray(_rt.stack_buffer(_PM * _DIM), (_PM, _DIM))
+    _pD1 = numba.carray(_rt.stack_buffer(_PM * _DIM), (_PM, _DIM))
+    _pA = numba.carray(_rt.stack_buffer(_PM * _PM), (_PM, _PM))
+    _pW = numba.carray(_rt.stack_buffer(_PM * _PM), (_PM, _PM))
+    _pv = numba.carray(_rt.stack_buffer(7 * _PM), (7, _PM))    # r, r_old, λ_old, size, rhs, c, x
+    _plam = numba.carray(_rt.stack_buffer(_PM), (_PM,))
     _yl = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
     _cl = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
     _gl = numba.carray(_rt.stack_buffer(_NG), (_NG,))
@@ -95,6 +111,9 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
             _cl[_i] = _C[_b, _i]
         for _i in range(_NG):
             _gl[_i] = _G[_b, _i]
+        if _PROJ != 0:
+            for _j in range(_PM):
+                _plam[_j] = _PJ[_b, _PM + _j]
         if _resume != 0:
             # the carried values as they were at the start of the stage asked about
             for _j in range(_KLERR):
@@ -106,9 +125,9 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
             _row = _rowr
         else:
             _fst[_b, 0] = _S_OK
-            if _EJUMP:
+            if _EJUMP and _PROJ == 0:
                 hs(_yl, _p, _ejs)
-            if _LERR == 2:
+            if _LERR == 2 and _PROJ == 0:
                 # a carried estimate: (h/2) f at the start of the first step
                 check(_yl, _p, _ck)
                 for _j in range(_KLERR):
@@ -124,6 +143,27 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
             _k = 0
             if _resume != 0 and _n == _nr:
                 _k = _k0
+            if _PROJ != 0:
+                # a projected step (a stage kind of its own: the base step's stages inside its
+                # iteration on the multipliers)
+                project(_yl, _cl, _plam, _PJ[_b], _p, _h, _ka, _kd, _kb, _maxiter, _z, _gl, _out, _py1, _pc1,
+                        _pyt, _pct, _plag, _pgv, _pgv1, _pD0, _pD1, _pA, _pW, _pv, _pres)
+                _it = int(_pres[2])
+                _its[_b, _n - _n0] += _it
+                if _pres[0] != _S_OK:
+                    _fst[_b, 0] = _pres[0]
+                    _fst[_b, 1] = _n
+                    _fst[_b, 2] = _it
+                    _fval[_b] = _pres[1]
+                    _failed = 1
+                else:
+                    for _i in range(_DIM):
+                        _yl[_i] = _py1[_i]
+                        if _comp != 0:
+                            _cl[_i] = _pc1[_i]
+                        else:
+                            _cl[_i] = 0.0
+                _k = _STAGES     # (the stage loop below does not run)
             while _k < _STAGES:
                 _hs = _h * _kd[_k]
                 _status = _S_OK
@@ -472,8 +512,227 @@ def stepper(_Y, _C, _G, _K, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, 
             _C[_b, _i] = _cl[_i]
         for _i in range(_NG):
             _G[_b, _i] = _gl[_i]
+        if _PROJ != 0:
+            for _j in range(_PM):
+                _PJ[_b, _PM + _j] = _plam[_j]
         if _stop != 0:
             return
+
+
+def project(y, c, lam, tgt, p, h, ka, kd, kb, maxiter, z, frc, out, y1, c1, yt, ct, lag, gv, gv1, D0, D1, A, W,
+            v, res):
+    """One projected step from ``(y, c)`` (state and compensation) onto the level set ``g = tgt``
+    (:mod:`methodgen.projection`: the iteration on the multipliers ``lam``, updated in place):
+    ``y1``, ``c1`` the new state and its compensation; ``res`` = status, value, iterations.
+
+    Symmetric projection (PSYM 1): ỹ0 = y0 + D(y0)λ, ŷ1 = Φ_h(ỹ0), y1 = ŷ1 + D(y1)λ with
+    g(y1) = tgt, D = diag(w) Gᵀ; Φ_h (every stage of the base composition, ``post`` with the
+    first-same-as-last ``force`` at its start) is evaluated again at every iterate.  Standard
+    projection (PSYM 0): ŷ1 = Φ_h(y0) once.  The first matrix is G(y1)(D(y0) + D(y1)) (G(y1)
+    D(y1)), later ones Broyden's update; converged when every residual is within PTOL of the
+    size of g's first-order terms, or stopped decreasing at or below PPLAT of it.  Statuses:
+    NON_FINITE, NOT_CONVERGED, DIVERGED (a non-finite residual or multiplier), LOCAL_ERROR (the
+    base step's direct estimate at the first iterate, with check_resolution).  Every sum is
+    compensated.  The kernels' output ``proj``: g (PM), G row by row (PM·DIM), w (DIM)."""
+    wo = _PM + _PM * _DIM        # where w starts in proj's output
+    if _PSYM != 0:
+        proj(y, p, gv)
+        for a in range(_PM):
+            for i in range(_DIM):
+                D0[a, i] = gv[wo + i] * gv[_PM + a * _DIM + i]
+    prev = math.inf
+    status = _S_NOT_CONVERGED
+    rn = 0.0
+    it = 0
+    while it < maxiter:
+        it += 1
+        if it == 1 or _PSYM != 0:
+            # the base step from ỹ0 (symmetric: at every iterate; standard: from y0 once,
+            # yt and ct keep ŷ1 for the later iterates)
+            for i in range(_DIM):
+                d = 0.0
+                if _PSYM != 0:
+                    for a in range(_PM):
+                        d += D0[a, i] * lam[a]
+                d += c[i]
+                s = y[i] + d
+                ct[i] = d - (s - y[i])
+                yt[i] = s
+            if _NF > 0:
+                force(yt, ct, p, frc)
+            ne2 = 0.0
+            nd2 = 1.0
+            for k in range(_STAGES):
+                post(z, yt, ct, frc, h * ka[k], h * kd[k], h * kb[k], p, out)
+                for i in range(_DIM):
+                    d = out[i] + ct[i]
+                    s = yt[i] + d
+                    ct[i] = d - (s - yt[i])
+                    yt[i] = s
+                for i in range(_NF):
+                    frc[i] = out[_DIM + i]
+                if _LERR == 1:
+                    # the largest local error estimate of the stages (|E|², |Δy|²)
+                    if out[_PE] * nd2 > ne2 * out[_PE + 1] or out[_PE] != out[_PE]:
+                        ne2 = out[_PE]
+                        nd2 = out[_PE + 1]
+            if _LERR == 1 and _chk != 0 and it == 1 and ne2 > _LERR2 * nd2:
+                # the base step does not resolve the dynamics here
+                status = _S_LOCAL_ERROR
+                rn = _LERR_SCALE * math.sqrt(ne2 / nd2)
+                break
+        if it == 1:
+            # D at ŷ1 for the first y1: y1 = ŷ1 + D(y1)λ then holds to O(|λ|²)
+            proj(yt, p, gv1)
+            if _PSYM == 0:
+                for i in range(_DIM):
+                    gv[wo + i] = gv1[wo + i]   # the metric w
+            for a in range(_PM):
+                for i in range(_DIM):
+                    D1[a, i] = gv[wo + i] * gv1[_PM + a * _DIM + i]
+        finite = 1
+        for i in range(_DIM):
+            d = ct[i]
+            for a in range(_PM):
+                d += D1[a, i] * lam[a]
+            s = yt[i] + d
+            c1[i] = d - (s - yt[i])
+            y1[i] = s
+            if not (s - s == 0.0):
+                finite = 0
+        if finite == 0:
+            status = _S_NON_FINITE
+            rn = math.nan
+            break
+        proj(y1, p, gv1)
+        # the lag of the D(y1) that y1 was built with, and the residual at the consistent
+        # y1 = ŷ1 + D(y1)λ to first order in it
+        for i in range(_DIM):
+            s = 0.0
+            wi = gv[wo + i]
+            for a in range(_PM):
+                s += (wi * gv1[_PM + a * _DIM + i] - D1[a, i]) * lam[a]
+            lag[i] = s
+        # each residual against its round-off: the size of g's first-order terms (v[3])
+        rn = 0.0
+        rel = 0.0
+        for a in range(_PM):
+            s = gv1[a] - tgt[a]
+            zz = 0.0
+            for i in range(_DIM):
+                s += gv1[_PM + a * _DIM + i] * lag[i]
+                zz += abs(gv1[_PM + a * _DIM + i]) * max(abs(y[i]), abs(y1[i]))
+            v[0, a] = s
+            v[3, a] = zz
+            rn = max(rn, abs(s))
+            if zz > 0.0:
+                rel = max(rel, abs(s) / zz)
+            elif s != 0.0:
+                rel = math.inf
+        if not (rel - rel == 0.0):
+            status = _S_DIVERGED
+            break
+        if rel <= _PTOL or (rel >= prev and prev <= _PPLAT):
+            status = _S_OK
+            # y1 rebuilt with D(y1) itself (the lag, already in the residual, leaves y1)
+            for i in range(_DIM):
+                d = lag[i] + c1[i]
+                s = y1[i] + d
+                c1[i] = d - (s - y1[i])
+                y1[i] = s
+            break
+        prev = rel
+        if it == 1:
+            # ∂g(y1)/∂λ with Φ_h' replaced by I (relative error O(h)); the standard
+            # projection does not move the start: G(y1) D(y1) alone
+            for a in range(_PM):
+                for e in range(_PM):
+                    s = 0.0
+                    for i in range(_DIM):
+                        dn = gv[wo + i] * gv1[_PM + e * _DIM + i]
+                        if _PSYM != 0:
+                            s += gv1[_PM + a * _DIM + i] * (D0[e, i] + dn)
+                        else:
+                            s += gv1[_PM + a * _DIM + i] * dn
+                    A[a, e] = s
+        else:
+            # Broyden's update from the last two iterates, unless the residual's change is
+            # round-off (PNOISE of the size of g's first-order terms)
+            dd = 0.0
+            for e in range(_PM):
+                dl = lam[e] - v[2, e]
+                dd += dl * dl
+            big = 0
+            for a in range(_PM):
+                if abs(v[0, a] - v[1, a]) > _PNOISE * v[3, a]:
+                    big = 1
+            if dd > 0.0 and big != 0:
+                for a in range(_PM):
+                    u = v[0, a] - v[1, a]
+                    for e in range(_PM):
+                        u -= A[a, e] * (lam[e] - v[2, e])
+                    u = u / dd
+                    for e in range(_PM):
+                        A[a, e] += u * (lam[e] - v[2, e])
+        for a in range(_PM):
+            v[4, a] = -v[0, a]
+        small_solve(A, v[4], v[6], W, v[5])
+        ok = 1
+        for a in range(_PM):
+            v[2, a] = lam[a]
+            v[1, a] = v[0, a]
+            lam[a] += v[6, a]
+            if not (lam[a] - lam[a] == 0.0):
+                ok = 0
+            for i in range(_DIM):
+                D1[a, i] = gv[wo + i] * gv1[_PM + a * _DIM + i]
+        if ok == 0:
+            status = _S_DIVERGED
+            break
+    res[0] = status
+    res[1] = rn
+    res[2] = it
+
+
+def small_solve(A, b, x, W, c):
+    """``x`` with ``A x = b`` (PM × PM) by Gaussian elimination with partial pivoting on the
+    copies ``W``, ``c``; NaN where A is singular."""
+    for i in range(_PM):
+        c[i] = b[i]
+        for j in range(_PM):
+            W[i, j] = A[i, j]
+    singular = 0
+    for k in range(_PM):
+        if singular == 0:
+            piv = k
+            for i in range(k + 1, _PM):
+                if abs(W[i, k]) > abs(W[piv, k]):
+                    piv = i
+            if not W[piv, k] != 0.0:
+                for i in range(_PM):
+                    x[i] = math.nan
+                singular = 1
+            else:
+                if piv != k:
+                    for j in range(_PM):
+                        t = W[k, j]
+                        W[k, j] = W[piv, j]
+                        W[piv, j] = t
+                    t = c[k]
+                    c[k] = c[piv]
+                    c[piv] = t
+                for i in range(k + 1, _PM):
+                    f = W[i, k] / W[k, k]
+                    for j in range(k, _PM):
+                        W[i, j] -= f * W[k, j]
+                    c[i] -= f * c[k]
+    if singular == 0:
+        for kk in range(_PM):
+            k = _PM - 1 - kk
+            s = c[k]
+            for j in range(k + 1, _PM):
+                s -= W[k, j] * x[j]
+            x[k] = s / W[k, k]
 
 
 def solve(_a0, _r0, _x, _wa, _wb):
