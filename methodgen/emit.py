@@ -243,22 +243,6 @@ def _docsafe(text: str) -> str:
     return " ".join(text.replace("\\", " ").replace('"""', "'''").split())
 
 
-def shared_runtime_supports(ir: ModuleIR) -> bool:
-    """True when a numba module of ``ir`` runs on the shared compiled runtime
-    (:mod:`methodgen.nbruntime`: only its kernels are compiled per system), False when it
-    takes the template route (one compiled loop per module, ``templates/numba_runtime.py.j2``).
-
-    The runtime knows the step structures below: explicit stages (compositions, with or
-    without first-same-as-last), Newton-solved and linearly implicit stages, with every
-    check and solver variant.  A new structure must be added here and to the runtime, or
-    it falls back to the template route: so far symmetric projection (its loop calls the base
-    step's kernels with the template route's signatures).  s-stage systems by structure
-    (Gauss, energy collocation: ``ir.stage``) run here with their stage loops compiled for the
-    runtime's kernel types (``numba_kernels.stage_kernel``).
-    """
-    return ir.kind in ("explicit", "newton", "linear")
-
-
 def runtime_sha256() -> str:
     """The shared runtime's ``SOURCE_SHA256`` (:data:`methodgen.nbabi.SOURCE_SHA256`: over
     ``nbabi.py`` and ``nbruntime.py``), without importing
@@ -334,7 +318,7 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     body_env = _environment()
     text = body_env.get_template(template).render(
         ir=clean, vector=vector, header=header, defaults_text=defaults,
-        traits_text=repr(ir.traits), shared=backend == "numba" and shared_runtime_supports(ir),
+        traits_text=repr(ir.traits),
         runtime_sha256=runtime_sha256())
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     digest = hashlib.sha256(text.encode()).hexdigest()

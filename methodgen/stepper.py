@@ -40,13 +40,13 @@ __all__ = ["stepper", "project", "small_solve", "solve", "resolution", "lu", "lu
 # flake8: noqa: F821
 
 
-def stepper(_Y, _C, _G, _K, _PJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _st, _its, _smode,
+def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _st, _its, _smode,
             _sluok, _sLU, _spiv, _fst, _fval, _dec, _jout, _maxiter, _tol, _nbt, _b0, _nr, _k0, _nxtr, _rowr):
     """Steps ``_n0 .. _n1-1`` of trajectories ``_b0 .. _nbt-1``.
 
     ``_Y``, ``_C``, ``_G`` (B, ·): state, compensation, carried force, updated in place;
     ``_K`` (B, NK + 2): the carried estimate's b and H with its size, left for a resumed call;
-    ``_PJ`` (B, 2 PM): a projected step's levels g(y_start), then its multipliers λ (updated);
+    ``_PRJ`` (B, 2 PM): a projected step's levels g(y_start), then its multipliers λ (updated);
     ``_T`` (rows, B, DIM): saved rows (row ``n // every`` after step ``n - 1``); ``_its``
     (B, n1 - n0): Newton iterations per step; ``_smode`` (B, STAGES): "auto" Newton steps
     left; ``_sluok`` (B, STAGES), ``_sLU`` (B·STAGES, N·N), ``_spiv`` (B·STAGES, N): solver
@@ -113,7 +113,7 @@ def stepper(_Y, _C, _G, _K, _PJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _n
             _gl[_i] = _G[_b, _i]
         if _PROJ != 0:
             for _j in range(_PM):
-                _plam[_j] = _PJ[_b, _PM + _j]
+                _plam[_j] = _PRJ[_b, _PM + _j]
         if _resume != 0:
             # the carried values as they were at the start of the stage asked about
             for _j in range(_KLERR):
@@ -146,7 +146,7 @@ def stepper(_Y, _C, _G, _K, _PJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _n
             if _PROJ != 0:
                 # a projected step (a stage kind of its own: the base step's stages inside its
                 # iteration on the multipliers)
-                project(_yl, _cl, _plam, _PJ[_b], _p, _h, _ka, _kd, _kb, _maxiter, _z, _gl, _out, _py1, _pc1,
+                project(_yl, _cl, _plam, _PRJ[_b], _p, _h, _ka, _kd, _kb, _maxiter, _z, _gl, _out, _py1, _pc1,
                         _pyt, _pct, _plag, _pgv, _pgv1, _pD0, _pD1, _pA, _pW, _pv, _pres)
                 _it = int(_pres[2])
                 _its[_b, _n - _n0] += _it
@@ -514,7 +514,7 @@ def stepper(_Y, _C, _G, _K, _PJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _n
             _G[_b, _i] = _gl[_i]
         if _PROJ != 0:
             for _j in range(_PM):
-                _PJ[_b, _PM + _j] = _plam[_j]
+                _PRJ[_b, _PM + _j] = _plam[_j]
         if _stop != 0:
             return
 

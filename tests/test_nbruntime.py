@@ -1,10 +1,8 @@
-"""The shared compiled runtime of the numba backend (methodgen.nbruntime).
+"""The numba backend's runtime (methodgen.nbabi, methodgen.nbruntime).
 
-A numba module compiles only its kernels and runs on the runtime compiled once per
-machine; the template route (one compiled loop per module) is the fallback.  These
-tests check that the two routes give the same trajectories, that the runtime reads
-its per-stage coefficients from the module, and that a stale cached runtime is
-rebuilt, never loaded.
+A numba module compiles only its kernels and runs on the stepper (methodgen.stepper).
+These tests check that every step structure takes it, that it reads its per-stage
+coefficients from the module, and that a stale cached runtime is rebuilt, never loaded.
 """
 
 from __future__ import annotations
@@ -36,47 +34,19 @@ def _module(tmp_path, scene_name, method, order=2, **options):
 
 # --- route ---------------------------------------------------------------------------
 
-def test_every_step_structure_of_today_takes_the_shared_runtime(kepler):
-    """Explicit, Newton-solved and linearly implicit stages all run on the shared runtime;
-    the module then holds kernels only (no compiled loop of its own)."""
-    for method in ("energy-momentum", "stormer-verlet", "kahan"):
-        src = emit_source(mg.discretize(kepler if method != "kahan" else mg.load_scene("henon-heiles").system,
-                                        method), backend="numba")
-        assert "_rt.run(" in src and "def _nb_run(" not in src, method
-        assert "def _nb_solve_step(" not in src
-    # control: the predicate decides -- refused, the template route is emitted
-    ir_kinds = {"explicit", "newton", "linear"}
-    assert all(emit.shared_runtime_supports(type("IR", (), {"kind": k, "projection": ()})()) for k in ir_kinds)
-    # symmetric projection is not in the shared runtime yet: such a module takes the template route
-    assert not emit.shared_runtime_supports(type("IR", (), {"kind": "explicit", "projection": ("H",)})())
-    assert not emit.shared_runtime_supports(type("IR", (), {"kind": "projection"})())
-
-
-def test_fallback_route_is_selected_by_the_predicate(kepler, monkeypatch):
-    monkeypatch.setattr(emit, "shared_runtime_supports", lambda ir: False)
-    src = emit_source(mg.discretize(kepler, "energy-momentum"), backend="numba")
-    assert "def _nb_run(" in src and "_rt.run(" not in src and "nbruntime" not in src
-
-
-def test_shared_runtime_and_template_route_agree_bitwise(tmp_path, monkeypatch):
-    """One trajectory through both routes (Newton, local error carried, compensated sums):
-    the same arithmetic, so the same bits.  Control: a perturbed step size differs."""
-    scene = mg.load_scene("simple-pendulum")
-    scheme = mg.discretize(scene.system, "midpoint")
-    shared = mg.generate(scheme, tmp_path / "shared_numba.py", backend="numba")
-    monkeypatch.setattr(emit, "shared_runtime_supports", lambda ir: False)
-    old = mg.generate(scheme, tmp_path / "template_numba.py", backend="numba")
-    assert hasattr(old, "_nb_run") and not hasattr(shared, "_nb_run")
-    y0 = np.array(scene.y0)
-    i_new, i_old = {}, {}
-    a = shared.integrate(y0, scene.h, 500, info=i_new)
-    b = old.integrate(y0, scene.h, 500, info=i_old)
-    assert np.array_equal(a, b)
-    assert np.array_equal(i_new["newton_iterations"], i_old["newton_iterations"])
-    assert np.array_equal(i_new["compensation"], i_old["compensation"])
-    # control: the comparison sees a difference of one ulp in h
-    c = shared.integrate(y0, np.nextafter(scene.h, 1.0), 500)
-    assert not np.array_equal(a, c)
+def test_every_step_structure_takes_the_stepper(kepler, hh):
+    """Explicit, Newton-solved, linearly implicit and projected steps all run on the stepper
+    (methodgen.stepper through methodgen.nbabi.run); the module holds kernels only (no
+    compiled loop of its own)."""
+    schemes = [mg.discretize(kepler, "energy-momentum"), mg.discretize(kepler, "stormer-verlet"),
+               mg.discretize(mg.load_scene("henon-heiles").system, "kahan"),
+               mg.discretize(hh, "stormer-verlet", project="energy")]
+    for scheme in schemes:
+        src = emit_source(scheme, backend="numba")
+        assert "_rt.run(" in src and "def _nb_run(" not in src and "def _nb_solve_step(" not in src
+        # a projected step is the stepper's too: the module's _nb_proj_run only calls it
+        assert ("def _nb_proj_run(" in src) == bool(scheme.projection)
+        assert "@_jit\ndef _nb_proj_run" not in src
 
 
 @pytest.mark.slow
@@ -84,21 +54,22 @@ def test_shared_runtime_and_template_route_agree_bitwise(tmp_path, monkeypatch):
     ("kepler", "energy-momentum", 4), ("kepler", "stormer-verlet", 4), ("henon-heiles", "kahan", 2),
     ("henon-heiles-2d", "energy-momentum", 2), ("kepler-eccentric", "gauss", 2),
     ("spherical-pendulum", "shake", 2), ("rigid-body", "avf", 2)])
-def test_routes_agree_bitwise_on_every_kind(tmp_path, monkeypatch, scene_name, method, order):
+def test_compiled_and_python_stepper_agree_bitwise_on_every_kind(tmp_path, monkeypatch, scene_name, method, order):
     """Compositions, first-same-as-last, linearly implicit, domain conditions, constraints
-    (banded elimination), a Poisson system (slow: the
-    template route compiles a loop per module; the pendulum test above is the fast sibling)."""
+    (banded elimination), a Poisson system: the compiled stepper and the stepper run as
+    Python give the same exception (or none) with the same message, rows and iterations
+    (fast siblings: tests/test_stepper.py)."""
     scene = mg.load_scene(scene_name)
     scheme = mg.discretize(scene.system, method, order=order)
-    shared = mg.generate(scheme, tmp_path / "shared_numba.py", backend="numba")
-    monkeypatch.setattr(emit, "shared_runtime_supports", lambda ir: False)
-    old = mg.generate(scheme, tmp_path / "template_numba.py", backend="numba")
+    mod = mg.generate(scheme, tmp_path / "mod_numba.py", backend="numba")
     y0 = np.array(scene.y0)
-    if shared.TIME_TRANSFORM:
-        y0 = shared.initial_state(y0)
-    new, old_ = _outcome(shared, y0, scene.h), _outcome(old, y0, scene.h)
-    assert new[0] == old_[0] and new[1] == old_[1]          # same exception (or none), same message
-    assert np.array_equal(new[2], old_[2]) and np.array_equal(new[3], old_[3])
+    if mod.TIME_TRANSFORM:
+        y0 = mod.initial_state(y0)
+    compiled = _outcome(mod, y0, scene.h)
+    monkeypatch.setenv("METHODGEN_STEPPER", "python")
+    python = _outcome(mod, y0, scene.h)
+    assert compiled[0] == python[0] and compiled[1] == python[1]
+    assert np.array_equal(compiled[2], python[2]) and np.array_equal(compiled[3], python[3])
 
 
 def _outcome(mod, y0, h, steps=300):
@@ -328,7 +299,7 @@ def test_stage_systems_by_structure_run_on_the_shared_runtime(tmp_path, monkeypa
     residual: residual and Jacobian differed from the numpy module's (by 1.0 in the Jacobian)
     and every step was wrong (Kepler e = 0.6: 5e-5 per step, Newton 'converged' in 1
     iteration).  Now residual, Jacobian and 50 steps agree with the numpy module to
-    round-off, and with the template route.  Control: without the stage system in the
+    round-off.  Control: without the stage system in the
     module's description (the straight-line kernels of ``ir.scalar``), the residual is wrong."""
     from methodgen import lower
 
@@ -344,11 +315,6 @@ def test_stage_systems_by_structure_run_on_the_shared_runtime(tmp_path, monkeypa
         np.testing.assert_allclose(getattr(nb, fn)(z, y0, 0.1), getattr(ref, fn)(z, y0, 0.1), rtol=1e-13, atol=1e-15)
     traj = nb.integrate(y0, scene.h, 50)
     np.testing.assert_allclose(traj, ref.integrate(y0, scene.h, 50), rtol=0, atol=1e-13)
-    with monkeypatch.context() as mp:
-        mp.setattr(emit, "shared_runtime_supports", lambda ir: False)
-        tmpl = mg.generate(scheme, tmp_path / "gauss4_template_numba.py", backend="numba")
-    assert "_rt.run(" not in open(tmpl.__file__).read()
-    np.testing.assert_allclose(tmpl.integrate(y0, scene.h, 50), traj, rtol=0, atol=1e-14)
     monkeypatch.setattr(lower, "stage_tables", lambda st: None)
     forced = mg.generate(scheme, tmp_path / "gauss4_forced_numba.py", backend="numba")
     assert "_rt.run(" in open(forced.__file__).read() and "_nb_fieldjac(" not in open(forced.__file__).read()

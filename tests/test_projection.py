@@ -4,7 +4,8 @@ Every property has a negative control: the unprojected base step (``_base_integr
 drifts in H; the standard (non-symmetric) projection, built here from the same module's
 kernels, does not return under ``-h``; the energy-only projection loses the angular
 momentum that the base method (and the projection onto H and L) keeps.  numpy backend
-(the numba loop is the same iteration; ``test_numba_agrees`` checks it when numba is there).
+(the compiled stepper runs the same iteration; ``test_numba_agrees`` checks it when numba is
+there, and tests/test_stepper.py that the stepper compiled and as Python agree bitwise).
 """
 
 from __future__ import annotations
@@ -374,15 +375,3 @@ def test_equilibrium_start_with_vanishing_gradient(proj2):
     near = proj2.integrate(np.array([1e-3, 0.0, 0.0, 0.0]), H, 20)
     assert np.max(np.abs(near[-1] - near[0])) > 1e-5
     assert _energy_error(proj2, near) <= 4 * np.finfo(float).eps * 5e-7
-
-
-def test_projected_ir_takes_the_template_route(hh):
-    """A real lowered projected module (the splitting, whose loop calls the first-same-as-last
-    post kernel) is not given to the shared numba runtime; control: its unprojected base is."""
-    from methodgen import emit
-    from methodgen.lower import lower
-
-    s = mg.discretize(hh, "stormer-verlet", order=4, composition="blanes-moan-rkn", project="energy")
-    ir = lower(s, "0" * 64, "rev_projection_ir")
-    assert ir.projection == ("H",) and not emit.shared_runtime_supports(ir)
-    assert emit.shared_runtime_supports(lower(s.projected_from, "0" * 64, "rev_projection_ir_base"))
