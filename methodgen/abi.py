@@ -12,7 +12,7 @@ data with names; both sides read it from here instead of recomputing it:
 * :data:`KERNEL_TYPES` -- the kernels' signatures (in :mod:`methodgen.ktypes`' vocabulary).
 
 The code generator (:mod:`methodgen.lower`, the templates) and the runtimes
-(:mod:`methodgen.nbruntime`, :mod:`methodgen.fused`, :mod:`methodgen.nbbatch`, the numpy
+(:mod:`methodgen.stepper`, :mod:`methodgen.fused`, :mod:`methodgen.nbruntime`, the numpy
 modules' loops) import it; it imports the standard library and :mod:`methodgen.ktypes` only.
 A change here changes the runtime's source digest (:data:`methodgen.nbabi.SOURCE_SHA256`), so
 machine code and modules generated for another contract are rebuilt, never mixed.
@@ -242,6 +242,10 @@ KERNEL_TYPES = {
     # g, G = ∂g/∂y (row by row) and the metric w at y
     "force": _t.void(_V, _V, _V, _V),
     "proj": _t.void(_V, _V, _V),
+    # an explicit stage for a block of lanes in lock-step (methodgen.stepper.lockstep):
+    # Y, C, G, h·KICK_A, h·DRIFT, h·KICK_B, p, OUT, lanes used, compensated -> non-finite count
+    # (a float: the compiled kernels return float64 or nothing)
+    "post_block": _f8(_V, _V, _V, _f8, _f8, _f8, _V, _V, _t.int64, _t.int64),
 }
 
 

@@ -13,9 +13,9 @@ The stepper records every failure itself (status, step, iteration, value, stage:
 numba runtime, bitwise).  Where a resolution verdict needs the spectral radius of a Newton
 matrix, it stops and asks; :func:`run_fused` computes ρ from the eigenvalues (LAPACK, as the
 numba runtime does) and calls it again from that stage.  Modules it does not apply to (a
-kernel numba compiled, internal arrays that are not C-contiguous float64) take the
-numba runtime; explicit batches of at least ``nbbatch.MIN_BATCH`` take the lock-step block of
-:mod:`methodgen.nbbatch` before this.
+kernel numba compiled) run the same stepper as Python.  Explicit batches of at least
+``nbabi.MIN_BATCH`` take :func:`run_lockstep` (:func:`methodgen.stepper.lockstep`, the module's
+block kernel inlined).
 
 The loop is called through its C entry point with ctypes (:func:`_drive`), so a run on this
 path does not import numba.
@@ -80,26 +80,44 @@ def spectral_h_omega(J, resol: int) -> float:
     return 2.0 * rho if resol == 1 else 2.0 * math.sqrt(rho)
 
 
-def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options):
+#: signature of the compiled lock-step loop (:func:`methodgen.stepper.lockstep`): Y, C, G (B, ·),
+#: traj (rows, B, DIM), p, kick_a, drift, kick_b, h, n0, n1, every, nxt0, row0, failures (B, 4), failure
+#: values (B), B
+LOCKSTEP_SIG = _t.void(_M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8, _i8, _M, _V, _i8)
+
+
+def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None):
     """The loop for this module's kernels and configuration, compiled on first use (or loaded
-    from the machine-code cache); None where it does not apply."""
+    from the machine-code cache); None where it does not apply.  ``block``: ``(post_block,
+    lanes)`` for the lock-step loop (:func:`methodgen.stepper.lockstep`)."""
     # keyed by what the loop is compiled from: the kernels' machine code (their symbols name
     # the text they were translated from; an id() is reused once a regenerated module's old
     # kernels are freed) and the constants bound into it
+    kernels = tuple(kernels) + ((block[0],) if block else ())
     key = (tuple(getattr(k, "symbol", None) or ("id", id(k)) for k in kernels),
            cfg.tobytes(), fcfg.tobytes(), tuple(lerr_index), tuple(map(bool, domain_pos)),
-           tuple(map(float, gammas)), tuple(map(float, ratios)), options)
+           tuple(map(float, gammas)), tuple(map(float, ratios)), options, block[1] if block else 0)
     got = _LOOPS.get(key)
     if got is None:
-        consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
+        fn, sig = loop_function(kernels[:len(KERNEL_NAMES)], cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
+                                options, block)
         try:
-            got = _lk.compile_kernel(types.FunctionType(_stepper.stepper.__code__, consts, "stepper"), LOOP_SIG,
-                                     globals_=consts, c_entry=True)
+            got = _lk.compile_kernel(fn, sig, globals_=fn.__globals__, c_entry=True)
         except _lk.Unsupported:
             got = False
         # (the kernels are kept with the loop: an id() in the key is not reused while it lives)
         _LOOPS[key] = got = (got, kernels)
     return (got[0] or None), key
+
+
+def loop_function(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None):
+    """``(function, signature)``: :func:`methodgen.stepper.stepper` (with ``block``:
+    :func:`methodgen.stepper.lockstep`) with a module's configuration and kernels bound as its
+    globals, what :func:`_compiled_loop` compiles (and :func:`methodgen.llvmkernels.assembly`
+    shows)."""
+    consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
+    entry, sig = (_stepper.lockstep, LOCKSTEP_SIG) if block else (_stepper.stepper, LOOP_SIG)
+    return types.FunctionType(entry.__code__, consts, entry.__name__), sig
 
 
 class _Stack:
@@ -115,20 +133,28 @@ class _Stack:
         return buf.reshape(shape)
 
 
-def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options):
-    """:func:`methodgen.stepper.stepper` bound to a module's kernels (their Python functions) and
-    configuration, to run as plain Python: the same source as the compiled loop, the reference
-    it is tested against (slow: an interpreter's loop)."""
-    consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
+def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None):
+    """:func:`methodgen.stepper.stepper` (with ``block``: :func:`methodgen.stepper.lockstep`) bound
+    to a module's kernels (their Python functions) and configuration, to run as plain Python: the
+    same source as the compiled loop, the reference it is tested against (slow: an
+    interpreter's loop)."""
+    consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
     consts.update(numba=_Stack, _rt=_Stack)
     # the kernels as callables: compiled ones (numba compiles an LLVM kernel's source on its
     # first call from Python, with the same arithmetic), so that a comparison with the compiled
     # loop tests the stepper alone
     consts.update(zip(KERNEL_NAMES, kernels))
-    return types.FunctionType(_stepper.stepper.__code__, consts, "stepper")
+    if block:
+        consts["post_block"] = block[0]
+    entry = _stepper.lockstep if block else _stepper.stepper
+    return types.FunctionType(entry.__code__, consts, entry.__name__)
 
 
-def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options) -> dict:
+#: The stepper's helpers (:mod:`methodgen.stepper`), bound with each loop's constants.
+_HELPERS = ("lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax")
+
+
+def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None) -> dict:
     """The stepper's globals for a module: its configuration as constants (:mod:`methodgen.abi`),
     the run's options that select code (``options``: solver code, use_tol, check_resolution,
     compensated, as ints), the status codes, its kernels' Python functions and the helpers
@@ -167,10 +193,12 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options) 
     consts.update(zip(("_solver", "_usetol", "_chk", "_comp"), options))
     for name, k in zip(KERNEL_NAMES, kernels):
         consts[name] = getattr(k, "py_func", None)
+    if block:
+        consts["post_block"] = getattr(block[0], "py_func", None)
+        consts["_L"] = int(block[1])
     # the helpers, with their constants resolved in this loop's configuration
-    for f in (_stepper.project, _stepper.small_solve, _stepper.solve, _stepper.resolution, _stepper.lu,
-              _stepper.lu_solve, _stepper.amax):
-        consts[f.__name__] = types.FunctionType(f.__code__, consts, f.__name__)
+    for name in _HELPERS:
+        consts[name] = types.FunctionType(getattr(_stepper, name).__code__, consts, name)
     return consts
 
 
@@ -287,3 +315,99 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
 def _call(loop, *args):
     """Run the stepper as Python (:func:`python_stepper`)."""
     loop(*args)
+
+
+def run_lockstep(block, kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a, drift, kick_b, traj,
+                 n0, n1, Y, C, FRC, h, p, check_resolution, compensated, fstat, fval, every, *, python=False):
+    """Steps ``n0 .. n1-1`` of an explicit module's batch in lock-step
+    (:func:`methodgen.stepper.lockstep`; ``block`` = the module's block kernel and its lanes, the
+    other arguments :func:`run_fused`'s): True when it ran them, None when it does not apply
+    (a kernel numba compiled).  ``python``: the same loop as plain Python."""
+    CFG = _abi.CFG
+    post_block, lanes = block
+    hs, check = kernels[4], kernels[5]
+    needed = [post_block] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
+        ([check] if int(cfg[CFG["LERR"]]) == 2 else [])
+    if n1 <= n0:
+        fstat[:, 0] = _STATUS["OK"]
+        return True
+    options = (0, 0, int(bool(check_resolution)), int(bool(compensated)))
+    if python:
+        loop, drive = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block), _call
+    else:
+        if not enabled() or not all(isinstance(k, _lk.LLVMKernel) for k in needed):
+            return None
+        loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
+        if loop is None:
+            return None
+        drive = _drive
+    p, kick_a, drift, kick_b = (numpy.ascontiguousarray(a, dtype=numpy.float64) for a in (p, kick_a, drift, kick_b))
+    state = (Y, C, FRC)
+    Y, C, FRC = (numpy.ascontiguousarray(a, dtype=numpy.float64) for a in state)
+    rows = traj
+    if not (traj.dtype.char == "d" and traj.flags.c_contiguous):
+        rows = numpy.ascontiguousarray(traj, dtype=numpy.float64)
+    B = Y.shape[0]
+    fst = numpy.zeros((B, 4))
+    fvl = numpy.zeros(B)
+    nxt0 = (n0 // every + 1) * every
+    drive(loop, Y, C, FRC, rows, p, kick_a, drift, kick_b, float(h), int(n0), int(n1), int(every), nxt0,
+          nxt0 // every, fst, fvl, B)
+    if rows is not traj:
+        traj[...] = rows
+    fstat[...] = fst.astype(numpy.int64)
+    fval[...] = fvl
+    for mine, theirs in zip((Y, C, FRC), state):
+        if mine is not theirs:
+            theirs[...] = mine
+    return True
+
+
+#: signature of the compiled rows loop (:func:`methodgen.stepper.rows`): Z, Y, h, p, R, J, B
+ROWS_SIG = _t.void(_M, _M, _f8, _V, _M, _M, _i8)
+
+
+def run_rows(kernel, jac, cfg, Z, Y, h, p, R, J=None):
+    """The residual (``jac`` False: ``kernel`` is the module's ``res``) or the residual and the
+    Newton matrix (True: its ``resjac``) at each row of ``Z``, ``Y`` (B, ·), into ``R`` (B, N)
+    and ``J`` (B, N, N): :func:`methodgen.stepper.rows`, compiled with the kernel inlined, or as
+    Python where the kernel is numba's."""
+    n = int(cfg[_abi.CFG["N"]])
+    kernels = [_Absent()] * len(KERNEL_NAMES)
+    kernels[KERNEL_NAMES.index("resjac" if jac else "res")] = kernel
+    fcfg = numpy.zeros(len(_abi.FCFG))
+    opts = (0, 0, 0, 0)
+    B = Z.shape[0]
+    # (copies: writable C-contiguous rows, as a kernel's signature takes them)
+    Z, Y, p = (numpy.array(a, dtype=numpy.float64, order="C") for a in (Z, Y, p))
+    R2 = numpy.zeros((B, max(n, 1)))
+    J2 = numpy.zeros((B * max(n, 1), max(n, 1))) if jac else numpy.zeros((1, 1))
+    if enabled() and isinstance(kernel, _lk.LLVMKernel):
+        key = ("rows", getattr(kernel, "symbol", None) or ("id", id(kernel)), bool(jac), cfg.tobytes())
+        got = _LOOPS.get(key)
+        if got is None:
+            consts = _bound(kernels, cfg, fcfg, (), (), (1.0,), (1.0,), opts)
+            consts["_JAC"] = int(bool(jac))
+            try:
+                got = _lk.compile_kernel(types.FunctionType(_stepper.rows.__code__, consts, "rows"), ROWS_SIG,
+                                         globals_=consts, c_entry=True)
+            except _lk.Unsupported:
+                got = None
+            _LOOPS[key] = got = (got, kernel)
+        loop, drive = got[0], _drive
+    else:
+        loop = None
+    if loop is None:
+        consts = _bound(kernels, cfg, fcfg, (), (), (1.0,), (1.0,), opts)
+        consts.update(numba=_Stack, _rt=_Stack, _JAC=int(bool(jac)))
+        consts["resjac" if jac else "res"] = kernel
+        loop, drive = types.FunctionType(_stepper.rows.__code__, consts, "rows"), _call
+    drive(loop, Z, Y, float(h), p, R2, J2, B)
+    R[...] = R2[:, :n]
+    if jac:
+        J[...] = J2.reshape(B, max(n, 1), max(n, 1))[:, :n, :n]
+
+
+class _Absent:
+    """A kernel the rows loop does not call."""
+    py_func = None

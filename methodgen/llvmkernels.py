@@ -55,7 +55,7 @@ from . import ktypes as _t
 from . import llvmcache as _objcache
 from . import nbcache as _nbcache
 
-__all__ = ["kernel", "compile_kernel", "Unsupported", "LLVMKernel", "enabled", "array_struct"]
+__all__ = ["kernel", "compile_kernel", "assembly", "Unsupported", "LLVMKernel", "enabled", "array_struct"]
 
 
 class Unsupported(Exception):
@@ -1011,6 +1011,19 @@ _LOADED: dict = {}
 
 def _translate_and_compile(py_func, sig, globals_, c_entry, name) -> bytes:
     """The kernel's object code: translated to LLVM IR, optimised (-O2), emitted for the host."""
+    return _target_machine().emit_object(_optimised(py_func, sig, globals_, c_entry, name))
+
+
+def assembly(py_func, sig, globals_=None) -> str:
+    """The host assembly of ``py_func`` translated and optimised as :func:`compile_kernel` does
+    (for inspection: which loops LLVM vectorised, that no multiply-add was contracted)."""
+    with _LOCK:
+        _engine()
+        return _target_machine().emit_assembly(_optimised(py_func, sig, globals_, False, py_func.__name__))
+
+
+def _optimised(py_func, sig, globals_, c_entry, name):
+    """The kernel translated to LLVM IR and optimised (-O2): an llvmlite module."""
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
     module.triple = _STATE["triple"]
@@ -1027,7 +1040,7 @@ def _translate_and_compile(py_func, sig, globals_, c_entry, name) -> bytes:
     pto = llvm.create_pipeline_tuning_options(speed_level=2)
     pb = llvm.create_pass_builder(tm, pto)
     pb.getModulePassManager().run(mod, pb)
-    return tm.emit_object(mod)
+    return mod
 
 
 class _Array1(ctypes.Structure):

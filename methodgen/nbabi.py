@@ -1,7 +1,7 @@
 """The shared compiled runtime's interface, without numba: what a numba module needs to load
 and run on its fused loop.
 
-A generated numba module (:mod:`methodgen.nbruntime`'s route) imports this module as ``_rt``.
+A generated numba module imports this module as ``_rt``.
 It re-exports the runtime's contract (:mod:`methodgen.abi`: the kernels' signatures
 :data:`KERNEL_TYPES`, the configuration arrays' names :data:`CFG`, :data:`FCFG`, the status
 codes) and holds :func:`run`, which runs a call on the
@@ -12,7 +12,7 @@ back.  So a cached module that runs fused never imports numba (0.18 s of a 0.3 s
 numba is imported, on first need, through :func:`methodgen.nbcache.numba`: by the lazy
 decorators :func:`jit` (a module's few numba-compiled functions), by a kernel the LLVM route
 cannot translate, and by :mod:`methodgen.nbruntime` (any name not defined here is looked up
-there: ``_rt.stack_buffer`` in a numba-compiled kernel, ``_rt.handle`` …).
+there: ``_rt.stack_buffer`` in a numba-compiled kernel).
 
 :data:`SOURCE_SHA256` covers this file, ``abi.py`` and ``nbruntime.py``: the compiled runtime reads the
 configuration through the positions defined in :mod:`methodgen.abi`, so a change of any is a new runtime
@@ -50,7 +50,7 @@ _EPS = _abi.EPS
 _TOL_ROUNDOFF = _abi.TOL_ROUNDOFF
 _TOL_PLATEAU = _abi.TOL_PLATEAU
 
-#: Explicit batches of at least this many trajectories take methodgen.nbbatch's lock-step block.
+#: Explicit batches of at least this many trajectories run in lock-step (methodgen.stepper.lockstep).
 MIN_BATCH = 16
 
 
@@ -78,29 +78,27 @@ def _config(names: dict, values: dict, dtype) -> numpy.ndarray:
 
 def use_block(cfg, batch: int) -> bool:
     """True when a batch of ``batch`` trajectories of a module with configuration ``cfg``
-    takes :func:`methodgen.nbbatch.run_block`: explicit stages and at least :data:`MIN_BATCH`
-    trajectories."""
-    return int(cfg[CFG["KIND"]]) == 2 and batch >= MIN_BATCH
+    runs in lock-step (:func:`methodgen.stepper.lockstep`): explicit stages (not projected) and
+    at least :data:`MIN_BATCH` trajectories."""
+    return int(cfg[CFG["KIND"]]) == 2 and not int(cfg[CFG["PROJ"]]) and batch >= MIN_BATCH
 
 
 # --- kernels a module does not have --------------------------------------------------------------
 
 class _Missing:
-    """The stand-in of a kernel a module does not have, compiled only when the shared runtime's
-    loop needs it (:func:`methodgen.nbruntime.handle`): a run on the fused loop, which never
-    calls it, loads no numba at all."""
+    """The stand-in of a kernel a module does not have: the stepper's constants select code
+    that never calls it (an explicit step has no Newton kernels).  ``py_func`` is None (nothing
+    to inline)."""
 
     __slots__ = ("kind",)
+    py_func = None
 
     def __init__(self, kind):
         self.kind = kind
 
-    def compiled(self):
-        from . import nbruntime
-        return nbruntime.stand_in(self.kind)
-
     def __call__(self, *args):
-        return self.compiled()(*args)
+        raise RuntimeError(f"methodgen: the {self.kind!r} kernel of a module that has none was called "
+                           "(a defect of the stepper's configuration)")
 
     def __repr__(self):
         return f"no_kernel({self.kind!r})"
@@ -110,8 +108,7 @@ _MISSING = {}
 
 
 def no_kernel(kind: str):
-    """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one
-    (compiled, or loaded from the cache, when first passed to the compiled runtime)."""
+    """The stand-in kernel of ``kind`` (a key of :data:`KERNEL_TYPES`), for a module without one."""
     if kind not in KERNEL_TYPES:
         raise KeyError(f"no kernel kind {kind!r}; valid: {sorted(KERNEL_TYPES)}")
     got = _MISSING.get(kind)
@@ -172,7 +169,8 @@ def materialize(namespace: dict):
 
 def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
         kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
-        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv, *, force_k=None, proj_k=None, PJ=None):
+        compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv, *, force_k=None, proj_k=None, PJ=None,
+        block=None):
     """Steps ``n0 .. n1-1`` of every trajectory on the module's stepper (:mod:`methodgen.stepper`),
     compiled with its kernels inlined (:mod:`methodgen.fused`).
 
@@ -184,7 +182,9 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     step, iteration, stage and ``fval`` (B) value of a failure; ``every``; the solver state
     ``smode``, ``slu_ok``, ``sLU``, ``spiv``; for a projected module (:mod:`methodgen.projection`)
     its ``force_k`` (first-same-as-last, where the base step has it) and ``proj_k`` kernels and
-    ``PJ`` (B, 2 PM): the levels to keep, then the multipliers (updated).
+    ``PJ`` (B, 2 PM): the levels to keep, then the multipliers (updated).  ``block``: an explicit
+    module's ``(block kernel factory, lanes)``; a batch of at least :data:`MIN_BATCH` then runs
+    in lock-step (:func:`methodgen.stepper.lockstep`, bitwise the same rows).
 
     Where the stepper cannot be compiled with these kernels (a kernel the LLVM translator
     refused, compiled by numba instead, or ``METHODGEN_KERNELS=numba``) it runs as plain Python
@@ -196,6 +196,15 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
             kick_a, drift, kick_b, traj, n0, n1, Y, C, FRC, h, p, maxiter, check_resolution, solver, use_tol, tol,
             compensated, its, fstat, fval, every, smode, slu_ok, sLU, spiv, PJ)
     python = os.environ.get("METHODGEN_STEPPER", "").strip() == "python"
+    if block is not None and use_block(cfg, Y.shape[0]):
+        largs = ((block[0](), block[1]),) + args[:13] + (Y, C, FRC, h, p, check_resolution, compensated, fstat,
+                                                          fval, every)
+        if not python:
+            if fused.run_lockstep(*largs):
+                return
+            _warn_python(post_k)
+        fused.run_lockstep(*largs, python=True)
+        return
     if not python:
         if fused.run_fused(*args):
             return
@@ -218,16 +227,16 @@ def _warn_python(post_k) -> None:
                       "the same results, about a hundred times slower", RuntimeWarning, stacklevel=3)
 
 
-def res_rows(res, Z, Y, h, p, R):
-    """The residual at each row of Z, Y (no compensation): :func:`methodgen.nbruntime.res_rows`."""
-    from . import nbruntime
-    nbruntime.res_rows(res, Z, Y, h, p, R)
+def res_rows(res, cfg, Z, Y, h, p, R):
+    """The residual at each row of Z, Y (no compensation): :func:`methodgen.fused.run_rows`."""
+    from . import fused
+    fused.run_rows(res, False, cfg, Z, Y, h, p, R)
 
 
-def jac_rows(resjac, Z, Y, h, p, R, J):
-    """The residual and the Jacobian at each row of Z, Y: :func:`methodgen.nbruntime.jac_rows`."""
-    from . import nbruntime
-    nbruntime.jac_rows(resjac, Z, Y, h, p, R, J)
+def jac_rows(resjac, cfg, Z, Y, h, p, R, J):
+    """The residual and the Jacobian at each row of Z, Y: :func:`methodgen.fused.run_rows`."""
+    from . import fused
+    fused.run_rows(resjac, True, cfg, Z, Y, h, p, R, J)
 
 
 def __getattr__(name):

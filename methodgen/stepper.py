@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["stepper", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax"]
+__all__ = ["stepper", "lockstep", "rows", "lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax"]
 
 # The names below that this file does not define (``numba``, ``_rt``, the upper-case
 # constants and the kernels) are bound by methodgen.fused when it compiles the loop.
@@ -943,3 +943,224 @@ def amax(_v):
         if a > m or a != a:
             m = a
     return m
+
+
+def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _row0, _fst, _fval, _nbt):
+    """Steps ``_n0 .. _n1-1`` of trajectories ``0 .. _nbt-1`` of an explicit method (KIND 2,
+    no projection), ``_L`` trajectories at a time in lock-step: the lanes of a block.
+
+    The block is component-major, lanes innermost (component i of lane l at ``i * _L + l``),
+    so that the module's block kernel ``post_block`` -- its straight-line ``post`` code in a
+    loop over the lanes, with the state's update (compensated or not) and the carried force
+    -- and the checks' lane loops have unit stride and no branch across lanes, and LLVM
+    vectorises them.  Every lane's arithmetic is :func:`stepper`'s, operation for operation,
+    so the rows are bitwise those of the one-trajectory loop.
+
+    The checks (non-finite state, domain, time-scale guard, local error, energy jump) are a
+    count of failing lanes after every stage; only where it is not zero a scalar pass
+    (:func:`lane_status`) records each failing lane as :func:`stepper` does (status, step,
+    index, stage; value).  A failed lane keeps its state after the failing stage; the other
+    lanes of its block finish that step, and every later block runs only up to it, so rows
+    ``0 .. step`` are complete and the first failing step and its trajectories are those of
+    the one-trajectory loop.  The arguments are :func:`stepper`'s (``_Y``, ``_C``, ``_G``
+    updated in place, ``_T`` the saved rows, ``_nxt0`` / ``_row0`` the first kept step and its
+    row, ``_fst`` / ``_fval`` the failures)."""
+    _YS = numba.carray(_rt.stack_buffer(_DIM * _L), (_DIM * _L,))
+    _CS = numba.carray(_rt.stack_buffer(_DIM * _L), (_DIM * _L,))
+    _FS = numba.carray(_rt.stack_buffer(_NG * _L), (_NG * _L,))
+    _PS = numba.carray(_rt.stack_buffer(_PL * _L), (_PL * _L,))
+    _G0 = numba.carray(_rt.stack_buffer(_NK * _L), (_NK * _L,))     # (h_prev/2) f per lane ("carry")
+    _EJS = numba.carray(_rt.stack_buffer(2 * _L), (2 * _L,))        # H and its size at the step's start
+    _NE2 = numba.carray(_rt.stack_buffer(_L), (_L,))
+    _ND2 = numba.carray(_rt.stack_buffer(_L), (_L,))
+    _DEAD = numba.carray(_rt.stack_buffer(_L), (_L,))     # lane failed in this step (at stage DEAD - 1)
+    _SAVE = numba.carray(_rt.stack_buffer((2 * _DIM + _NG) * _L), ((2 * _DIM + _NG) * _L,))
+    _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
+    _ejs = numba.carray(_rt.stack_buffer(2), (2,))
+    _ls = numba.carray(_rt.stack_buffer(3), (3,))
+    for _i in range(_L):
+        _NE2[_i] = 0.0
+        _ND2[_i] = 0.0
+    _hh = 0.5 * _h * _GAMMA0
+    _limit = _n1
+    _b0 = 0
+    while _b0 < _nbt:
+        _nl = min(_L, _nbt - _b0)
+        for _l in range(_nl):
+            _b = _b0 + _l
+            _fst[_b, 0] = _S_OK
+            _DEAD[_l] = 0.0
+            for _i in range(_DIM):
+                _YS[_i * _L + _l] = _Y[_b, _i]
+                _CS[_i * _L + _l] = _C[_b, _i]
+            for _i in range(_NF):
+                _FS[_i * _L + _l] = _G[_b, _i]
+            if _EJUMP:
+                hs(_Y[_b], _p, _ejs)
+                _EJS[_l] = _ejs[0]
+                _EJS[_L + _l] = _ejs[1]
+            if _LERR == 2:
+                check(_Y[_b], _p, _ck)
+                for _j in range(_KLERR):
+                    _G0[_j * _L + _l] = _hh * _ck[1 + _LIDX[_j]]
+        _nxt = _nxt0
+        _row = _row0
+        _failed = 0
+        for _n in range(_n0, _limit):
+            for _k in range(_STAGES):
+                # the stage for the whole block: y (compensated or not) and the carried force
+                # updated in place, the check values in _PS, the count of non-finite components
+                _nbad = post_block(_YS, _CS, _FS, _h * _ka[_k], _h * _kd[_k], _h * _kb[_k], _p, _PS, _nl, _comp)
+                _rk = _RATIOS[_k]
+                # the other checks: a count of failing lanes, one row of lanes at a time (an
+                # integer count: LLVM vectorises the lane loops; a float sum it may not reorder)
+                _cnt = 0
+                for _j in range(_NDOMAIN):
+                    _o = (_PD + _j) * _L
+                    if _DPOS[_j] != 0:
+                        for _l in range(_nl):
+                            if not (_PS[_o + _l] > 0.0):
+                                _cnt += 1
+                    else:
+                        for _l in range(_nl):
+                            if not (_PS[_o + _l] >= 0.0):
+                                _cnt += 1
+                if _TT_GUARD:
+                    for _l in range(_nl):
+                        if not (_PS[_PT * _L + _l] > 0.0):
+                            _cnt += 1
+                    if _chk != 0:
+                        for _l in range(_nl):
+                            if abs(_PS[(_PT + 1) * _L + _l]) > _MLD * _PS[(_PT + 2) * _L + _l]:
+                                _cnt += 1
+                if _LERR != 0 and _chk != 0:
+                    if _LERR == 1:
+                        for _l in range(_nl):
+                            _NE2[_l] = _PS[_PE * _L + _l]
+                            _ND2[_l] = _PS[(_PE + 1) * _L + _l]
+                    else:
+                        for _l in range(_nl):
+                            _NE2[_l] = 0.0
+                            _ND2[_l] = _PS[_PE * _L + _l]
+                        for _j in range(_KLERR):
+                            for _l in range(_nl):
+                                _e = _PS[(_PE + 1 + _j) * _L + _l] - _rk * _G0[_j * _L + _l]
+                                _NE2[_l] += _e * _e
+                    for _l in range(_nl):
+                        if _NE2[_l] > _LERR2 * _ND2[_l]:
+                            _cnt += 1
+                if _EJUMP and _chk != 0:
+                    for _l in range(_nl):
+                        if abs(_PS[_PJ * _L + _l] - _EJS[_l]) > _MEJ * _EJS[_L + _l]:
+                            _cnt += 1
+                if _nbad != 0.0 or _cnt != 0:
+                    # which lanes failed, and how: the checks in the one-trajectory loop's order
+                    for _l in range(_nl):
+                        if _DEAD[_l] == 0.0:
+                            lane_status(_PS, _YS, _NE2, _ND2, _EJS, _l, _ls)
+                            if _ls[0] != _S_OK:
+                                _b = _b0 + _l
+                                _fst[_b, 0] = _ls[0]
+                                _fst[_b, 1] = _n
+                                _fst[_b, 2] = _ls[1]
+                                _fst[_b, 3] = _k
+                                _fval[_b] = _ls[2]
+                                _DEAD[_l] = _k + 1
+                                for _i in range(_DIM):
+                                    _SAVE[_i * _L + _l] = _YS[_i * _L + _l]
+                                    _SAVE[(_DIM + _i) * _L + _l] = _CS[_i * _L + _l]
+                                for _i in range(_NF):
+                                    _SAVE[(2 * _DIM + _i) * _L + _l] = _FS[_i * _L + _l]
+                                _failed = 1
+                # what the next stage's checks start from
+                if _LERR == 2:
+                    for _j in range(_KLERR):
+                        for _l in range(_nl):
+                            _G0[_j * _L + _l] = _PS[(_PE + 1 + _KLERR + _j) * _L + _l]
+                if _EJUMP:
+                    for _l in range(2 * _L):
+                        _EJS[_l] = _PS[_PJ * _L + _l]    # H and its size: two consecutive rows
+            if _failed != 0:
+                # the failed lanes keep their state after the failing stage; the others
+                # completed this step
+                for _l in range(_nl):
+                    if _DEAD[_l] != 0.0:
+                        for _i in range(_DIM):
+                            _YS[_i * _L + _l] = _SAVE[_i * _L + _l]
+                            _CS[_i * _L + _l] = _SAVE[(_DIM + _i) * _L + _l]
+                        for _i in range(_NF):
+                            _FS[_i * _L + _l] = _SAVE[(2 * _DIM + _i) * _L + _l]
+                _limit = _n + 1
+            if _n + 1 == _nxt:
+                for _l in range(_nl):
+                    if _DEAD[_l] == 0.0:
+                        for _i in range(_DIM):
+                            _T[_row, _b0 + _l, _i] = _YS[_i * _L + _l]
+                _row = _row + 1
+                _nxt = _nxt + _every
+            if _failed != 0:
+                break
+        for _l in range(_nl):
+            _b = _b0 + _l
+            for _i in range(_DIM):
+                _Y[_b, _i] = _YS[_i * _L + _l]
+                _C[_b, _i] = _CS[_i * _L + _l]
+            for _i in range(_NF):
+                _G[_b, _i] = _FS[_i * _L + _l]
+        _b0 = _b0 + _L
+
+
+def lane_status(PS, YS, NE2, ND2, EJS, l, out):
+    """``out`` = (status, index, value) of lane ``l`` of a :func:`lockstep` block after a stage:
+    its first failing check in :func:`stepper`'s order, or OK."""
+    st = _S_OK
+    ix = 0
+    val = 0.0
+    for i in range(_DIM):
+        if st == _S_OK and not (YS[i * _L + l] - YS[i * _L + l] == 0.0):
+            st = _S_NON_FINITE
+            val = math.nan
+    for j in range(_NDOMAIN):
+        v = PS[(_PD + j) * _L + l]
+        if st == _S_OK and ((_DPOS[j] != 0 and not (v > 0.0)) or (_DPOS[j] == 0 and not (v >= 0.0))):
+            st = _S_OUT_OF_DOMAIN
+            ix = j
+            val = v
+    if _TT_GUARD and st == _S_OK:
+        if not (PS[_PT * _L + l] > 0.0) or (_chk != 0 and abs(PS[(_PT + 1) * _L + l]) > _MLD * PS[(_PT + 2) * _L + l]):
+            st = _S_TIME_SCALE
+            val = PS[_PT * _L + l]
+    if _LERR != 0 and _chk != 0 and st == _S_OK:
+        if NE2[l] > _LERR2 * ND2[l]:
+            st = _S_LOCAL_ERROR
+            val = _LERR_SCALE * math.sqrt(NE2[l] / ND2[l])
+    if _EJUMP and _chk != 0 and st == _S_OK:
+        d = abs(PS[_PJ * _L + l] - EJS[l])
+        if d > _MEJ * EJS[_L + l]:
+            st = _S_ENERGY_JUMP
+            val = d / EJS[_L + l]
+    out[0] = st
+    out[1] = ix
+    out[2] = val
+
+
+def rows(_Z, _Y, _h, _p, _R, _J, _nb):
+    """The step equations' residual (``_JAC`` 0), or residual and Newton matrix (``_JAC`` 1), at
+    each of the ``_nb`` rows of ``_Z`` (B, N) and ``_Y`` (B, DIM), without compensation: ``_R``
+    (B, N), ``_J`` (B·N, N), the matrix of row b in rows ``b·N .. b·N + N - 1`` (a module's
+    ``residual()`` and ``jacobian()``)."""
+    _c = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
+    _Jb = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ, _NZ))
+    for _i in range(_DIM):
+        _c[_i] = 0.0
+    for _b in range(_nb):
+        if _JAC != 0:
+            for _i in range(_N):
+                for _j in range(_N):
+                    _Jb[_i, _j] = 0.0
+            resjac(_Z[_b], _Y[_b], _c, _h, _p, _R[_b], _Jb)
+            for _i in range(_N):
+                for _j in range(_N):
+                    _J[_b * _N + _i, _j] = _Jb[_i, _j]
+        else:
+            res(_Z[_b], _Y[_b], _c, _h, _p, _R[_b])

@@ -1,15 +1,21 @@
-"""Lock-step batches of explicit methods on the numba backend (methodgen.nbbatch).
+"""Lock-step batches of explicit methods on the numba backend (methodgen.stepper.lockstep).
 
 A batch of at least ``nbabi.MIN_BATCH`` trajectories of an explicit method runs in
-blocks of ``_BLOCK_LANES`` lanes, stepped together through a vectorised block kernel;
-smaller batches and implicit methods keep the one-trajectory runtime.  These tests
-check that both paths give *bitwise* the same rows (no fastmath: the block kernel is
-the same arithmetic), including a batch that is not a multiple of the block, chunked
-runs, ``save_every`` and ``out=``, and that a failing lane is reported with its index
-and step.  Each has a negative control showing that the comparison can fail.
+blocks of ``_BLOCK_LANES`` lanes, stepped together through the module's block kernel
+inlined into the lock-step loop (vectorised by LLVM); smaller batches and implicit
+methods take the one-trajectory stepper.  These tests check that both paths give
+*bitwise* the same rows (no fastmath: the block kernel is the same arithmetic),
+including a batch that is not a multiple of the block, chunked runs, ``save_every`` and
+``out=``, that a failing lane is reported with its index and step, and that the
+lock-step loop compiled and run as Python agree.  Each has a negative control showing
+that the comparison can fail.
 """
 
 from __future__ import annotations
+
+import os
+import textwrap
+import inspect
 
 import numpy as np
 import pytest
@@ -19,7 +25,7 @@ from methodgen.emit import module_filename
 
 pytest.importorskip("numba")
 
-from methodgen import nbabi, nbbatch, nbruntime  # noqa: E402
+from methodgen import abi, fused, llvmkernels, nbabi, stepper  # noqa: E402
 
 B = 300  # two full blocks of 128 and a remainder of 44
 # (label, order, composition): Störmer–Verlet, a composition of it, a splitting family
@@ -45,22 +51,33 @@ def orbits(n, seed=0):
 
 
 def run(mod, path, *args, **kw):
-    """``mod.integrate`` on the lock-step path (``path="block"``) or the one-trajectory one."""
+    """``mod.integrate`` on the lock-step path (``path="block"``; ``"python"``: the lock-step
+    loop run as Python) or the one-trajectory one."""
     saved = nbabi.MIN_BATCH
-    nbabi.MIN_BATCH = 1 if path == "block" else 1 << 62
+    nbabi.MIN_BATCH = 1 if path in ("block", "python") else 1 << 62
+    env = os.environ.get("METHODGEN_STEPPER")
+    os.environ["METHODGEN_STEPPER"] = "python" if path == "python" else ""
     try:
         return mod.integrate(*args, **kw)
     finally:
         nbabi.MIN_BATCH = saved
+        if env is None:
+            del os.environ["METHODGEN_STEPPER"]
+        else:
+            os.environ["METHODGEN_STEPPER"] = env
 
 
-def test_route_explicit_batches_only(modules):
-    """Explicit modules carry a block kernel and take run_block for batches from MIN_BATCH on."""
+def test_route_explicit_batches_only(modules, hh):
+    """Explicit modules carry a block kernel and run in lock-step from MIN_BATCH trajectories on;
+    not implicit ones, nor projected ones (a projected step is the one-trajectory stepper's)."""
     cfg = modules["sv2"]._CFG
-    assert nbbatch.use_block(cfg, nbabi.MIN_BATCH) and not nbbatch.use_block(cfg, nbabi.MIN_BATCH - 1)
+    assert nbabi.use_block(cfg, nbabi.MIN_BATCH) and not nbabi.use_block(cfg, nbabi.MIN_BATCH - 1)
     implicit = cfg.copy()
-    implicit[nbruntime.CFG["KIND"]] = 0
-    assert not nbbatch.use_block(implicit, 10 ** 6)  # Newton per lane stays on nbruntime.run
+    implicit[abi.CFG["KIND"]] = 0
+    assert not nbabi.use_block(implicit, 10 ** 6)  # Newton per lane stays on the stepper
+    projected = cfg.copy()
+    projected[abi.CFG["PROJ"]] = 1
+    assert not nbabi.use_block(projected, 10 ** 6)
     for mod in modules.values():
         assert hasattr(mod, "_py_post_block") and mod._BLOCK_LANES == 128
 
@@ -85,9 +102,10 @@ def test_block_path_equals_one_trajectory_path_bitwise(modules, label):
     assert b is out and np.array_equal(a, b)
 
 
-def test_bitwise_comparison_detects_a_lane_permutation_and_a_stride_fault(modules, monkeypatch):
-    """Negative controls: two lanes of the remainder swapped, or the runtime's lane stride
-    disagreeing with the one compiled into the block kernel, are seen by the comparison."""
+def test_bitwise_comparison_detects_a_lane_permutation(modules):
+    """Negative control: two lanes of the remainder swapped are seen by the comparison.  (The
+    lane stride is one constant: the block kernel is inlined into the lock-step loop, both
+    compiled with the module's ``_BLOCK_LANES``.)"""
     mod = modules["sv2"]
     Y0 = orbits(B)
     a = run(mod, "single", Y0, 0.01, 20)
@@ -96,45 +114,40 @@ def test_bitwise_comparison_detects_a_lane_permutation_and_a_stride_fault(module
     swapped = b.copy()
     swapped[:, [B - 2, B - 1]] = swapped[:, [B - 1, B - 2]]
     assert not np.array_equal(a, swapped)
-    # the runtime's stride 256, the kernel's compiled one 128 (larger, so that the kernel's
-    # accesses stay inside the runtime's arrays: numba does not check bounds)
-    monkeypatch.setattr(mod, "_BLOCK_LANES", 256)
-    c = run(mod, "block", Y0, 0.01, 20, check_resolution=False)
-    assert not np.array_equal(a, c)
 
 
-def _interpreted_block_run(mod, Y0, h, steps):
-    """One call of ``run_block`` interpreted (its ``py_func``, the module's block kernel as
-    Python): a model of the compiled path in which a fault can be injected."""
-    Y = np.array(Y0, dtype=float)
-    Bn = Y.shape[0]
-    C = np.zeros_like(Y)
-    FRC = np.ascontiguousarray(mod._start_force(None, Y, C, np.array([1.0, 1.0])).reshape(Bn, -1))
-    traj = np.zeros((steps + 1, Bn, 6))
-    traj[0] = Y
-    fstat = np.zeros((Bn, 4), dtype=np.int64)
-    fval = np.zeros(Bn)
-    nbbatch._run_block.py_func(
-        mod._py_post_block, mod._nb_hs, nbabi.no_kernel("check"), mod._CFG, mod._FCFG, mod._LERR_INDEX,
-        mod._DOMAIN_POSITIVE, mod._STAGE_GAMMAS, mod._STAGE_RATIOS, mod._KICK_A, mod._DRIFT, mod._KICK_B,
-        traj, 0, steps, Y, C, FRC, h, np.array([1.0, 1.0]), True, True, fstat, fval, 1, mod._BLOCK_LANES)
-    return traj, fstat
+def test_lockstep_compiled_and_as_python_agree_bitwise(modules, logh):
+    """The lock-step loop, one source run two ways: compiled (the block kernel inlined) and as
+    Python, the same bits -- a batch with a remainder block, save_every, not compensated, a
+    time-transformed module with its domain conditions and guard."""
+    for mod, h, Y0 in ((modules["sv2"], 0.01, orbits(150)), (modules["bm-rkn4"], 0.01, orbits(40)),
+                       (logh, 2 * np.pi / 40, logh.initial_state(logh_orbits(40, 0.5)))):
+        for kw in ({}, {"compensated": False, "save_every": 3}):
+            assert np.array_equal(run(mod, "block", Y0, h, 12, **kw), run(mod, "python", Y0, h, 12, **kw))
+
+
+def _edited_lockstep(monkeypatch, line, replacement):
+    """:func:`methodgen.stepper.lockstep` with one line of its source replaced (a fault)."""
+    src = textwrap.dedent(inspect.getsource(stepper.lockstep))
+    assert src.count(line) == 1
+    namespace = {}
+    exec(compile(src.replace(line, replacement), "edited_lockstep", "exec"), namespace)
+    monkeypatch.setattr(stepper, "lockstep", namespace["lockstep"])
 
 
 def test_block_remainder_fault_is_detected(modules, monkeypatch):
-    """Negative control on the remainder: the interpreted run_block agrees with the compiled
-    path to round-off; with the remainder block shortened by one lane (``min`` patched)
-    the last trajectory is never stepped, which the comparison sees."""
+    """Negative control on the remainder: the lock-step loop as Python agrees with the compiled
+    one; with the remainder block shortened by one lane the last trajectory is never stepped,
+    which the comparison sees."""
     mod = modules["sv2"]
-    Y0 = orbits(B)[:, :]
+    Y0 = orbits(B)
     ref = run(mod, "block", Y0, 0.01, 3)
-    good, _ = _interpreted_block_run(mod, Y0, 0.01, 3)
-    assert np.allclose(good, ref, rtol=1e-13, atol=1e-15)
-    monkeypatch.setitem(nbbatch._run_block.py_func.__globals__, "min",
-                        lambda a, b: b - 1 if b < a else a)
-    bad, _ = _interpreted_block_run(mod, Y0, 0.01, 3)
-    assert np.allclose(bad[:, :B - 1], ref[:, :B - 1], rtol=1e-13, atol=1e-15)
-    assert not np.allclose(bad[:, B - 1], ref[:, B - 1])
+    assert np.array_equal(run(mod, "python", Y0, 0.01, 3), ref)
+    _edited_lockstep(monkeypatch, "_nl = min(_L, _nbt - _b0)", "_nl = min(_L, _nbt - _b0) - (1 if _nbt - _b0 < _L else 0)")
+    # (into rows of NaN: a row left unwritten must not show a freed array's old values)
+    bad = run(mod, "python", Y0, 0.01, 3, out=np.full_like(ref, np.nan))
+    assert np.array_equal(bad[:, :B - 1], ref[:, :B - 1])
+    assert not np.array_equal(bad[:, B - 1], ref[:, B - 1])
 
 
 @pytest.mark.parametrize("label", ["sv2", "bm-rkn4"])
@@ -184,19 +197,24 @@ def test_failing_lane_is_named_with_its_step(modules, bad_lane):
 
 
 def test_unrecorded_lane_failure_would_go_silent(modules, monkeypatch):
-    """Negative control: with the scalar pass that names failing lanes disabled (``_lane_status``
+    """Negative control: with the scalar pass that names failing lanes disabled (``lane_status``
     always OK), the plunging lane is not reported and non-finite rows come back."""
     mod = modules["sv2"]
     bad_lane = 200
     Y0 = plunging_batch(bad_lane)
-    _, fstat = _interpreted_block_run(mod, Y0, 0.01, 120)
-    assert fstat[bad_lane, 0] != 0 and (np.delete(fstat[:, 0], bad_lane) == 0).all()
-    monkeypatch.setitem(nbbatch._run_block.py_func.__globals__, "_lane_status",
-                        lambda *a: (0, 0, 0.0))
-    traj, fstat = _interpreted_block_run(mod, Y0, 0.01, 120)
-    assert (fstat[:, 0] == 0).all()  # nothing reported ...
+    with pytest.raises((mod.ResolutionError, mod.NonFiniteError)) as ei:
+        run(mod, "python", Y0, 0.01, 120)
+    assert f"[{bad_lane}]" in str(ei.value)
+
+    def always_ok(PS, YS, NE2, ND2, EJS, l, out):
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 0.0
+
+    monkeypatch.setattr(stepper, "lane_status", always_ok)
+    traj = run(mod, "python", Y0, 0.01, 120)     # nothing reported ...
     H = mod.hamiltonian(traj[:, bad_lane])
-    assert not (np.abs(H - H[0]) < 0.1).all()  # ... though the lane's energy left its value
+    assert not (np.abs(H - H[0]) < 0.1).all()    # ... though the lane's energy left its value
 
 
 # --- a time-transformed module: domain conditions and the time-scale guard in the lanes --------
@@ -208,7 +226,7 @@ def logh(tmp_path_factory):
     path = tmp_path_factory.mktemp("ensemble_logh") / module_filename(scene.name, "sv", "numba")
     mod = mg.generate(scheme, path, backend="numba")
     cfg = mod._CFG
-    assert cfg[nbruntime.CFG["NDOMAIN"]] > 0 and cfg[nbruntime.CFG["TT_GUARD"]] == 1 and hasattr(mod, "_py_post_block")
+    assert cfg[abi.CFG["NDOMAIN"]] > 0 and cfg[abi.CFG["TT_GUARD"]] == 1 and hasattr(mod, "_py_post_block")
     return mod
 
 
@@ -251,19 +269,27 @@ def test_log_hamiltonian_failing_lane_named(logh):
     assert np.array_equal(run(mod, "single", Y0, 2 * np.pi / 30, 60), run(mod, "block", Y0, 2 * np.pi / 30, 60))
 
 
+def _loop_function(mod, block):
+    """The lock-step (``block``) or one-trajectory loop of an explicit module, as compiled."""
+    by = {"post": mod._nb_post, "hs": getattr(mod, "_nb_hs", None), "check": getattr(mod, "_nb_check", None)}
+    kernels = tuple(by.get(n) or nbabi.no_kernel(n) for n in fused.KERNEL_NAMES)
+    return fused.loop_function(kernels, mod._CFG, mod._FCFG, mod._LERR_INDEX, mod._DOMAIN_POSITIVE,
+                               mod._STAGE_GAMMAS, mod._STAGE_RATIOS, (0, 0, 1, 1),
+                               (mod._block_kernel(), mod._BLOCK_LANES) if block else None)
+
+
 @pytest.mark.skipif(__import__("platform").machine() not in ("x86_64", "AMD64"), reason="x86 instruction names")
-def test_block_kernel_is_vectorised_without_contraction(modules):
-    """The block kernel's lane loops compile to packed double square roots (SIMD over lanes)
-    and no fused multiply-add (which would change the rounding: not bitwise the one-lane
-    path).  Control: the one-lane post kernel, compiled the same way, has no packed ones."""
+def test_lockstep_loop_is_vectorised_without_contraction(modules):
+    """The lock-step loop's lane loops compile to packed double square roots (SIMD over lanes:
+    the block kernel inlined, its rows distinct stack buffers) and no fused multiply-add (which
+    would change the rounding: not bitwise the one-lane path).  Control: the one-trajectory
+    stepper of the same module, compiled the same way, has no packed ones."""
     import re
 
-    import numba
-
     mod = modules["sv2"]
-    block = numba.njit(nbbatch.KERNEL_TYPES["post_block"], error_model="numpy")(mod._py_post_block)
-    asm = "\n".join(block.inspect_asm().values())
+    fn, sig = _loop_function(mod, True)
+    asm = llvmkernels.assembly(fn, sig, fn.__globals__)
     assert re.search(r"\bv?sqrtpd\b", asm) and not re.search(r"vfn?m(add|sub)", asm)
-    one = numba.njit(nbruntime.KERNEL_TYPES["post"], error_model="numpy")(mod._nb_post.py_func)
-    asm1 = "\n".join(one.inspect_asm().values())
+    fn1, sig1 = _loop_function(mod, False)
+    asm1 = llvmkernels.assembly(fn1, sig1, fn1.__globals__)
     assert re.search(r"\bv?sqrtsd\b", asm1) and not re.search(r"\bv?sqrtpd\b", asm1)

@@ -203,7 +203,7 @@ def test_an_undecided_resolution_bound_stops_and_resumes(monkeypatch):
 @pytest.mark.parametrize("method, kw", [("energy-momentum", {"order": 4}), ("stormer-verlet", {"order": 6})])
 def test_a_batch_of_any_size_runs_fused(monkeypatch, method, kw):
     """The number of trajectories is a run-time bound of the loop: a batch of 12 (implicit; and
-    explicit below nbbatch's lock-step size) runs fused, bitwise the Python stepper's, iterations
+    explicit below the lock-step batch size) runs fused, bitwise the Python stepper's, iterations
     included (counted in place, in the caller's zeroed array)."""
     scene = mg.load_scene("henon-heiles-2d")
     mod = mg.build(scene.system, method, backend="numba", **kw)

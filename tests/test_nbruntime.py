@@ -129,8 +129,6 @@ def test_status_codes_match_the_modules(tmp_path):
 # --- cache stamp -------------------------------------------------------------------------
 
 def test_the_runtime_is_stamped_with_its_content_hash():
-    locator = nbruntime.stand_in("hs")._cache._impl.locator
-    assert locator.get_source_stamp() == ("methodgen.nbruntime", nbruntime.SOURCE_SHA256)
     # the stamp covers the runtime and the contract whose layout it compiles in (abi, nbabi)
     import hashlib
     h = hashlib.sha256()

@@ -266,10 +266,9 @@ def test_emitted_source_is_deterministic_and_self_contained(kepler):
         elif isinstance(node, ast.ImportFrom):
             imported |= {f"{node.module}.{a.name}" for a in node.names}
     # numpy, numba and, of methodgen, only its compiled runtime (on the shared route its
-    # numba-free interface nbabi, and nbbatch for explicit batches) and the LLVM kernel
-    # compiler (never SymPy or the generator)
+    # numba-free interface nbabi) and the LLVM kernel compiler (never SymPy or the generator)
     assert imported <= {"math", "operator", "numba", "numpy", "methodgen.nbruntime", "methodgen.nbabi",
-                        "methodgen.nbbatch", "methodgen.llvmkernels"}
+                        "methodgen.llvmkernels"}
 
 
 def test_compiled_code_is_cached_on_disk(tmp_path, monkeypatch):
