@@ -116,8 +116,9 @@ def _numba_helper_module(tmp_path, compiled=None):
     default all), and one jitted function that calls every one of them (one compile for
     the lot)."""
     numba_tpl = (TEMPLATES / "numba_module.py.j2").read_text()
-    # (the template route's spelling; the shared route's is the same njit, applied lazily)
-    inline = re.search(r"^_inline = numba\.njit.*$", numba_tpl, re.M).group(0)
+    # (the module's spelling is the same njit, applied lazily through methodgen.nbabi.jit)
+    inline = re.search(r"^_inline = _rt\.jit\((.*)\)$", numba_tpl, re.M)
+    inline = f"_inline = numba.njit({inline.group(1)})"
     loop = re.search(r"\{% for name in ir.helpers %\}\n.*?\{% endfor %\}\n", numba_tpl, re.S).group(0)
     names = sorted(_template_names())
     plain = _plain_module(tmp_path, names)
