@@ -37,11 +37,31 @@ def _load(tmp_path, name, source):
     return mod
 
 
+_ROWS = []
+
+
+def _res_rows():
+    """A numba-compiled loop calling a kernel of signature ``res`` as a first-class function
+    (numba's public API; an LLVM kernel is one through methodgen.nbruntime's registration)."""
+    if not _ROWS:
+        t = numba.types
+        V, M = t.float64[::1], t.float64[:, ::1]
+
+        @numba.njit(t.void(t.FunctionType(RES), M, M, t.float64, V, M), error_model="numpy")
+        def rows(res, Z, Y, h, p, R):
+            c = np.zeros(Y.shape[1])
+            for b in range(Z.shape[0]):
+                res(Z[b], Y[b], c, h, p, R[b])
+
+        _ROWS.append(rows)
+    return _ROWS[0]
+
+
 def _rows(kernel, Y, n_out):
-    """The kernel (signature ``res``) at each row of Y, called from compiled code (the shared
-    runtime's res_rows: a first-class function call, as the integration loop makes)."""
+    """The kernel (signature ``res``) at each row of Y, called from compiled code (a
+    first-class function call)."""
     R = np.zeros((Y.shape[0], n_out))
-    rt.res_rows(kernel, np.zeros_like(Y), Y, 0.1, np.array([2.0, -3.0]), R)
+    _res_rows()(kernel, np.zeros_like(Y), np.ascontiguousarray(Y), 0.1, np.array([2.0, -3.0]), R)
     return R
 
 
@@ -383,13 +403,20 @@ def test_and_or_short_circuit_as_python(tmp_path, guard):
     path = tmp_path / "k_short.py"
     path.write_text("import math\nimport numba\nimport numpy\n" + src)
     code = textwrap.dedent(f"""
-        import importlib.util, numpy as np
+        import importlib.util, numba, numpy as np
         from methodgen import llvmkernels as lk, nbruntime as rt
         spec = importlib.util.spec_from_file_location("k_short", {str(path)!r})
         mod = importlib.util.module_from_spec(spec); spec.loader.exec_module(mod)
         ll = lk.compile_kernel(mod.guarded, rt.KERNEL_TYPES["res"])
+        t = numba.types
+        @numba.njit(t.void(t.FunctionType(rt.KERNEL_TYPES["res"]), t.float64[:, ::1], t.float64[:, ::1],
+                           t.float64, t.float64[::1], t.float64[:, ::1]))
+        def rows(res, Z, Y, h, p, R):
+            c = np.zeros(Y.shape[1])
+            for b in range(Z.shape[0]):
+                res(Z[b], Y[b], c, h, p, R[b])
         R = np.zeros((1, 2))
-        rt.res_rows(ll, np.zeros((1, 3)), np.ones((1, 3)), 0.1, np.array([0.5]), R)
+        rows(ll, np.zeros((1, 3)), np.ones((1, 3)), 0.1, np.array([0.5]), R)
         print("ok", R.tolist())
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
