@@ -1,0 +1,99 @@
+"""``mod.solve``: a generated module's run as a :class:`Solution` (times, states, status,
+statistics, invariant errors), on both backends.
+
+Its rows are :func:`integrate`'s bitwise (the same run); a failed step is reported in the result
+(status -1, the message, the rows before it), not raised; the invariant errors are measured on
+the rows.  Each property has a control that shows the comparison can fail.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import methodgen as mg
+
+BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
+    __import__("importlib").util.find_spec("numba") is None, reason="numba not installed"))]
+
+
+@pytest.fixture(scope="module", params=BACKENDS)
+def em(request, kepler):
+    return mg.build(kepler, "energy-momentum", backend=request.param)
+
+
+Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
+
+
+def test_fields_are_integrates_run(em):
+    sol = em.solve(Y0, (0.0, 1.0), 0.03)
+    # h shortened to land on t1 in whole steps: 34 steps of 1/34
+    assert sol.status == 0 and sol.success and sol.nsteps == 34 and sol.h == 1.0 / 34
+    assert sol.t[0] == 0.0 and sol.t[-1] == 1.0 and sol.t.shape == (35,)
+    np.testing.assert_allclose(np.diff(sol.t), sol.h, rtol=1e-14)
+    info = {}
+    ref = em.integrate(Y0, sol.h, 34, info=info)
+    assert np.array_equal(sol.y, ref)
+    assert np.array_equal(sol.newton_iterations, info["newton_iterations"])
+    assert "reached t = 1.0 in 34 steps" in sol.message and "Solution(status=0" in repr(sol)
+    # control: another step size is another run
+    assert not np.array_equal(em.integrate(Y0, 0.03, 34), sol.y)
+
+
+def test_backward_batch_and_save_every(em):
+    Y = np.stack([Y0, Y0 * 1.01])
+    sol = em.solve(Y, (1.0, -1.0), 0.1, save_every=3)
+    assert sol.h == -0.1 and sol.nsteps == 20
+    # rows after 0, 3, ..., 18 steps and the last (20)
+    np.testing.assert_allclose(sol.t, [1.0, 0.7, 0.4, 0.1, -0.2, -0.5, -0.8, -1.0], rtol=0, atol=1e-14)
+    assert np.array_equal(sol.y, em.integrate(Y, -0.1, 20, save_every=3))
+    assert sol.invariant_errors["H"].shape == (2,)
+
+
+def test_t_eval_rows(em):
+    sol = em.solve(Y0, (0.0, 1.0), 0.1, t_eval=[0.0, 0.5, 1.0])
+    full = em.integrate(Y0, 0.1, 10)
+    assert np.array_equal(sol.t, [0.0, 0.5, 1.0]) and np.array_equal(sol.y, full[[0, 5, 10]])
+    # times from t_span[0]: the same rows from another start time
+    later = em.solve(Y0, (2.0, 3.0), 0.1, t_eval=[2.0, 2.5, 3.0])
+    assert np.array_equal(later.y, sol.y) and np.array_equal(later.t, [2.0, 2.5, 3.0])
+
+
+def test_a_failed_step_is_reported_not_raised(em):
+    """h = 2 does not resolve Kepler at the pericentre: status -1 with integrate's message and
+    the rows before the failing step.  Control: integrate raises the same failure."""
+    sol = em.solve(Y0, (0.0, 50.0), 2.0)
+    with pytest.raises(em.ResolutionError) as ei:
+        em.integrate(Y0, 2.0, 25)
+    assert sol.status == -1 and not sol.success and sol.message == str(ei.value)
+    assert sol.nsteps == ei.value.step and np.array_equal(sol.y, ei.value.trajectory)
+    assert sol.t.shape == (len(sol.y),)
+
+
+def test_invariant_errors_measure_what_the_method_keeps(kepler):
+    """Energy-momentum keeps H and L: their errors at round-off; control: Störmer–Verlet keeps L
+    but not H, and the field shows H's error."""
+    em = mg.build(kepler, "energy-momentum")
+    sv = mg.build(kepler, "stormer-verlet")
+    a = em.solve(Y0, (0.0, 5.0), 0.05)
+    b = sv.solve(Y0, (0.0, 5.0), 0.05)
+    H0 = abs(float(em.hamiltonian(Y0)))
+    assert a.invariant_errors["H"] <= 8 * np.finfo(float).eps * H0
+    assert b.invariant_errors["H"] > 1e-6 * H0
+    assert max(b.invariant_errors[k] for k in ("Lx", "Ly", "Lz")) <= 1e-14
+
+
+def test_bad_input_is_named(em):
+    with pytest.raises(ValueError, match="h must be > 0"):
+        em.solve(Y0, (0.0, 1.0), -0.1)
+    with pytest.raises(ValueError, match="t_span must be two numbers"):
+        em.solve(Y0, 1.0, 0.1)
+    with pytest.raises(ValueError, match="t_span must be finite"):
+        em.solve(Y0, (0.0, math.inf), 0.1)
+    with pytest.raises(TypeError, match="takes no 'steps'"):
+        em.solve(Y0, (0.0, 1.0), 0.1, steps=3)
+    # an empty span: the initial state alone
+    sol = em.solve(Y0, (1.0, 1.0), 0.1)
+    assert sol.nsteps == 0 and np.array_equal(sol.y, Y0[None]) and np.array_equal(sol.t, [1.0])
