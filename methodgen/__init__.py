@@ -33,7 +33,8 @@ __all__ = [
     "__version__", "Hamiltonian", "PoissonSystem", "discretize", "generate", "build", "build_text",
     "Scheme", "Traits", "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
     "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
-    "GenerationError", "time_transform", "autonomise", "wisdom_holman", "cite",
+    "GenerationError", "time_transform", "autonomise", "wisdom_holman", "cite", "event", "section_event",
+    "poincare",
 ]
 
 
@@ -51,6 +52,7 @@ def _lazy_names():
         "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
         "autonomise": ".timetransform", "time_transform": ".timetransform",
         "verify": ".verify", "wisdom_holman": ".nbody", "cite": ".cite",
+        "event": ".events", "section_event": ".events", "poincare": ".events",
     }
     found: list[frozenset] = []
 
