@@ -166,7 +166,7 @@ def section_event(module, text: str, *, crossings: int | None = None, params: di
                  params=params)
 
 
-def poincare(module, y0, h: float, section: str, *, crossings: int = 1000, t_max: float | None = None,
+def poincare(module, y0, h: float, section: str, *, crossings: int | None = 1000, t_max: float | None = None,
              params: dict | None = None, **options):
     """A Poincaré section: the first ``crossings`` crossings of ``section`` by the trajectory
     from ``y0``, each located on the method's own map (``module.solve`` with the section as a
@@ -180,8 +180,8 @@ def poincare(module, y0, h: float, section: str, *, crossings: int = 1000, t_max
         Step size (> 0).
     section : str
         ``"lhs = rhs[, condition]"``, e.g. ``"q1 = 0, p1 > 0"``.
-    crossings : int
-        How many crossings to collect.
+    crossings : int or None
+        How many crossings to collect (None: every one up to ``t_max``).
     t_max : float, optional
         Give up at this time (default ``1e6 * h``): fewer crossings are returned then.
     params : dict, optional

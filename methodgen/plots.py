@@ -496,3 +496,37 @@ _ORDER_MARKERS = {2: "o", 4: "v", 6: "^", 8: "P", 10: "*"}
 _PEER_STYLES = {"heyoka": "s--", "rebound": "D--"}
 #: Colours of the peers (by row ``method``): none of them is used for methodgen's methods.
 _PEER_COLORS = {"heyoka (Taylor)": "black", "heyoka (Taylor) model.nbody": "black", "REBOUND IAS15": "tab:olive", "REBOUND WHFast": "tab:gray"}
+
+
+def section_figure(points, names, section: str, *, title: str | None = None):
+    """A Poincaré section's located states drawn in the plane of the first coordinate the
+    section's equation does not name and its momentum (q then p in ``names``).
+
+    Parameters
+    ----------
+    points : array_like, shape (k, n)
+        The located states (:func:`methodgen.events.poincare`).
+    names : sequence of str
+        The state's component names (n), coordinates first.
+    section : str
+        The section's text, ``"lhs = rhs[, condition]"`` (for the choice of plane and the title).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Without pyplot (save it with ``fig.savefig``; the CLI's ``--plot`` does).
+    """
+    import re
+
+    pts = np.asarray(points, dtype=float).reshape(-1, len(names))
+    dof = len(names) // 2
+    surface = section.split(",")[0]
+    used = {n for n in names if re.search(rf"(?<![A-Za-z0-9_]){re.escape(n)}(?![A-Za-z0-9_])", surface)}
+    i = next((k for k in range(dof) if names[k] not in used), 0)
+    fig = _figure((5.0, 4.5))
+    ax = fig.add_subplot(1, 1, 1)
+    ax.plot(pts[:, i], pts[:, dof + i], ".", ms=1.5, color="C0")
+    ax.set_xlabel(names[i])
+    ax.set_ylabel(names[dof + i])
+    ax.set_title((title + "\n" if title else "") + f"section {section} ({len(pts)} crossings)", fontsize=9)
+    return fig

@@ -244,7 +244,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
               backend: str = "numpy", extended: bool = False, y0=None, params: dict | None = None,
               t_final: float | None = None, order=None, composition: str | None = None,
               stages=None, time_transform: str | None = None, save_every: int | None = None,
-              check_resolution: bool = True) -> dict:
+              check_resolution: bool = True, section: str | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
     With ``save`` the trajectory is written to an ``.npz`` in chunks of
@@ -276,6 +276,10 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     ``t_final`` with ``steps`` (and no ``h``) takes ``h = (t_final − t0) / steps``.
     ``check_resolution=False`` (``--no-check-resolution``) passes the same to the module's
     ``integrate``: no refusal of a step size estimated to under-resolve the motion.
+    ``section`` (``"x = 0, px > 0"``): the run is a Poincaré section instead (every crossing in
+    the ``steps`` steps, located on the method's own map: :func:`methodgen.events.poincare`);
+    the report says how many, their largest |g| and the invariants' errors at them, and
+    ``plot`` draws them.
     Refused before any work (:class:`InputError`): more than :data:`~methodgen.limits.MAX_STEPS`
     steps, or more states kept at once than fit in half the machine's memory.
     """
@@ -292,6 +296,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     scene = resolve_time_transform(load_scene(scene_name), time_transform)
     method = method or scene.method
     splitting = method in WH_FAMILIES
+    if section is not None and (splitting or save is not None or extended):
+        raise InputError("--section runs a generated module's solve(): not with a Wisdom–Holman splitting, "
+                         "--save or --extended")
     if splitting:
         # Wisdom–Holman: its own runtime (methodgen.nbody), no generated module
         _check_splitting_args(method, order, composition, stages, extended, scene)
@@ -379,6 +386,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 module.step(y, h, params)
         except (RuntimeError, FloatingPointError, ValueError):
             pass
+    if section is not None:
+        return _run_section(scene, module, method, order, composition, backend, y, h, steps, params, section, plot,
+                            check_resolution)
     chunk = steps if not chunk else chunk
     # chunks end on kept steps, so chunk after chunk the rows stay every-th states
     chunk = -(-chunk // every) * every
@@ -565,6 +575,38 @@ def _print_run(rep: dict) -> None:
           + (f"; {td['time']}={_num(td['t_final'], '.15g', 1)}" if td is not None else ""))
 
 
+def _run_section(scene, module, method, order, composition, backend, y, h, steps, params, text, plot,
+                 check_resolution) -> dict:
+    """The Poincaré section of ``run --section``: every crossing within ``steps`` steps."""
+    from ..events import poincare, section_event
+
+    section_event(module, text, params=params)       # a bad section is refused before the run
+    t0 = time.perf_counter()
+    t, pts, sol = poincare(module, y, h, text, crossings=None, t_max=steps * abs(h), params=params,
+                           check_resolution=check_resolution)
+    seconds = time.perf_counter() - t0
+    g = section_event(module, text, params=params)
+    inv0 = {k: float(v) for k, v in module.invariants(np.asarray(y, dtype=float), params).items()}
+    errs = {}
+    if len(pts):
+        at = module.invariants(pts, params)
+        errs = {k: float(np.max(np.abs(at[k] - inv0[k]))) for k in inv0}
+    rep = dict(scene=scene.name, method=method, order=order, composition=composition, backend=backend, h=sol.h,
+               steps=steps, steps_done=int(sol.nsteps), section=text, crossings=int(len(pts)),
+               status="ok" if sol.status >= 0 else "numerical-error", message=sol.message,
+               seconds=seconds, max_abs_g=float(np.max(np.abs(g(t, pts)))) if len(pts) else None,
+               invariant_errors_at_crossings=errs, state_names=list(module.STATE_NAMES),
+               t_events=t.tolist(), y_events=pts.tolist())
+    if plot is not None:
+        from ..plots import section_figure
+        fig = section_figure(pts, list(module.STATE_NAMES), text, title=f"{scene.name}, {method}, h = {sol.h:g}")
+        fig.savefig(plot)
+        rep["plot"] = plot
+    if sol.status < 0:
+        raise InputError(f"the section run stopped: {sol.message}")
+    return rep
+
+
 def _cli_overrides(args):
     """--y0 and --param validated against the scene (one-line errors naming the bad item)."""
     if args.y0 is None and not args.param:
@@ -583,7 +625,7 @@ def cmd_run(args) -> int:
                         params=params, t_final=args.t_final, order=args.order,
                         composition=args.composition, stages=args.stages,
                         time_transform=args.time_transform, save_every=args.save_every,
-                        check_resolution=args.check_resolution)
+                        check_resolution=args.check_resolution, section=args.section)
     except RunFailure as fail:
         what = "interrupted" if fail.code == 130 else "stopped"
         if fail.saved:
@@ -601,6 +643,15 @@ def cmd_run(args) -> int:
         return fail.code
     if args.json:
         print(dump_json(rep))
+    elif "section" in rep:
+        errs = ", ".join(f"{k} {v:.2e}" for k, v in rep["invariant_errors_at_crossings"].items()) or "—"
+        g = "—" if rep["max_abs_g"] is None else f"{rep['max_abs_g']:.2e}"
+        print(f"{rep['scene']}, {rep['method']}: {rep['crossings']} crossings of {rep['section']!r} in "
+              f"{rep['steps_done']} steps of h = {rep['h']:g} ({rep['seconds']:.2f} s); max |g| {g}; "
+              f"invariant errors at the crossings: {errs}")
+        if "plot" in rep:
+            print(f"plot written to {rep['plot']}")
+        return 0
     else:
         _print_run(rep)
         if "saved" in rep:
@@ -647,5 +698,9 @@ def add_parser(sub) -> None:
     p.add_argument("--save-every", type=positive_int, metavar="K",
                    help="keep every K-th state (and the last): what --save writes and --plot draws; the "
                         "invariant errors are then maxima over the kept states (default 1)")
+    p.add_argument("--section", metavar="'X = 0, PX > 0'",
+                   help="a Poincaré section instead of the trajectory: every crossing of the surface "
+                        "(lhs = rhs, and an optional side) in --steps steps, each located on the method's "
+                        "own map; --plot draws them")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_run)
