@@ -49,7 +49,7 @@ if TYPE_CHECKING:  # imported where rendering needs them (never on the loading p
     from .lower import Kernel, ModuleIR
 
 __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
-           "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available",
+           "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available", "compiled_available",
            "resolve_backend", "write_module", "check_cache_folder", "cache_root_of", "untagged",
            "load_if_current"]
 
@@ -157,10 +157,16 @@ def _check_backend(backend: str) -> None:
         raise InputError(f"unknown backend {backend!r}; backends are {', '.join(BACKENDS)}")
 
 
+def compiled_available() -> bool:
+    """True when the compiled backend can run: llvmlite is installed (the ``methodgen[fast]``
+    extra).  Found on the path, not imported.  Its kernels and its stepper are machine code
+    printed through llvmlite; numba is needed only for a kernel the LLVM translator refuses
+    (:func:`methodgen.nbcache.numba` says so then) and for ``METHODGEN_KERNELS=numba``."""
+    return _findable("llvmlite")
+
+
 def numba_available() -> bool:
-    """True when numba (and llvmlite) are installed (the ``methodgen[fast]`` extra): found on
-    the path, not imported -- a cached numba module that runs on its fused loop never imports
-    numba, and its import alone is 0.18 s of such a warm start."""
+    """True when numba (and llvmlite) are installed: found on the path, not imported."""
     return all(_findable(name) for name in ("numba", "llvmlite"))
 
 
@@ -182,8 +188,8 @@ def resolve_backend(backend: str, stacklevel: int = 3) -> str:
         For a name not in :data:`BACKENDS`.
     """
     _check_backend(backend)
-    if backend == "numba" and not numba_available():
-        warnings.warn('numba is not installed, so the numpy backend is used instead; install it with '
+    if backend == "numba" and not compiled_available():
+        warnings.warn('llvmlite is not installed, so the numpy backend is used instead; install it with '
                       'pip install "methodgen[fast]" for the compiled backend', RuntimeWarning,
                       stacklevel=stacklevel)
         return "numpy"

@@ -99,8 +99,20 @@ def defer_stamp_guard(path: str, digest: str, *, owner: str = "methodgen.nbrunti
 
 
 def numba():
-    """The numba module, imported on first call, with every deferred guard installed."""
-    import numba as nb
+    """The numba module, imported on first call, with every deferred guard installed.
+
+    Raises
+    ------
+    ImportError
+        numba is not installed: the compiled backend needs it only for a kernel the LLVM
+        translator refuses (or ``METHODGEN_KERNELS=numba``), and says so.
+    """
+    try:
+        import numba as nb
+    except ImportError:
+        raise ImportError("numba is needed here: a kernel uses a construct methodgen's LLVM translator does not "
+                          "know (or METHODGEN_KERNELS=numba asks for numba); install it with pip install numba "
+                          "(or \"methodgen[numba]\"), or use backend=\"numpy\"") from None
 
     flush_deferred()
     return nb

@@ -687,7 +687,7 @@ def add_parser(sub) -> None:
     p.add_argument("--plot", metavar="FILE", help="draw phase portrait, invariant errors (log scale) and "
                                                   "constraint residuals to FILE (.png/.svg/.pdf; needs methodgen[plot])")
     p.add_argument("--backend", choices=BACKENDS, default="numpy",
-                   help="numpy, or numba: compiled integration loop (needs methodgen[fast]; "
+                   help="numpy, or numba: compiled integration loop (needs methodgen[fast] or llvmlite alone; "
                         "compiled once, cached on disk)")
     p.add_argument("--extended", action="store_true",
                    help="refine each step in extended precision (long double): removes the small "
