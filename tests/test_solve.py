@@ -97,3 +97,26 @@ def test_bad_input_is_named(em):
     # an empty span: the initial state alone
     sol = em.solve(Y0, (1.0, 1.0), 0.1)
     assert sol.nsteps == 0 and np.array_equal(sol.y, Y0[None]) and np.array_equal(sol.t, [1.0])
+
+
+def test_cli_json_carries_the_solution_names(capsys, kepler):
+    """``methodgen run --json`` reports ``success``, ``message``, ``nsteps`` and
+    ``invariant_errors`` as a Solution names them, with the same values as ``mod.solve`` on the
+    same run; a failed run says ``success`` false with the failure's message."""
+    import json
+
+    from methodgen.cli import main
+
+    assert main(["run", "kepler", "--steps", "50", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    sc = mg.load_scene("kepler")
+    mod = mg.build(kepler, "energy-momentum")
+    sol = mod.solve(np.array(sc.y0), (0.0, 50 * sc.h), sc.h)
+    assert rep["success"] is True and rep["nsteps"] == sol.nsteps == 50
+    assert set(rep["invariant_errors"]) == set(sol.invariant_errors)
+    for name, v in sol.invariant_errors.items():
+        assert abs(rep["invariant_errors"][name] - v) <= 4e-16
+    assert main(["run", "kepler", "--steps", "50", "--h", "2", "--json"]) != 0
+    out = capsys.readouterr()
+    bad = json.loads(out.out)
+    assert bad["success"] is False and "does not resolve the dynamics" in bad["message"]

@@ -194,6 +194,11 @@ def _report(scene, method, h, steps, module, y_final, inv_acc, its, seconds, ste
         "us_per_step": seconds / steps_done * 1e6 if steps_done else 0.0,
         "module": str(getattr(module, "__file__", "")),
         "backend": getattr(module, "BACKEND", "numpy"),
+        # the names of a module's Solution (mod.solve), for the same facts
+        "success": not problems,
+        "message": "; ".join(problems) if problems else f"{steps_done} steps of h = {h!r}",
+        "nsteps": steps_done,
+        "invariant_errors": {name: v.get("max_abs_error") for name, v in report_inv.items()},
     }
 
 
@@ -592,8 +597,8 @@ def _run_section(scene, module, method, order, composition, backend, y, h, steps
         at = module.invariants(pts, params)
         errs = {k: float(np.max(np.abs(at[k] - inv0[k]))) for k in inv0}
     rep = dict(scene=scene.name, method=method, order=order, composition=composition, backend=backend, h=sol.h,
-               steps=steps, steps_done=int(sol.nsteps), section=text, crossings=int(len(pts)),
-               status="ok" if sol.status >= 0 else "numerical-error", message=sol.message,
+               steps=steps, steps_done=int(sol.nsteps), nsteps=int(sol.nsteps), section=text, crossings=int(len(pts)),
+               status="ok" if sol.status >= 0 else "numerical-error", success=sol.status >= 0, message=sol.message,
                seconds=seconds, max_abs_g=float(np.max(np.abs(g(t, pts)))) if len(pts) else None,
                invariant_errors_at_crossings=errs, state_names=list(module.STATE_NAMES),
                t_events=t.tolist(), y_events=pts.tolist())
@@ -638,8 +643,8 @@ def cmd_run(args) -> int:
         if args.json:
             status = ("interrupted" if fail.code == 130 else "io-error" if isinstance(fail.exc, OSError)
                       else "non-finite" if type(fail.exc).__name__ == "NonFiniteError" else "numerical-error")
-            print(dump_json({**fail.report, "status": status, "error": str(fail.exc),
-                             "saved": str(fail.saved) if fail.saved else None}))
+            print(dump_json({**fail.report, "status": status, "error": str(fail.exc), "success": False,
+                             "message": str(fail.exc), "saved": str(fail.saved) if fail.saved else None}))
         return fail.code
     if args.json:
         print(dump_json(rep))
