@@ -130,9 +130,26 @@ def test_event_text_is_data(em):
         mg.event(em, "q1", condition="p1")
 
 
-def test_events_need_one_trajectory(em):
-    with pytest.raises(ValueError, match="one trajectory"):
-        em.solve(np.stack([Y0, Y0]), (0.0, 1.0), H, events=_q1)
+def test_events_in_a_batch_are_each_trajectorys(em):
+    """A batch's crossings, with the trajectory of each, are those of each trajectory run alone
+    (times to 1e-13) and keep H; control: the trajectory indices are not all one lane's."""
+    Y = np.array([Y0, [0.0, -0.1, 0.3, 0.1], [0.0, 0.2, 0.2, 0.3]])
+    ev = _up(_q1)
+    sol = em.solve(Y, (0.0, 40.0), H, events=ev)
+    lanes = sol.trajectory_events[0]
+    assert sol.y.shape == (801, 3, 4) and set(lanes.tolist()) == {0, 1, 2}
+    for b in range(3):
+        alone = em.solve(Y[b], (0.0, 40.0), H, events=ev)
+        assert np.array_equal(alone.trajectory_events[0], np.zeros(len(alone.t_events[0]), dtype=np.int64))
+        mine = np.sort(sol.t_events[0][lanes == b])
+        assert len(mine) == len(alone.t_events[0]) and np.abs(mine - alone.t_events[0]).max() <= 1e-13
+        Hb = em.hamiltonian(sol.y_events[0][lanes == b])
+        assert np.abs(Hb - em.hamiltonian(Y[b])).max() <= 4 * np.finfo(float).eps * abs(float(em.hamiltonian(Y[b])))
+
+
+def test_events_refuse_what_they_cannot_do(em):
+    with pytest.raises(ValueError, match="terminal events need one trajectory"):
+        em.solve(np.stack([Y0, Y0]), (0.0, 1.0), H, events=_up(_q1, terminal=True))
     with pytest.raises(ValueError, match="t_eval and events"):
         em.solve(Y0, (0.0, 1.0), H, events=_q1, t_eval=[0.0, 1.0])
 
