@@ -49,7 +49,7 @@ if TYPE_CHECKING:  # imported where rendering needs them (never on the loading p
     from .lower import Kernel, ModuleIR
 
 __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic", "file_status",
-           "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "numba_available", "compiled_available",
+           "load_module", "generate", "module_filename", "cache_dir", "BACKENDS", "compiled_available",
            "resolve_backend", "write_module", "check_cache_folder", "cache_root_of", "untagged",
            "load_if_current"]
 
@@ -164,10 +164,6 @@ def compiled_available() -> bool:
     (:func:`methodgen.nbcache.numba` says so then) and for ``METHODGEN_KERNELS=numba``."""
     return _findable("llvmlite")
 
-
-def numba_available() -> bool:
-    """True when numba (and llvmlite) are installed: found on the path, not imported."""
-    return all(_findable(name) for name in ("numba", "llvmlite"))
 
 
 def _findable(name: str) -> bool:
