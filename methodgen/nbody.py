@@ -885,7 +885,7 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         One of :data:`FAMILIES` (``"wisdom-holman"``, ``"saba1"`` … ``"saba6"``,
         ``"sbab1"`` … ``"sbab6"``).
     corrector : bool
-        Apply the [LR01]_ corrector (error ``O(ε h^{2n} + ε² h⁴)`` instead of ``ε² h²``).
+        Apply the corrector of [LR01]_ (error ``O(ε h^{2n} + ε² h⁴)`` instead of ``ε² h²``).
     nbody : methodgen.scene.NBody, optional
         With a system: its ``[nbody]`` declaration.
     params : dict, optional
@@ -898,7 +898,7 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
         round-off floor of ~2e-11; it costs ~20 % per step.
     project : {None, "energy-output", "energy-standard"}
         Project states onto the run's initial energy H and angular momentum L
-        (:func:`methodgen.kepler_flow.project`, the standard projection [HLW, §IV.4.1]): the
+        (:func:`methodgen.kepler_flow.project`, the standard projection [HLW]_ §IV.4.1): the
         Jacobi momenta are scaled and rotated rigidly, ``δp'_i = λ_H p'_i + m'_i λ_L × q'_i``
         (the gradients of H and L in the momenta, in the mass metric), positions and total
         momentum untouched.  ``"energy-output"``: every *returned* state is projected, the run
@@ -932,6 +932,8 @@ def wisdom_holman(scene_or_system, method: str = "saba3", *, corrector: bool = T
     ----------
     .. [HLW] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
        Springer 2006.
+    .. [LR01] J. Laskar, P. Robutel, High order symplectic integrators for perturbed
+       Hamiltonian systems, Celest. Mech. Dyn. Astron. 80 (2001) 39–62.
     """
     if project not in PROJECTIONS:
         raise InputError(f"project={project!r} is not a projection of the Wisdom–Holman splittings; valid: "

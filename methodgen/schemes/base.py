@@ -93,7 +93,7 @@ class Traits:
         How the scheme was derived (e.g. which cancelled form was used).
     approximate : tuple of str
         Invariants kept only up to a stated approximation error (e.g. AVF with a
-        quadrature rule: H to O(|Δy|^16) per step).  They are *not* in
+        quadrature rule: H to O(‖Δy‖^16) per step).  They are *not* in
         ``preserved``, ``energy_preserving`` is False for them, and their
         certificates are numerical.
     """
