@@ -33,7 +33,7 @@ from typing import Callable, Iterator
 
 from .errors import InputError
 
-__all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "threshold_from_env",
+__all__ = ["phase", "install", "installed", "StderrReporter", "tqdm_reporter", "tqdm_steps", "threshold_from_env",
            "stderr_reporting", "about", "subject", "PHASES"]
 
 #: The phases the pipeline reports, in the order a cold build runs them.
@@ -295,3 +295,49 @@ def tqdm_reporter(**kwargs) -> Reporter:
             bar.close()
 
     return report
+
+
+def tqdm_steps(**kwargs):
+    """A progress callback for a generated module's ``solve(..., progress=...)``: a tqdm bar
+    over the steps; needs ``pip install tqdm``.
+
+    The module calls it as ``callback(done, total)`` after each chunk of steps (``done`` and
+    ``total`` in steps); the bar closes when ``done == total`` or, after a failed step, when the
+    next run starts a new bar.  ``kwargs`` go to :class:`tqdm.tqdm` (``desc=``, ``leave=``,
+    ``file=`` …).
+
+    Returns
+    -------
+    callable
+        ``callback(done: int, total: int) -> None``.
+
+    Raises
+    ------
+    ImportError
+        tqdm is not installed (one line saying how to install it).
+
+    Examples
+    --------
+    >>> sol = mod.solve(y0, (0.0, 1e4), 0.01, progress=methodgen.progress.tqdm_steps())  # doctest: +SKIP
+    """
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        raise ImportError("progress bars need tqdm: pip install tqdm (or pass progress=True for a "
+                          "plain line on stderr)") from None
+    state: dict = {"bar": None}
+
+    def callback(done: int, total: int) -> None:
+        bar = state["bar"]
+        if bar is not None and done == total and bar.n <= done < bar.total:
+            bar.total = total        # the run ended early (a failure, a terminal event)
+        if bar is None or bar.total != total or done < bar.n:
+            if bar is not None:
+                bar.close()
+            bar = state["bar"] = tqdm(total=total, unit="step", **kwargs)
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+            state["bar"] = None
+
+    return callback

@@ -120,3 +120,68 @@ def test_cli_json_carries_the_solution_names(capsys, kepler):
     out = capsys.readouterr()
     bad = json.loads(out.out)
     assert bad["success"] is False and "does not resolve the dynamics" in bad["message"]
+
+
+APO = np.array([-1.6, 0.0, 0.0, 0.0, -0.4, -0.3])     # the apocentre of Y0's orbit (e = 0.6)
+
+
+@pytest.mark.parametrize("every", [1, 3])
+def test_progress_reports_and_keeps_the_run(em, every):
+    """progress= runs in chunks that continue each other: the same rows, times and iterations
+    bitwise, with a report at the start and after each chunk (about 1 % of the steps)."""
+    calls = []
+    ref = em.solve(Y0, (0.0, 20.0), 0.01, save_every=every)
+    sol = em.solve(Y0, (0.0, 20.0), 0.01, save_every=every, progress=lambda d, t: calls.append((d, t)))
+    assert np.array_equal(sol.y, ref.y) and np.array_equal(sol.t, ref.t)
+    assert np.array_equal(sol.newton_iterations, ref.newton_iterations) and sol.message == ref.message
+    done = [d for d, _ in calls]
+    assert calls[0] == (0, 2000) and calls[-1] == (2000, 2000) and {t for _, t in calls} == {2000}
+    assert done == sorted(done) and 50 <= len(calls) <= 202
+    assert all((b - a) % every == 0 for a, b in zip(done[:-2], done[1:-1]))   # chunks of whole save_every
+    # control: chunks that do not continue each other (a fresh start per chunk) are another run
+    y, rows = Y0, [Y0[None]]
+    for _ in range(10):
+        part = em.integrate(y, 0.01, 200)
+        rows.append(part[1:])
+        y = part[-1]
+    assert not np.array_equal(np.concatenate(rows), em.solve(Y0, (0.0, 20.0), 0.01).y)
+
+
+def test_progress_on_a_failed_run_ends_at_the_step_made(em):
+    """A step that fails mid-run (the pericentre from the apocentre at h = 0.2): the same status,
+    message, rows and step as without progress; the last report is (step, step)."""
+    calls = []
+    ref = em.solve(APO, (0.0, 40.0), 0.2, save_every=3)
+    sol = em.solve(APO, (0.0, 40.0), 0.2, save_every=3, progress=lambda d, t: calls.append((d, t)))
+    assert ref.status == -1 and 0 < ref.nsteps < 200      # fails mid-run, not at the first step
+    assert sol.status == -1 and sol.message == ref.message and sol.nsteps == ref.nsteps
+    assert np.array_equal(sol.y, ref.y) and np.array_equal(sol.t, ref.t)
+    assert np.array_equal(sol.newton_iterations, ref.newton_iterations)
+    assert calls[-1] == (ref.nsteps, ref.nsteps) and calls[-2][1] == 200
+
+
+def test_progress_with_events_and_text_line(em, capsys):
+    calls = []
+    peri = mg.event(em, "x*px + y*py + z*pz", direction=1, terminal=2)
+    ref = em.solve(Y0, (0.0, 1e3), 0.01, events=peri)
+    sol = em.solve(Y0, (0.0, 1e3), 0.01, events=peri, progress=lambda d, t: calls.append((d, t)))
+    assert np.array_equal(sol.y, ref.y) and np.array_equal(sol.t_events[0], ref.t_events[0])
+    assert calls[0] == (0, 100_000) and calls[-1] == (sol.nsteps, sol.nsteps) and sol.status == 1
+    em.solve(Y0, (0.0, 1.0), 0.01, progress=True)
+    err = capsys.readouterr().err
+    assert err.startswith("\renergy-momentum: 0/100 steps (0 %)") and err.endswith("100/100 steps (100 %)\n")
+    with pytest.raises(ValueError, match="progress must be"):
+        em.solve(Y0, (0.0, 1.0), 0.01, progress="yes")
+
+
+def test_tqdm_steps_bar(em):
+    pytest.importorskip("tqdm")
+    import io
+
+    from methodgen.progress import tqdm_steps
+    out = io.StringIO()
+    em.solve(Y0, (0.0, 1.0), 0.01, progress=tqdm_steps(file=out, mininterval=0))
+    assert "100/100" in out.getvalue()
+    out = io.StringIO()
+    em.solve(APO, (0.0, 40.0), 0.2, progress=tqdm_steps(file=out, mininterval=0))
+    assert "14/14" in out.getvalue()         # ended early: the bar closes at the step made

@@ -448,6 +448,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     except BaseException as exc:
         partial = getattr(exc, "trajectory", None)
         numeric = type(exc).__name__ in NUMERICAL_ERRORS
+        if numeric and done and isinstance(getattr(exc, "step", None), int):
+            # The module names the step within this chunk (--chunk): name the run's step.
+            step = exc.step
+            exc.step = done + step
+            exc.args = (str(exc).replace(f"at step {step}", f"at step {done + step}", 1),) + exc.args[1:]
         # A failed write of the --save file (disk full): keep what is on disk, say where.
         io_fault = isinstance(exc, OSError) and writer is not None and writer.failed is not None
         if not (numeric or io_fault or isinstance(exc, KeyboardInterrupt)):
