@@ -1,5 +1,9 @@
 """Plots: the notes' two figures, a run of any scene, a work-precision diagram.
 
+Each ``plot_*`` function returns the :class:`matplotlib.figure.Figure` when called without
+a ``path`` (to show in a notebook, adjust, or save as you like), and writes the file and
+returns its path when given one (what the command line does).
+
 matplotlib is an optional extra (``pip install "methodgen[plot]"``) and is
 imported lazily inside the functions, so ``import methodgen.plots`` never
 fails.  Figures are drawn on a bare :class:`matplotlib.figure.Figure` (the Agg
@@ -77,6 +81,12 @@ def _save(fig, path, fmt: str | None = None) -> Path:
     return path
 
 
+def _finish(fig, path, fmt: str | None = None):
+    """``fig`` itself when ``path`` is None (to show, adjust or save as the caller likes), else
+    the path it was written to (:func:`_save`)."""
+    return fig if path is None else _save(fig, path, fmt)
+
+
 def _bin_envelope(t: np.ndarray, v: np.ndarray, nbins: int = 1500):
     """Per-bin min and max of ``v`` (long runs: what the eye sees, at a fraction of the points)."""
     n = len(v)
@@ -97,7 +107,7 @@ def _stride(a: np.ndarray, limit: int = 20000) -> np.ndarray:
 
 # --- Figure 1 ----------------------------------------------------------------------
 
-def plot_figure1(data: dict, path, fmt: str | None = None, checks: dict | None = None) -> Path:
+def plot_figure1(data: dict, path=None, fmt: str | None = None, checks: dict | None = None):
     """Draw Figure 1 from :func:`methodgen.figures.figure1_data` into ``path`` (1000 × 450 px).
 
     Left: midpoint (black squares) and exact (red circles) at ``t = n·h``,
@@ -151,12 +161,12 @@ def plot_figure1(data: dict, path, fmt: str | None = None, checks: dict | None =
         c = checks["right"]
         rtitle += f"\nmax |H−H₀|/H₀ = {c['energy_max_rel_error']:.1e}, angle/step dev {c['angle']['max_deviation']:.1e}"
     axr.set_title(rtitle, fontsize=9)
-    return _save(fig, path, fmt)
+    return _finish(fig, path, fmt)
 
 
 # --- Figure 2 ----------------------------------------------------------------------
 
-def plot_figure2(data: dict, path, fmt: str | None = None, checks: dict | None = None) -> Path:
+def plot_figure2(data: dict, path=None, fmt: str | None = None, checks: dict | None = None):
     """Draw Figure 2 from :func:`methodgen.figures.figure2_data` into ``path`` (1000 × 800 px).
 
     One phase portrait per method against the level set of H through y₀
@@ -202,7 +212,7 @@ def plot_figure2(data: dict, path, fmt: str | None = None, checks: dict | None =
         ttl += f"\nKahan's modified energy: max rel. drift {checks['modified_energy']['max_rel_drift']:.1e}"
     ax.set_title(ttl, fontsize=9)
     fig.suptitle("H = ½(q² + p²) + q²p − p³/3, h = %g on [0, %g]" % (data["h"], t[-1]), fontsize=10)
-    return _save(fig, path, fmt)
+    return _finish(fig, path, fmt)
 
 
 def write_figures(out, fmt: str = "png", *, fig1: dict | None = None, fig2: dict | None = None) -> dict:
@@ -278,8 +288,8 @@ def _resolve_pair(pair, names) -> tuple[int, int]:
     return tuple(out)
 
 
-def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
-             constraint_residuals=None, pairs=None, fmt: str | None = None) -> Path:
+def plot_run(module, traj, path=None, *, scene_name: str, method: str, h: float,
+             constraint_residuals=None, pairs=None, fmt: str | None = None):
     """Phase portrait(s), invariant errors and constraint residuals of one run.
 
     Parameters
@@ -287,8 +297,9 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
     module : module
         The generated module (``STATE_NAMES``, ``INVARIANT_NAMES``, ``invariants``).
     traj : ndarray, shape (steps+1, 2d)
-    path : path-like
+    path : path-like, optional
         Output file; the format is taken from the suffix (png, svg, pdf) unless ``fmt``.
+        Without it the Figure is returned and nothing is written.
     scene_name, method : str
     h : float
     constraint_residuals : tuple of ndarray, optional
@@ -298,11 +309,12 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
 
     Returns
     -------
-    Path
-        ``path``; the image is ``4·ncols × 7.5`` inches at 100 dpi, ``ncols`` =
-        max(number of pairs, number of error panels).
+    Path or matplotlib.figure.Figure
+        ``path``, or the Figure without one; the image is ``4·ncols × 7.5`` inches at
+        100 dpi, ``ncols`` = max(number of pairs, number of error panels).
     """
-    _format_of(Path(path), fmt)  # bad input fails before any drawing
+    if path is not None:
+        _format_of(Path(path), fmt)  # bad input fails before any drawing
     traj = np.asarray(traj, dtype=float)
     if traj.ndim != 2 or len(traj) < 1:
         raise InputError("plot_run needs a trajectory of shape (steps+1, 2d)")
@@ -361,17 +373,18 @@ def plot_run(module, traj, path, *, scene_name: str, method: str, h: float,
     for ax in axes[1][nbottom:]:
         ax.set_axis_off()
     fig.suptitle(f"{scene_name} — {method}, h = {h:g}, {len(traj) - 1} steps", fontsize=10)
-    return _save(fig, path, fmt)
+    return _finish(fig, path, fmt)
 
 
-def plot_scene(scene_name: str, path, *, method: str | None = None, h: float | None = None,
-               steps: int | None = None, traj=None, pairs=None, fmt: str | None = None) -> Path:
+def plot_scene(scene_name: str, path=None, *, method: str | None = None, h: float | None = None,
+               steps: int | None = None, traj=None, pairs=None, fmt: str | None = None):
     """:func:`plot_run` for a scene (built-in name or TOML path), integrating it unless ``traj`` is given.
 
     Parameters
     ----------
     scene_name : str
-    path : path-like
+    path : path-like, optional
+        Without it the Figure is returned and nothing is written.
     method, h, steps : optional
         Default: the scene's.
     traj : ndarray, optional
@@ -393,8 +406,8 @@ def plot_scene(scene_name: str, path, *, method: str | None = None, h: float | N
                     constraint_residuals=res, pairs=pairs, fmt=fmt)
 
 
-def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = None,
-                        energy: bool | None = None, targets: dict | None = None) -> Path:
+def plot_work_precision(rows, path=None, fmt: str | None = None, title: str | None = None,
+                        energy: bool | None = None, targets: dict | None = None):
     """Work-precision diagram: error against CPU time, log–log, one line per method.
 
     Parameters
@@ -405,7 +418,8 @@ def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = 
         colour per base method, one marker per order).
         Rows without ``seconds`` or ``error`` (failed runs) and rows with
         non-positive or non-finite values (not drawable on log axes) are left out.
-    path : path-like
+    path : path-like, optional
+        Without it the Figure is returned and nothing is written.
     energy : bool, optional
         Add a second panel, the max relative energy error against CPU time.  Default:
         when there are peer rows (``methodgen bench --peers``: kinds ``heyoka``,
@@ -486,7 +500,7 @@ def plot_work_precision(rows, path, fmt: str | None = None, title: str | None = 
     axes[0].set_title(title or "work-precision", fontsize=10)
     if energy:
         axes[1].set_title("energy", fontsize=10)
-    return _save(fig, path, fmt)
+    return _finish(fig, path, fmt)
 
 
 #: Markers of methodgen's rows by order (``bench --peers --orders``); lines are solid.

@@ -207,6 +207,30 @@ def test_plot_run(tmp_path):
         plot_run(mod, traj, tmp_path / "x.jpg", scene_name="x", method="x", h=1.0)
 
 
+def test_plots_return_figures_without_a_path(tmp_path):
+    """Without a path every plot function returns the Figure and writes nothing; saved, it is
+    the same picture as the file written with a path (control: another run is another picture)."""
+    from matplotlib.figure import Figure
+
+    from methodgen.build import build, scene_module_path
+    from methodgen.plots import plot_run, plot_scene, plot_work_precision
+    from methodgen.scene import load_scene
+
+    s = load_scene("henon-heiles")
+    mod = build(s.system, "kahan", path=scene_module_path(s, "kahan"))
+    traj = mod.integrate(np.array(s.y0), 0.5, 200)
+    fig = plot_run(mod, traj, scene_name=s.name, method="kahan", h=0.5)
+    assert isinstance(fig, Figure) and list(tmp_path.iterdir()) == []
+    fig.savefig(tmp_path / "a.png", dpi=100, metadata={"Software": None})
+    written = plot_run(mod, traj, tmp_path / "b.png", scene_name=s.name, method="kahan", h=0.5)
+    assert (tmp_path / "a.png").read_bytes() == written.read_bytes()
+    other = plot_run(mod, traj[:100], tmp_path / "c.png", scene_name=s.name, method="kahan", h=0.5)
+    assert other.read_bytes() != written.read_bytes()
+    assert isinstance(plot_scene("henon-heiles", steps=20), Figure)
+    rows = [{"method": "midpoint", "seconds": 1e-3 * k, "error": 1e-2 / k ** 2} for k in (1, 2, 4)]
+    assert isinstance(plot_work_precision(rows), Figure)
+
+
 def test_plot_scene_constrained(tmp_path):
     from methodgen.plots import plot_scene
 
