@@ -305,7 +305,7 @@ def test_emitted_source_is_deterministic_and_self_contained(kepler):
             imported |= {f"{node.module}.{a.name}" for a in node.names}
     # numpy, numba and, of methodgen, only its compiled runtime (on the shared route its
     # numba-free interface nbabi) and the LLVM kernel compiler (never SymPy or the generator)
-    assert imported <= {"math", "operator", "numba", "numpy", "methodgen.nbruntime", "methodgen.nbabi",
+    assert imported <= {"math", "operator", "sys", "numba", "numpy", "methodgen.nbruntime", "methodgen.nbabi",
                         "methodgen.llvmkernels"}
 
 
