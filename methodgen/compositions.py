@@ -59,7 +59,7 @@ __all__ = ["Composition", "FAMILIES", "ALL_FAMILIES", "ORDERS", "DEFAULT_FAMILY"
 
 ORDERS = (2, 4, 6, 8, 10)
 #: The family used for each order when none is given (smallest error constant per
-#: stage among those available here; see README "High order").
+#: stage among those available here; see the docs, "High order").
 DEFAULT_FAMILY = {2: "base", 4: "suzuki", 6: "kahan-li", 8: "kahan-li", 10: "sofroniou-spaletta"}
 DPS = 60
 

@@ -1,6 +1,6 @@
 """Scene files: one problem plus what the user wants done with it (TOML).
 
-Format (see the README, "Your own scene file", and the built-in scenes in ``methodgen/scenes``)::
+Format (see the docs, "Scene files", and the built-in scenes in ``methodgen/scenes``)::
 
     name = "kepler"
     description = "..."

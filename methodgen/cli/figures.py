@@ -2,7 +2,7 @@
 
 Reproduces the lecture notes' Figures 1 and 2 (see :mod:`methodgen.figures`),
 checks their captions and writes the images into ``generated/figures/`` (the
-committed copies the README shows) or ``--out``.  Exit status 0 when every
+committed copies the docs show) or ``--out``.  Exit status 0 when every
 caption check passes, 1 when one fails (the images are written either way so
 the failure can be looked at), 2 for bad input or a missing matplotlib.
 """

@@ -123,7 +123,7 @@ def build(system: Hamiltonian, stages: int = DEFAULT_STAGES) -> Scheme:
                   "order 8 or 10 (explicit, symplectic) or a Wisdom–Holman splitting (a dominant mass) "
                   "costs far less for the same accuracy",)
     if "H" in preserved:
-        # stated where H is claimed: the float64 module drifts (measured, see README)
+        # stated where H is claimed: the float64 module drifts (measured, see the docs: "The method library")
         notes += ("H (quadratic) exact in exact arithmetic; in float64 it drifts linearly: "
                   "−4.2e-19 per step measured for s = 2, 1.4e-18 for s = 3 (p²/2 + q²/2, h = 0.1, mean over 64 "
                   "phases; s = 1 does not drift: its A = 1/2 and d = 2 are exact)",)
