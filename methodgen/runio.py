@@ -29,6 +29,10 @@ Faults lose nothing that was already written:
 The metadata of every file says what its rows cover (:func:`extent`):
 ``steps_done = min((rows - 1) * save_every, steps)`` and ``t_final``, also in a
 file rebuilt from a killed run.
+
+The same run in an open, versioned HDF5 file (``--save FILE.h5``):
+:mod:`methodgen.trajfile`, which uses the temporary files, locks and placement
+rules of this module and reads and recovers both formats.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import StorageError
+from .errors import InputError, StorageError
 
 try:  # POSIX; elsewhere temporary files are not locked and orphans are only reported
     import fcntl
@@ -261,10 +265,13 @@ def extent(rows: int, meta: dict, last_row=None) -> dict:
 
 
 def _free_name(path: Path, tag: str):
-    """``NAME.TAG.npz``, ``NAME.TAG-2.npz``, … for ``path`` = ``NAME.npz`` (candidates, in order)."""
-    stem = path.name[:-4] if path.name.endswith(".npz") else path.name
+    """``NAME.TAG.npz``, ``NAME.TAG-2.npz``, … for ``path`` = ``NAME.npz`` (candidates, in order);
+    the same with the suffix of ``path`` for another format (``NAME.TAG.h5`` …)."""
+    path = Path(path)
+    suffix = path.suffix if path.suffix else ".npz"
+    stem = path.name[:-len(path.suffix)] if path.suffix else path.name
     for i in range(1, 1000):
-        yield path.with_name(f"{stem}.{tag}.npz" if i == 1 else f"{stem}.{tag}-{i}.npz")
+        yield path.with_name(f"{stem}.{tag}{suffix}" if i == 1 else f"{stem}.{tag}-{i}{suffix}")
 
 
 def _place_new(tmp: str, candidates) -> Path:
@@ -559,7 +566,19 @@ class ChunkWriter:
 
 
 def load_trajectory(path) -> tuple[np.ndarray, dict]:
-    """Read a file written by :class:`ChunkWriter`: ``(states, metadata)``."""
+    """Read a file written by :class:`ChunkWriter`: ``(states, metadata)``.
+
+    An ``.h5`` trajectory is read by :func:`methodgen.trajfile.load_trajectory` (both
+    formats); given one, this says so.
+    """
+    try:
+        with open(path, "rb") as fh:
+            hdf5 = fh.read(8) == b"\x89HDF\r\n\x1a\n"
+    except OSError:
+        hdf5 = False
+    if hdf5:
+        raise InputError(f"{path} is an HDF5 trajectory file: read it with "
+                         "methodgen.trajfile.load_trajectory(path), which reads .npz and .h5 files")
     with np.load(path, allow_pickle=False) as data:
         keys = sorted(k for k in data.files if k.startswith("chunk_"))
         states = np.concatenate([data[k] for k in keys]) if keys else np.zeros((0,))
@@ -678,7 +697,8 @@ def recover_orphans(folder) -> list[str]:
     ``t_final`` its rows cover (:func:`extent`, from the metadata the run wrote
     first: ``save_every``, ``steps``, ``h``, ``time_column``); an orphan without a
     complete chunk is removed.  Temporary files of older methodgen versions
-    (no owner in the name, no lock) are only reported.
+    (no owner in the name, no lock) are only reported; those of ``.h5`` files are
+    left to :func:`methodgen.trajfile.recover_orphans` (which does both).
 
     Returns
     -------
