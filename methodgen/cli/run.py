@@ -3,6 +3,7 @@ statistics and timing (:func:`run_scene` is the report as a dict)."""
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time
@@ -15,7 +16,8 @@ from ..emit import BACKENDS
 from ..errors import InputError
 from ..limits import check_memory, check_steps, steps_for_time
 from ..progress import about, phase
-from ..runio import ChunkWriter
+from .. import __version__
+from ..trajfile import check_suffix, open_writer, require_h5py
 from ..scene import check_g_positive, load_scene
 from ..compositions import PROCESSED_FAMILIES
 from ..schemes import METHODS, composition_for, method_key, scheme_options
@@ -252,8 +254,9 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
               check_resolution: bool = True, section: str | None = None) -> dict:
     """Run a scene and return the report dictionary (the ``--json`` object).
 
-    With ``save`` the trajectory is written to an ``.npz`` in chunks of
-    ``chunk`` steps (memory stays bounded).  If the run is interrupted (Ctrl-C)
+    With ``save`` the trajectory is written in chunks of ``chunk`` steps (memory stays
+    bounded) to an ``.npz``, or with ``save`` = ``FILE.h5`` to an HDF5 file of the open
+    format ``methodgen-trajectory`` 1 (:mod:`methodgen.trajfile`; needs h5py).  If the run is interrupted (Ctrl-C)
     or fails numerically, the states computed so far are saved — to ``save`` or
     to ``interrupted_path`` — and :class:`RunFailure` is raised.  If writing
     fails (disk full), every chunk written before is kept as a readable file
@@ -292,6 +295,10 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         raise InputError("--extended needs the numpy backend (numba has no long double)")
     if save is not None:
         save = str(check_output_file(save, "--save"))
+        if check_suffix(save, "--save") == "hdf5":   # .npz or .h5, else refused before any work
+            require_h5py()                            # a missing h5py too
+    if interrupted_path is not None and check_suffix(interrupted_path, "interrupted_path") == "hdf5":
+        require_h5py()
     if plot is not None:
         # Checked like --save, before any work: a missing folder is not created, a folder or an
         # empty name is refused (an empty --plot used to be ignored, a folder failed after the run).
@@ -405,7 +412,14 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
                 # (q, t, p, e), their column t the physical time; h is a fictive step.
                 time_transform=scene.time_transform or "",
                 # what the rows cover after a failure or a kill (methodgen.runio.extent)
-                steps=steps, time_column=(getattr(module, "TIME_TRANSFORM", None) or {}).get("time", ""))
+                steps=steps, time_column=(getattr(module, "TIME_TRANSFORM", None) or {}).get("time", ""),
+                methodgen_version=__version__)
+    # provenance: what was integrated, by which module, and what the method claims
+    for name, attr in (("hamiltonian", "HAMILTONIAN"), ("signature", "SIGNATURE")):
+        if isinstance(getattr(module, attr, None), str):
+            meta[name] = getattr(module, attr)
+    if isinstance(getattr(module, "TRAITS", None), dict):
+        meta["claims"] = json.dumps(module.TRAITS, default=str)
     if n_stages is not None:
         meta["stages"] = n_stages
     if every > 1:
@@ -422,7 +436,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     info: dict = {}
     if save:
         # A path that cannot be written is a StorageError here (exit 2), before any work.
-        writer = ChunkWriter(save, meta=meta)
+        writer = open_writer(save, meta=meta)
         for note in writer.recovered:
             print_note(note)
     try:
@@ -475,11 +489,11 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         note = None
         if target is None and (interrupted_path or isinstance(exc, KeyboardInterrupt)):
             try:
-                target = ChunkWriter(interrupted_path or f"{scene.name}_{key}_partial.npz".replace("-", "_"),
+                target = open_writer(interrupted_path or f"{scene.name}_{key}_partial.npz".replace("-", "_"),
                                      meta=meta)
                 for k in kept:
                     target.append(k)
-            except OSError as wexc:  # the partial file cannot be written: say so, keep the report
+            except (OSError, InputError) as wexc:  # the partial file cannot be written: say so, keep the report
                 note = f"the computed states were not saved: {wexc}"
                 if target is not None and target.failed is None:
                     target.abort()
@@ -513,7 +527,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     if plot:
         from ..plots import plot_run
         if writer is not None:
-            from ..runio import load_trajectory
+            from ..trajfile import load_trajectory
             traj, _ = load_trajectory(rep["saved"])
         else:
             traj = np.concatenate(kept)
@@ -702,7 +716,9 @@ def add_parser(sub) -> None:
     p.add_argument("--extended", action="store_true",
                    help="refine each step in extended precision (long double): removes the small "
                         "systematic round-off drift of long runs (Brouwer's law); slower")
-    p.add_argument("--save", metavar="FILE.npz", help="write the trajectory to an .npz (in chunks)")
+    p.add_argument("--save", metavar="FILE.npz|FILE.h5",
+                   help="write the trajectory in chunks to an .npz, or to an .h5: HDF5 of the open format "
+                        "methodgen-trajectory 1, read by h5py, netCDF4 and xarray (needs methodgen[hdf5])")
     p.add_argument("--chunk", type=positive_int, metavar="N",
                    help="with --save: steps per chunk (memory stays bounded; default: one chunk)")
     p.add_argument("--save-every", type=positive_int, metavar="K",
