@@ -34,7 +34,7 @@ __all__ = [
     "Scheme", "Traits", "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
     "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
     "GenerationError", "time_transform", "autonomise", "wisdom_holman", "cite", "event", "section_event",
-    "poincare",
+    "poincare", "save_trajectory", "read_trajectory",
 ]
 
 
@@ -53,6 +53,7 @@ def _lazy_names():
         "autonomise": ".timetransform", "time_transform": ".timetransform",
         "verify": ".verify", "wisdom_holman": ".nbody", "cite": ".cite",
         "event": ".events", "section_event": ".events", "poincare": ".events",
+        "save_trajectory": ".trajfile", "read_trajectory": ".trajfile",
     }
     found: list[frozenset] = []
 

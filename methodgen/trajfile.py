@@ -36,7 +36,8 @@ Root attributes (plain HDF5 types: text, integers, floats and arrays of them):
 * ``format = "methodgen-trajectory"``, ``format_version = 1`` — a reader refuses a
   higher version; ``methodgen_version``, ``created`` (ISO 8601, UTC);
 * what the run was: ``scene``, ``method``, ``order``, ``composition``, ``h``,
-  ``steps`` (planned), ``save_every`` (1 unless given), ``state_names``,
+  ``steps`` (planned), ``save_every`` (1 unless given; 0: rows at chosen times, as
+  ``solve(t_eval=...)``'s — ``t`` says which), ``state_names``,
   ``time_transform``, ``time_column``, ``stages``, and the provenance the caller
   gives (``hamiltonian``, ``signature``, ``claims`` …);
 * what the rows cover: ``complete`` (0 while writing and for an incomplete run),
@@ -572,9 +573,11 @@ class Trajectory(NamedTuple):
 def read_trajectory(path) -> Trajectory:
     """Read a trajectory file of either format: ``Trajectory(t, y, meta)``.
 
-    ``meta`` holds the root attributes (0-d arrays, text arrays, booleans and
-    mappings as written).  For an ``.npz``, ``t`` is its ``t`` entry (written by
-    :func:`save_trajectory`) or else :func:`row_times` of its metadata.
+    ``meta`` holds the root attributes as plain Python values (text, numbers,
+    booleans; arrays stay arrays; ``claims``, JSON text in the file, as a dict).
+    For an ``.npz``, ``t`` is its ``t`` entry (written by :func:`save_trajectory`)
+    or else :func:`row_times` of its metadata.  (:func:`load_trajectory` returns
+    the metadata as 0-d arrays, as :func:`methodgen.runio.load_trajectory` does.)
 
     Raises
     ------
@@ -584,6 +587,25 @@ def read_trajectory(path) -> Trajectory:
         The file cannot be read, is damaged (a checksum fails) or truncated
         (fewer rows than ``saved_rows``).
     """
+    t, y, meta = _read_arrays(path)
+    return Trajectory(t, y, {k: _plain(k, v) for k, v in meta.items()})
+
+
+def _plain(key: str, value):
+    """A metadata value as a plain Python value: 0-d arrays as their item, ``claims`` (JSON
+    text) as a dict."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if key == "claims" and isinstance(value, str):
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
+def _read_arrays(path) -> Trajectory:
+    """:func:`read_trajectory` with the metadata as written (0-d arrays)."""
     if not _is_hdf5(path):
         y, meta = _load_npz(path)
         t = meta.pop("t", None)
@@ -620,7 +642,7 @@ def read_trajectory(path) -> Trajectory:
 def load_trajectory(path) -> tuple[np.ndarray, dict]:
     """``(states, metadata)`` of a trajectory file of either format (as :func:`methodgen.runio.load_trajectory`
     for an ``.npz``); the same run saved as ``.npz`` and ``.h5`` gives equal arrays and values."""
-    traj = read_trajectory(path)
+    traj = _read_arrays(path)
     return traj.y, traj.meta
 
 
@@ -660,6 +682,7 @@ def save_trajectory(path, t, y=None, meta: dict | None = None, *, module=None, d
                     reason="complete" if success else "failed", message=getattr(sol, "message", None))
         if dims is None and np.ndim(y) == 3:
             dims = ("trajectory", "state")
+        info["save_every"] = _solution_stride(sol)
     elif y is None:
         raise InputError("save_trajectory(path, t, y): give the states y, or a Solution as t")
     y = np.asarray(y)
@@ -688,6 +711,23 @@ def save_trajectory(path, t, y=None, meta: dict | None = None, *, module=None, d
         writer.abort()
         raise
     return writer.close(**final)
+
+
+def _solution_stride(sol) -> int | None:
+    """The ``save_every`` of a Solution's rows: k when row i is the state after min(i·k, nsteps)
+    steps; 0 for rows at chosen times (``t_eval``: the file's ``t`` says which)."""
+    t = np.asarray(sol.t, dtype=np.float64)
+    h = getattr(sol, "h", None)
+    n = getattr(sol, "nsteps", None)
+    if len(t) < 2 or not h or n is None:
+        return 1 if len(t) < 2 else 0
+    k = (t - t[0]) / float(h)
+    steps = np.rint(k)
+    if not np.allclose(k, steps, rtol=0, atol=1e-6):
+        return 0
+    every = int(steps[1])
+    want = np.minimum(np.arange(len(t)) * every, int(n))     # the last row is the run's end
+    return every if every >= 1 and np.array_equal(steps.astype(np.int64), want) else 0
 
 
 def _module_meta(module) -> dict:

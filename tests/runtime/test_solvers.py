@@ -14,7 +14,7 @@ import pytest
 import methodgen as mg
 from methodgen.emit import load_module, module_filename
 
-GENERATED = Path(__file__).resolve().parent.parent / "generated"
+GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
 
 def load_generated(name):

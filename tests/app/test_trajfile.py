@@ -29,6 +29,7 @@ import pytest
 
 h5py = pytest.importorskip("h5py")
 
+import methodgen as mg  # noqa: E402
 import methodgen.cli as cli  # noqa: E402
 import methodgen.runio as runio  # noqa: E402
 import methodgen.trajfile as tf  # noqa: E402
@@ -87,7 +88,7 @@ def test_round_trip_and_a_truncated_dataset_is_detected(tmp_path):
     # row i: min(10 i, 95) steps of h = 0.25; the last row is the state after all 95
     np.testing.assert_array_equal(t, 0.25 * np.minimum(10 * np.arange(11), 95))
     assert int(meta["steps_done"]) == 95 and float(meta["t_final"]) == t[-1] == 23.75
-    assert meta["complete"].dtype == bool and bool(meta["complete"]) and str(meta["reason"]) == "complete"
+    assert meta["complete"] is True and meta["reason"] == "complete"      # plain values
     assert list(meta["state_names"]) == ["q", "p"] and meta["claims"] == {"symplectic": True}
     assert str(meta["format"]) == "methodgen-trajectory" and int(meta["format_version"]) == 1
     assert {"created", "methodgen_version", "scene", "method", "order", "h", "steps", "save_every"} <= set(meta)
@@ -254,7 +255,8 @@ def test_save_trajectory_after_solve(osc, tmp_path):
     t, y, meta = tf.load(where)
     assert np.array_equal(t, sol.t) and np.array_equal(y, sol.y)
     assert str(meta["method"]) == "midpoint" and int(meta["order"]) == 2 and bool(meta["complete"])
-    assert json.loads(str(meta["claims"]))["symplectic"] is True and int(meta["steps_done"]) == sol.nsteps
+    assert meta["claims"]["symplectic"] is True and int(meta["steps_done"]) == sol.nsteps
+    assert meta["save_every"] == 1
     # a batch: the axes are (time, trajectory, state)
     batch = mod.solve(np.array([[1.0, 0.0], [0.5, 0.0]]), (0.0, 1.0), 0.1)
     got = _read_elsewhere(save_trajectory(tmp_path / "batch.h5", batch, module=mod))
@@ -478,3 +480,16 @@ def test_a_bad_suffix_is_refused(osc, tmp_path, capsys, name):
     assert code == cli.EXIT_INPUT and "Traceback" not in err
     assert ".npz" in err and ".h5" in err and "a trajectory file ends in" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_solutions_stride_is_recorded(tmp_path):
+    """save_every of a saved Solution: its stride (rows after min(i·k, nsteps) steps), or 0 for
+    rows at chosen times that are no stride's (t holds them); control: a stride read off the
+    first two rows alone would say 30 for t_eval = [0, 0.3, 0.5]."""
+    mod = mg.build(mg.load_scene("harmonic").system, "midpoint")
+    y0 = np.array([1.0, 0.0])
+    for kw, want in ((dict(save_every=7), 7), (dict(), 1), (dict(t_eval=[0.0, 0.3, 0.5]), 0)):
+        sol = mod.solve(y0, (0.0, 1.0), 0.01, **kw)
+        t, y, meta = read_trajectory(tf.save(tmp_path / f"s{want}.h5", sol, module=mod))
+        assert meta["save_every"] == want and np.array_equal(t, sol.t) and np.array_equal(y, sol.y)
+    assert round((0.3 - 0.0) / 0.01) == 30

@@ -194,7 +194,7 @@ def test_files_outside_the_cache_keep_their_deterministic_bytes(cache, tmp_path)
 
 
 def test_generated_folder_modules_load_with_their_plain_hash():
-    root = Path(__file__).resolve().parent.parent / "generated"
+    root = Path(__file__).resolve().parents[2] / "generated"
     path = root / "harmonic_midpoint.py"
     if not path.is_file():
         pytest.skip("no checkout generated/")

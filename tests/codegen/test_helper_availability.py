@@ -27,7 +27,7 @@ from methodgen.lower import _helpers_called, lower
 from methodgen.problem import Hamiltonian
 from methodgen.special import SPECIAL_FUNCTIONS
 
-TEMPLATES = Path(__file__).resolve().parents[1] / "templates"
+TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
 DEF_RE = re.compile(r"^def _f_(\w+)\(", re.M)
 
 

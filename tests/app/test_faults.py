@@ -26,7 +26,7 @@ import methodgen.sweep as sw
 from methodgen.errors import StorageError
 from methodgen.runio import ChunkWriter, load_trajectory, recover_orphans
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(autouse=True)

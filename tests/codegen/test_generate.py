@@ -13,7 +13,7 @@ import pytest
 import methodgen as mg
 from methodgen.emit import emit_source, file_status, signature
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_generated_folder_is_in_sync():

@@ -23,7 +23,7 @@ from methodgen.errors import InputError
 
 mb = importlib.import_module("methodgen.build")   # the module (methodgen.build is the function)
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 H = "p**2/(2*m) + k*q**2/2"
 

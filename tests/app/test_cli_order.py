@@ -17,7 +17,7 @@ from methodgen.cli import generate as cli_generate
 from methodgen.emit import load_module
 from methodgen.errors import SceneError
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -15,7 +15,7 @@ from methodgen.verify import kahan as K
 from methodgen.verify.constrained import field_zero, velocity_constraint, velocity_structural
 from methodgen.verify.maps import splitting_symplectic, symplectic_certificate
 
-USER = Path(__file__).resolve().parent / "user_problems"
+USER = Path(__file__).resolve().parents[1] / "user_problems"
 HH2 = mg.Hamiltonian("(px**2 + py**2)/2 + (x**2 + y**2)/2 + x**2*y - y**3/3",
                      q=["x", "y"], p=["px", "py"], name="hh2")
 CUBIC1 = mg.Hamiltonian("p**2/2 + q**2/2 - a*q**3/3", q=["q"], p=["p"], params={"a": 1.0},

@@ -202,7 +202,7 @@ def test_measured_order_near_a_singularity_is_not_refuted(monkeypatch):
 
     from methodgen.verify import collocation as C
 
-    scene = mg.load_scene(str(Path(__file__).parent / "user_problems" / "calogero.toml"))
+    scene = mg.load_scene(str(Path(__file__).parents[1] / "user_problems" / "calogero.toml"))
     sc = mg.discretize(scene.system, "energy-collocation", stages=2)
     cert = C._measured_order(sc, 4)
     assert cert.status == NUMERICAL, cert.statement

@@ -20,7 +20,7 @@ import methodgen as mg
 from methodgen.derive import invariants
 from methodgen.errors import InputError, SceneError
 
-USER = Path(__file__).resolve().parent / "user_problems"
+USER = Path(__file__).resolve().parents[1] / "user_problems"
 TODA_Y0 = [0.0, 0.5, -0.3, 0.8, -0.2, -0.6]
 
 

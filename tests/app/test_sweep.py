@@ -16,7 +16,7 @@ import methodgen.sweep as sw
 from methodgen.cli import main
 from methodgen.errors import InputError, MethodgenError
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 #: 2 methods × 2 h × 2 k × 2 batches = 16 tasks, about a second in-process.
 SMALL = {"scene": "kepler", "methods": ["midpoint", "energy-momentum"], "h": [0.02, 0.01], "steps": 60,

@@ -173,7 +173,7 @@ def test_no_false_alarm_sweep(modules):
     import glob
     from pathlib import Path
     targets = [(mg.load_scene(s), mg.load_scene(s).methods) for s in mg.scenes()]
-    root = Path(__file__).resolve().parent / "user_problems"
+    root = Path(__file__).resolve().parents[1] / "user_problems"
     for f in sorted(glob.glob(str(root / "*.toml"))):
         sc = mg.load_scene(f)
         targets.append((sc, mg.applicable_methods(sc.run_system)))

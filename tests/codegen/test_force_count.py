@@ -127,7 +127,7 @@ def test_numba_post_kernel_source(pendulum):
     assert len(re.findall(r"\bmath\.cos\(", code)) == U_PER_STAGE
 
 
-_ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+_ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
 
 
 def _has_fsal_kernels(text):

@@ -17,7 +17,7 @@ from methodgen.special import atan_dd, safe_div, to_elementary
 from methodgen.verify.common import at, y1_symbols
 from methodgen.verify.exact import Domain, certify, guard_cases, reduce_to_zero
 
-USER = Path(__file__).resolve().parent / "user_problems"
+USER = Path(__file__).resolve().parents[1] / "user_problems"
 ENERGY = ("energy-momentum", "avf", "gonzalez", "itoh-abe")
 
 

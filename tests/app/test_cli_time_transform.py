@@ -16,7 +16,7 @@ from methodgen.emit import load_module
 from methodgen.errors import SceneError
 from methodgen.runio import load_trajectory
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 R = "sqrt(x**2 + y**2 + z**2)"
 
 

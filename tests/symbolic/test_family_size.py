@@ -23,7 +23,7 @@ from methodgen.bench import nbody_system
 from methodgen.errors import ParseError
 from methodgen.schemes import base, energy_momentum as em
 
-USER = Path(__file__).parent / "user_problems"
+USER = Path(__file__).parents[1] / "user_problems"
 
 
 def _ring(n: int, text: str) -> mg.Hamiltonian:
