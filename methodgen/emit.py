@@ -94,7 +94,7 @@ def template_hash(backend: str = "numpy") -> str:
 #: makes signatures change more often — never a stale module believed current.
 _NOT_GENERATOR = frozenset({
     "__main__.py", "bench.py", "build.py", "figures.py", "limits.py", "peers.py", "plots.py",
-    "progress.py", "runio.py", "scene.py", "stats.py", "sweep.py", "trajfile.py",
+    "progress.py", "runio.py", "scene.py", "stats.py", "sweep.py", "trajfile.py", "events.py",
 })
 _NOT_GENERATOR_DIRS = frozenset({"cli", "verify", "scenes"})
 

@@ -76,10 +76,20 @@ def _symbols(module) -> tuple[list[sp.Symbol], dict[str, sp.Symbol]]:
     return state, table
 
 
-def _compile(module, text: str, params, what: str):
-    """A numpy function of the state's components for the expression ``text``."""
+def _compile(module, text, params, what: str):
+    """A numpy function of the state's components for the expression ``text`` (text, parsed by
+    the whitelist parser, or a SymPy expression whose symbols are named as the module's state
+    components and parameters)."""
     state, table = _symbols(module)
-    expr = parse_expr(text, table, what=what)
+    if isinstance(text, sp.Basic):
+        unknown = sorted(str(s) for s in text.free_symbols if str(s) not in table)
+        if unknown:
+            raise InputError(f"{what} {text} uses {unknown}, which are not state components "
+                             f"{list(module.STATE_NAMES)} or parameters {list(module.PARAM_NAMES)}")
+        # the module's symbols by name (a user's Symbol('x') may lack real=True)
+        expr = text.xreplace({s: table[str(s)] for s in text.free_symbols})
+    else:
+        expr = parse_expr(text, table, what=what)
     values = dict(module.DEFAULT_PARAMS)
     if params:
         unknown = sorted(set(params) - set(values))
@@ -104,8 +114,10 @@ def event(module, text: str, *, terminal=False, direction: float = 0.0, conditio
     ----------
     module : generated module
         Its STATE_NAMES, PARAM_NAMES and DEFAULT_PARAMS name what ``text`` may use.
-    text : str
-        ``"q1"``, ``"x**2 + y**2 = 1"`` …
+    text : str or sympy.Expr or sympy.Eq
+        ``"q1"``, ``"x**2 + y**2 = 1"`` … (text is parsed by the whitelist parser, never
+        evaluated), or a SymPy expression or equation in symbols named as the module's state
+        components and parameters.
     terminal : bool or int
         Stop at the first (True) or the n-th crossing.
     direction : float
@@ -125,15 +137,20 @@ def event(module, text: str, *, terminal=False, direction: float = 0.0, conditio
         Text that does not parse, names that are not the module's, a condition that is not one
         comparison.
     """
-    if not isinstance(text, str):
-        raise InputError(f"an event must be text, got {type(text).__name__}")
-    m = _EQUATION.match(text.strip())
-    body = f"({m['lhs']}) - ({m['rhs']})" if m else text
+    if isinstance(text, sp.Equality):
+        body = text.lhs - text.rhs
+    elif isinstance(text, sp.Expr):
+        body = text
+    elif isinstance(text, str):
+        m = _EQUATION.match(text.strip())
+        body = f"({m['lhs']}) - ({m['rhs']})" if m else text
+    else:
+        raise InputError(f"an event must be text or a SymPy expression, got {type(text).__name__}")
     fn = _compile(module, body, params, "event")
     cond = None
     if condition is not None:
         cond = _condition(module, condition, params)
-    return Event(text, fn, terminal=terminal, direction=direction, condition=cond)
+    return Event(str(text), fn, terminal=terminal, direction=direction, condition=cond)
 
 
 def _condition(module, text: str, params):

@@ -119,6 +119,21 @@ def test_text_events_poincare_section(em):
     assert len(r2) and np.abs(r2 - 0.04).max() <= 1e-15
 
 
+def test_sympy_events_are_the_text_events(em):
+    """A SymPy expression (or equation) in symbols named as the state gives the text's event;
+    control: another expression gives other crossings; a foreign symbol is refused."""
+    import sympy as sp
+    q1, q2 = sp.symbols("q1 q2")            # without real=True: matched by name
+    text = em.solve(Y0, (0.0, 30.0), H, events=mg.event(em, "q1**2 + q2**2 = 0.04", direction=-1))
+    expr = em.solve(Y0, (0.0, 30.0), H, events=mg.event(em, sp.Eq(q1**2 + q2**2, sp.Rational(1, 25)),
+                                                         direction=-1))
+    assert len(text.t_events[0]) and np.array_equal(text.t_events[0], expr.t_events[0])
+    other = em.solve(Y0, (0.0, 30.0), H, events=mg.event(em, q1**2 + q2**2 - sp.Rational(1, 16), direction=-1))
+    assert not np.array_equal(other.t_events[0], text.t_events[0])
+    with pytest.raises(InputError, match="not state components"):
+        mg.event(em, sp.Symbol("zz") + q1)
+
+
 def test_event_text_is_data(em):
     with pytest.raises(ParseError, match="only direct calls of|unknown function"):
         mg.event(em, "__import__('os').system('true')")
