@@ -26,6 +26,7 @@ from __future__ import annotations
 import ctypes
 import math
 import os
+import threading
 import types
 
 import numpy
@@ -58,8 +59,88 @@ def enabled() -> bool:
 
 def _drive(loop, *args):
     """Run the compiled stepper through its C entry (ctypes: no numba dispatcher is loaded, so a
-    warm start does not pay for numba's target initialisation); arrays by reference."""
-    loop.c_call(*[ctypes.byref(_lk.array_struct(a)) if isinstance(a, numpy.ndarray) else a for a in args])
+    warm start does not pay for numba's target initialisation); arrays by reference, their
+    structures (:func:`methodgen.llvmkernels.array_struct`'s layout) packed into one buffer
+    (:func:`_packed`), which lives until the call returns."""
+    arrays = [a for a in args if isinstance(a, numpy.ndarray)]
+    buf, addrs = _packed(arrays)
+    it = iter(addrs)
+    loop.c_call(*[next(it) if isinstance(a, numpy.ndarray) else a for a in args])
+    del buf
+
+
+class _Addr(int):
+    """The address of an array structure packed already (:func:`_scratch`, :func:`_constant`):
+    :func:`_drive` passes it as it is.  Whoever made it keeps the array and the buffer alive."""
+
+
+_LOCAL = threading.local()
+_KEEP = 64
+#: Batches up to this size keep their work arrays between calls (:func:`_scratch`); a larger
+#: one allocates its own (the per-call cost is then small beside the run's, and a cache must
+#: not hold a large batch's arrays).
+_SCRATCH_B = 64
+
+
+def _scratch(key, shapes):
+    """Zeroed float64 work arrays of ``shapes`` for one run of a loop, and their packed
+    structures' addresses (:class:`_Addr`): made once per thread and key, zeroed again at each
+    later call (the arrays and their structures cost more to make than to clear)."""
+    store = getattr(_LOCAL, "scratch", None)
+    if store is None:
+        store = _LOCAL.scratch = {}
+    got = store.get(key)
+    if got is None:
+        arrays = [numpy.zeros(sh) for sh in shapes]
+        buf, addrs = _packed(arrays)
+        got = (arrays, [_Addr(x) for x in addrs], buf)
+        store[key] = got
+        while len(store) > _KEEP:
+            del store[next(iter(store))]
+    else:
+        for arr in got[0]:
+            arr.fill(0.0)
+    return got[0], got[1]
+
+
+_CONSTANTS: dict = {}
+
+
+def _constant(a):
+    """:class:`_Addr` of a module's constant array (the same object at every call: its stage
+    coefficients), packed once and kept with the array (so its id is not reused while the entry
+    lives); any other array as it is."""
+    got = _CONSTANTS.get(id(a))
+    if got is None or got[0] is not a:
+        buf, (addr,) = _packed([a])
+        got = _CONSTANTS[id(a)] = (a, _Addr(addr), buf)
+        while len(_CONSTANTS) > 4 * _KEEP:
+            del _CONSTANTS[next(iter(_CONSTANTS))]
+    return got[1]
+
+
+def _packed(arrays):
+    """``(buffer, addresses)``: the structures of ``arrays`` (numba's: meminfo, parent, nitems,
+    itemsize, data, shape, strides; :func:`methodgen.llvmkernels.array_struct`) back to back in
+    one int64 buffer, and the address of each.  One allocation for all of them: building a
+    ctypes structure per array cost about 2.4 µs each, a tenth of a one-step call.  ValueError
+    for an array that is not C-contiguous float64 (the translated code indexes C order)."""
+    vals = []
+    offs = []
+    for a in arrays:
+        if a.dtype.char != "d" or not a.flags.c_contiguous or not 1 <= a.ndim <= 3:
+            raise ValueError(f"a C-contiguous float64 array of 1-3 dimensions is needed, got {a.dtype} {a.shape}")
+        try:
+            ptr = ctypes.addressof(ctypes.c_char.from_buffer(a))
+        except (TypeError, ValueError):      # read-only or empty: the array interface
+            ptr = a.__array_interface__["data"][0]
+        offs.append(len(vals))
+        vals += (0, 0, a.size, 8, ptr)
+        vals += a.shape
+        vals += a.strides
+    buf = numpy.array(vals, dtype=numpy.int64)
+    base = buf.__array_interface__["data"][0]
+    return buf, [base + 8 * o for o in offs]
 
 
 _LOOPS: dict = {}
@@ -254,19 +335,24 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     n = int(cfg[CFG["N"]])
     nk = max(int(cfg[CFG["KLERR"]]), 1)
     resol = int(cfg[CFG["RESOLUTION"]])
-    st = numpy.zeros(2)
-    K = numpy.zeros((B, nk + 2))
-    fst = numpy.zeros((B, 4))
-    fvl = numpy.zeros(B)
-    dec = numpy.zeros(4)
-    jout = numpy.zeros((max(n, 1), max(n, 1)))
+    m1 = max(n, 1)
+    # the work arrays, then the placeholders of arrays this run does not use (one element)
+    shapes = ((2,), (B, nk + 2), (B, 4), (B,), (4,), (m1, m1), (1, 2), (1, 1), (1, 1), (1, 1), (1, 1), (1, 1))
+    if python or B > _SCRATCH_B:
+        work = [numpy.zeros(sh) for sh in shapes]
+        refs = work
+    else:
+        # made once per loop and size, with the structures the C entry takes
+        work, refs = _scratch((id(loop), B, nk, m1), shapes)
+        kick_a, drift, kick_b = (_constant(a) for a in (kick_a, drift, kick_b))
+    st, K, fst, fvl, dec, jout = work[:6]
     # the iterations: counted as floats (the translated code's arrays are float64) in place of
     # its, when its is zeros (its usual state: 0 has the same bits as 0.0), else in a copy
     counted = kind != 2 or pm          # (an explicit step has no iterations; a projected one has)
     in_place = counted and its.flags.c_contiguous and not its.any()
-    itsf = its.view(numpy.float64) if in_place else numpy.zeros((B, n1 - n0) if counted else (1, 1))
-    PJ = numpy.zeros((1, 2)) if PJ is None else PJ
-    smf = smode.astype(numpy.float64) if kind == 0 else numpy.zeros((1, 1))
+    itsf = its.view(numpy.float64) if in_place else numpy.zeros((B, n1 - n0)) if counted else refs[7]
+    PJ = refs[6] if PJ is None else PJ
+    smf = smode.astype(numpy.float64) if kind == 0 else refs[8]
     reuse = kind == 0 and solver == 3
     if reuse:
         S = smode.shape[1]
@@ -275,13 +361,13 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
         luf = numpy.ascontiguousarray(sLU, dtype=numpy.float64).reshape(B * S, m * m)
         pvf = spiv.astype(numpy.float64).reshape(B * S, m)
     else:
-        okf, luf, pvf = (numpy.zeros((1, 1)),) * 3
+        okf, luf, pvf = refs[9:12]
     b0, nr, k0, limit = 0, -1, 0, n1
     while True:
         nxtr = (max(nr, 0) // every + 1) * every
-        drive(loop, Y, C, FRC, K, PJ, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(limit), int(every),
-              nxt0, nxt0 // every - r0, st, itsf, smf, okf, luf, pvf, fst, fvl, dec, jout, int(maxiter), float(tol),
-              B, b0, nr, k0, nxtr, nxtr // every - r0)
+        drive(loop, Y, C, FRC, refs[1], PJ, traj, p, kick_a, drift, kick_b, float(h), int(n0), int(limit),
+              int(every), nxt0, nxt0 // every - r0, refs[0], itsf, smf, okf, luf, pvf, refs[2], refs[3], refs[4],
+              refs[5], int(maxiter), float(tol), B, b0, nr, k0, nxtr, nxtr // every - r0)
         if not st[0]:
             break
         # the stepper asks for the spectral radius of J - I at trajectory b, step n, stage k:
