@@ -317,3 +317,36 @@ def test_a_strided_out_runs_on_the_stepper(monkeypatch):
     assert mod.integrate(y0, scene.h, 300, save_every=3, out=out) is out
     assert np.array_equal(out, ref) and calls == []
     assert np.all(big[:, 1::2] == -7.0)              # the other columns untouched
+
+
+def test_work_arrays_kept_between_calls_carry_nothing_over():
+    """The compiled loop keeps its work arrays between calls (per loop, size and thread): a run
+    after a failed one, after other batch sizes and from other threads gives the rows it gives
+    first in a fresh process-state.  Control: the failing run does fail (a stale failure record
+    would then be the only way the next run could go wrong)."""
+    import threading
+
+    kep = mg.load_scene("kepler").system
+    mod = mg.build(kep, "energy-momentum", backend="numba")
+    y0 = APO.copy()
+    first = mod.integrate(y0, 0.05, 40)
+    one = mod.integrate(y0, 0.05, 1)
+    with pytest.raises(mod.ResolutionError):          # h = 2 does not resolve the pericentre
+        mod.integrate(y0, 2.0, 40)
+    assert np.array_equal(mod.integrate(y0, 0.05, 40), first)
+    Y = np.stack([y0, y0 * 1.01, y0 * 0.99])
+    batch = mod.integrate(Y, 0.05, 40)
+    assert np.array_equal(batch[:, 0], first) and np.array_equal(mod.integrate(y0, 0.05, 1), one)
+    out = {}
+
+    def run(k):
+        out[k] = [mod.integrate(Y if k % 2 else y0, 0.05, 40) for _ in range(5)]
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k, runs in out.items():
+        for r in runs:
+            assert np.array_equal(r, batch if k % 2 else first)
