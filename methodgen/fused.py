@@ -23,7 +23,6 @@ path does not import numba.
 
 from __future__ import annotations
 
-import ctypes
 import math
 import os
 import threading
@@ -60,10 +59,10 @@ def enabled() -> bool:
 def _drive(loop, *args):
     """Run the compiled stepper through its C entry (ctypes: no numba dispatcher is loaded, so a
     warm start does not pay for numba's target initialisation); arrays by reference, their
-    structures (:func:`methodgen.llvmkernels.array_struct`'s layout) packed into one buffer
-    (:func:`_packed`), which lives until the call returns."""
+    structures packed into one buffer (:func:`methodgen.llvmkernels.packed_structs`), which
+    lives until the call returns."""
     arrays = [a for a in args if isinstance(a, numpy.ndarray)]
-    buf, addrs = _packed(arrays)
+    buf, addrs = _lk.packed_structs(arrays)
     it = iter(addrs)
     loop.c_call(*[next(it) if isinstance(a, numpy.ndarray) else a for a in args])
     del buf
@@ -92,7 +91,7 @@ def _scratch(key, shapes):
     got = store.get(key)
     if got is None:
         arrays = [numpy.zeros(sh) for sh in shapes]
-        buf, addrs = _packed(arrays)
+        buf, addrs = _lk.packed_structs(arrays)
         got = (arrays, [_Addr(x) for x in addrs], buf)
         store[key] = got
         while len(store) > _KEEP:
@@ -112,35 +111,11 @@ def _constant(a):
     lives); any other array as it is."""
     got = _CONSTANTS.get(id(a))
     if got is None or got[0] is not a:
-        buf, (addr,) = _packed([a])
+        buf, (addr,) = _lk.packed_structs([a])
         got = _CONSTANTS[id(a)] = (a, _Addr(addr), buf)
         while len(_CONSTANTS) > 4 * _KEEP:
             del _CONSTANTS[next(iter(_CONSTANTS))]
     return got[1]
-
-
-def _packed(arrays):
-    """``(buffer, addresses)``: the structures of ``arrays`` (numba's: meminfo, parent, nitems,
-    itemsize, data, shape, strides; :func:`methodgen.llvmkernels.array_struct`) back to back in
-    one int64 buffer, and the address of each.  One allocation for all of them: building a
-    ctypes structure per array cost about 2.4 µs each, a tenth of a one-step call.  ValueError
-    for an array that is not C-contiguous float64 (the translated code indexes C order)."""
-    vals = []
-    offs = []
-    for a in arrays:
-        if a.dtype.char != "d" or not a.flags.c_contiguous or not 1 <= a.ndim <= 3:
-            raise ValueError(f"a C-contiguous float64 array of 1-3 dimensions is needed, got {a.dtype} {a.shape}")
-        try:
-            ptr = ctypes.addressof(ctypes.c_char.from_buffer(a))
-        except (TypeError, ValueError):      # read-only or empty: the array interface
-            ptr = a.__array_interface__["data"][0]
-        offs.append(len(vals))
-        vals += (0, 0, a.size, 8, ptr)
-        vals += a.shape
-        vals += a.strides
-    buf = numpy.array(vals, dtype=numpy.int64)
-    base = buf.__array_interface__["data"][0]
-    return buf, [base + 8 * o for o in offs]
 
 
 _LOOPS: dict = {}

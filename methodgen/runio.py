@@ -343,7 +343,37 @@ def _copy_new(tmp: str, target) -> Path | None:
     return Path(target)
 
 
-class ChunkWriter:
+class _LockedTemp:
+    """What both chunk writers (this module's ``.npz``, :mod:`methodgen.trajfile`'s ``.h5``) do
+    with their locked temporary file: release the lock after giving up the open file
+    (``_abandon_file``, the writer's own), and discard the file altogether."""
+
+    _lock = None
+    _tmp = None
+
+    def _abandon_file(self) -> None:   # pragma: no cover - every writer defines it
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        self._abandon_file()
+        if self._lock is not None:
+            try:
+                os.close(self._lock)
+            except OSError:  # pragma: no cover
+                pass
+            self._lock = None
+
+    def _discard(self) -> None:
+        tmp, self._tmp = self._tmp, None
+        self._release()
+        if tmp:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+
+
+class ChunkWriter(_LockedTemp):
     """Write a trajectory chunk by chunk into ``path`` (an ``.npz``).
 
     Parameters
@@ -546,23 +576,7 @@ class ChunkWriter:
                 pass
             self._fh = None
 
-    def _release(self) -> None:
-        self._abandon_zip()
-        if self._lock is not None:
-            try:
-                os.close(self._lock)
-            except OSError:  # pragma: no cover
-                pass
-            self._lock = None
-
-    def _discard(self) -> None:
-        tmp, self._tmp = self._tmp, None
-        self._release()
-        if tmp:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    _abandon_file = _abandon_zip
 
 
 def load_trajectory(path) -> tuple[np.ndarray, dict]:

@@ -74,7 +74,7 @@ import numpy as np
 
 from ._version import __version__
 from .errors import InputError, StorageError
-from .runio import (ChunkWriter, _fmt_size, _free_name, _place_new, _scalar, extent, find_orphans,
+from .runio import (ChunkWriter, _LockedTemp, _fmt_size, _free_name, _place_new, _scalar, extent, find_orphans,
                     make_temp, storage_error)
 from .runio import load_trajectory as _load_npz
 from .runio import recover_orphans as _recover_npz
@@ -244,7 +244,7 @@ def _default_dims(shape: tuple, names: list[str]) -> tuple[str, ...]:
 
 # --- the HDF5 writer ------------------------------------------------------------------------------
 
-class H5ChunkWriter:
+class H5ChunkWriter(_LockedTemp):
     """Write a trajectory chunk by chunk into ``path`` (a ``.h5``), as :class:`~methodgen.runio.ChunkWriter`.
 
     The same interface and the same guarantees: :meth:`append`, :meth:`close`,
@@ -524,23 +524,6 @@ class H5ChunkWriter:
         except Exception:  # noqa: BLE001 - after a failure: the file is finished or rebuilt later
             pass
 
-    def _release(self) -> None:
-        self._abandon_file()
-        if self._lock is not None:
-            try:
-                os.close(self._lock)
-            except OSError:  # pragma: no cover
-                pass
-            self._lock = None
-
-    def _discard(self) -> None:
-        tmp, self._tmp = self._tmp, None
-        self._release()
-        if tmp:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
 
 
 # --- both formats ----------------------------------------------------------------------------------

@@ -355,8 +355,6 @@ def test_a_c_entry_called_through_ctypes_is_the_kernel(tmp_path):
     (arrays as numba's structures by pointer; the fused loop's route, no numba dispatcher) --
     bitwise the compiled runtime's call of the kernel.  Arrays the translated code cannot index
     (not C-contiguous, not float64) are refused by name, never passed."""
-    import ctypes
-
     mod = _load(tmp_path, "k_centry", "from methodgen import nbruntime as _rt\n" + FLOW)
     ll = lk.compile_kernel(mod.flow, RES, c_entry=True)
     rng = np.random.default_rng(5)
@@ -366,14 +364,13 @@ def test_a_c_entry_called_through_ctypes_is_the_kernel(tmp_path):
     for b in range(Y.shape[0]):
         r = np.zeros(6)
         y, z, c = Y[b].copy(), np.zeros(3), np.zeros(3)
-        structs = [lk.array_struct(a) for a in (z, y, c)]
-        tail = [lk.array_struct(a) for a in (p, r)]
-        ll.c_call(*[ctypes.byref(s) for s in structs], 0.1, *[ctypes.byref(s) for s in tail])
+        buf, (az, ay, ac, ap, ar) = lk.packed_structs([z, y, c, p, r])
+        ll.c_call(az, ay, ac, 0.1, ap, ar)
         assert np.array_equal(r, ref[b])
     with pytest.raises(ValueError, match="C-contiguous float64"):
-        lk.array_struct(np.zeros((4, 4))[:, 1])
+        lk.packed_structs([np.zeros((4, 4))[:, 1]])
     with pytest.raises(ValueError, match="C-contiguous float64"):
-        lk.array_struct(np.zeros(3, dtype=np.int64))
+        lk.packed_structs([np.zeros(3, dtype=np.int64)])
     assert lk.compile_kernel(mod.flow, RES).c_call is None     # only where asked for
 
 
