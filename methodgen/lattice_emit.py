@@ -1,0 +1,172 @@
+"""A lattice method as one numpy module for every size N: printing, writing, loading.
+
+:func:`render` prints a :class:`methodgen.lattice_scheme.LatticeScheme` through
+``templates/lattice_module.py.j2``: per site term, its energy and its discrete-gradient pieces
+(with their derivatives) as vectorised numpy over the term's sites, CSE'd; the index tables of a
+size are built by the module at run time.  Nothing in the text depends on N, so the module is
+derived, printed and imported once, in the time one template costs.  :func:`build_lattice` is
+the cached entry point (the module cache and its trust checks of :mod:`methodgen.store` and
+:mod:`methodgen.emit`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from pathlib import Path
+
+import sympy as sp
+
+from ._version import __version__
+from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, template_dir,
+                   file_status, generator_hash, load_module, template_hash, warn_regenerating)
+from .lattice import Lattice
+from .lattice_scheme import LATTICE_METHODS, LatticeScheme, discretize_lattice
+from .lower import _HELPER_CALL, VectorPrinter, _helper_closure
+from .progress import phase
+from .special import SPECIAL_FUNCTIONS
+from .store import cache_dir, check_cache_folder, write_module
+
+__all__ = ["render", "lattice_signature", "build_lattice"]
+
+TEMPLATE = "lattice_module.py.j2"
+
+
+def _sources_hash() -> str:
+    """SHA-256 of the lattice path's own sources (kept out of :func:`methodgen.emit.generator_hash`
+    and ``template_hash``, so that a change here does not make every other module stale)."""
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in (here / "lattice.py", here / "lattice_scheme.py", here / "lattice_emit.py",
+                 template_dir() / TEMPLATE):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def lattice_signature(lattice: Lattice, method: str) -> str:
+    """Hash of everything the module depends on: the text, names, defaults and method, the
+    versions, the printers and helpers it shares with other modules, and its own sources."""
+    parts = [lattice.text, lattice.q_name, lattice.p_name, lattice.size.name, lattice.name,
+             repr(sorted(lattice.params.items())), method, __version__, sp.__version__,
+             template_hash("numpy"), generator_hash(), _sources_hash()]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def _cse_lines(exprs, printer, prefix: str) -> tuple[list[str], list[str]]:
+    """CSE ``exprs``: (assignment lines, the printed outputs)."""
+    syms = sp.numbered_symbols(prefix)
+    temps, outs = sp.cse(list(exprs), symbols=syms, optimizations="basic")
+    lines = [f"{printer.doprint(s)} = {printer.doprint(e)}" for s, e in temps]
+    return lines, [printer.doprint(e) for e in outs]
+
+
+def _gathers(symbols, names, source: str, fields) -> list[str]:
+    out = []
+    for s, (f, o) in zip(symbols, names):
+        out.append(f"{s.name} = {source}[{fields.index(f)}, ix[{o}]]")
+    return out
+
+
+def _bind(exprs, lattice: Lattice) -> list[str]:
+    """Lines binding the parameters and the size the expressions use."""
+    used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
+    lines = [f"{s.name} = p[{k}]" for k, s in enumerate(lattice.param_symbols) if s in used]
+    if lattice.size in used:
+        lines.append(f"{lattice.size.name} = float(n)")
+    return lines
+
+
+def _tuple(items) -> str:
+    return "(" + ", ".join(items) + ("," if len(items) == 1 else "") + ")"
+
+
+def render(scheme: LatticeScheme, sig: str) -> str:
+    """The module's source text (deterministic: the same scheme gives the same bytes)."""
+    lat = scheme.lattice
+    printer = VectorPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+    terms = []
+    for tp in scheme.terms:
+        t = tp.term
+        energy_pre, (energy,) = _cse_lines([t.template], printer, "_e")
+        energy_lines = (_bind([t.template], lat) + _gathers(tp.z0, t.slots, "Y", fields) + energy_pre
+                        + [f"return numpy.broadcast_to({energy}, ix[{t.slots[0][1]}].shape)"])
+        flat_jac = [e for row in tp.jac for e in row]
+        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
+        k = len(tp.pieces)
+        jac_rows = [_tuple(j_out[k + a * k:k + (a + 1) * k]) for a in range(k)]
+        piece_lines = (_bind(list(tp.pieces) + flat_jac, lat)
+                       + _gathers(tp.z0, t.slots, "Y0", fields) + _gathers(tp.z1, t.slots, "Z", fields)
+                       + ["if not jac:"] + ["    " + ln for ln in g_pre] + [f"    return {_tuple(g_out)}, None"]
+                       + j_pre + [f"return {_tuple(j_out[:k])}, {_tuple(jac_rows)}"])
+        terms.append({
+            "source": _docsafe(t.source), "lo": (t.lo.from_end, t.lo.c), "hi": (t.hi.from_end, t.hi.c),
+            "offsets": sorted({o for _, o in t.slots}),
+            "slots": [(fields.index(f), o) for f, o in t.slots],
+            "slot_names": [s.name for s in tp.z0],
+            "energy_lines": energy_lines, "piece_lines": piece_lines})
+    code = "\n".join(ln for t in terms for ln in t["energy_lines"] + t["piece_lines"])
+    known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
+    helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
+    env = _environment()
+    special = env.get_template("_special.py.j2").render(ir=type("HelperSet", (), {"helpers": helpers}))
+    if helpers:
+        special = "\n\n" + special.strip("\n") + "\n"
+    defaults = "{" + ", ".join(f"{k!r}: {v!r}" for k, v in lat.params.items()) + "}"
+    traits = scheme.traits
+    description = (f"{LATTICE_METHODS[scheme.method]}; "
+                   + ("keeps H exactly up to round-off." if traits["energy_preserving"] else
+                      "H is not kept exactly (bounded for a symplectic method)."))
+    if scheme.notes:
+        description += "\n" + "\n".join(scheme.notes)
+    header = [f"Generated by methodgen {__version__} from templates/{TEMPLATE} -- do not edit.",
+              f"system: {lat.name}; method: {scheme.method} (lattice, any N)",
+              f"H = {_docsafe(lat.text)}",
+              f"methodgen {__version__}; sympy {sp.__version__}; templates sha256 {template_hash('numpy')[:16]}",
+              HEADER_SIGNATURE[2:] + sig]
+    text = env.get_template(TEMPLATE).render(
+        header=header, method=scheme.method, name=lat.name, source=_docsafe(lat.text), description=description,
+        q=lat.q_name, p=lat.p_name, size=lat.size.name, nmin=lat.nmin, param_names=list(lat.params),
+        defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special)
+    text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
+    return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
+
+
+def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, progress=None):
+    """The generated module of ``method`` for ``lattice``: one module for every N.
+
+    Derived, printed and written once (to ``path``, default the per-user cache under a name with
+    the signature); a current file is imported without deriving.
+
+    Parameters
+    ----------
+    lattice : Lattice
+    method : {"avf", "midpoint"}
+    path : path-like, optional
+    progress : callable, optional
+        ``progress(phase, elapsed, done)`` for derive, render, write and load.
+
+    Returns
+    -------
+    module
+    """
+    if method not in LATTICE_METHODS:
+        discretize_lattice(lattice, method)     # raises with the list of methods
+    sig = lattice_signature(lattice, method)
+    if path is None:
+        path = cache_dir() / f"{lattice.name}_{method}_lattice_{sig[:12]}.py".replace("-", "_")
+    path = Path(path)
+    check_cache_folder(path)
+    status = file_status(path, sig)
+    if status != "ok":
+        if status == "untrusted":
+            warn_regenerating(path, status)
+        with phase("derive", progress):
+            scheme = discretize_lattice(lattice, method)
+        with phase("render", progress):
+            text = render(scheme, sig)
+        with phase("write", progress):
+            write_module(path, text)
+    with phase("load", progress):
+        return load_module(path, expected_signature=sig)
