@@ -16,6 +16,9 @@ build(system, method, path=None, backend="numpy") -> module  (reuses an up-to-da
 build_text(H, q, p, method, params=..., ...) -> module  (warm start: no SymPy when the module is cached)
 verify(scheme) -> Report                        (exact certificates of the method's claims)
 load_scene(name_or_path) -> Scene
+Lattice(H, q="q", p="p", size="N", params=None, invariants=None)   (site sums of symbolic size N)
+build_lattice(lattice, "avf" | "midpoint", path=None) -> module     (one module for every N)
+load_lattice_scene(name_or_path) -> LatticeScene
 wisdom_holman(scene, "sbab4") -> WisdomHolman  (Wisdom–Holman splittings of [nbody] scenes)
 methods() / scenes()
 
@@ -34,7 +37,7 @@ __all__ = [
     "Scheme", "Traits", "load_scene", "Scene", "scene_names", "methods", "scenes", "applicable_methods",
     "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
     "GenerationError", "time_transform", "autonomise", "wisdom_holman", "cite", "event", "section_event",
-    "poincare", "save_trajectory", "read_trajectory",
+    "poincare", "save_trajectory", "read_trajectory", "Lattice", "build_lattice", "load_lattice_scene",
 ]
 
 
@@ -54,6 +57,7 @@ def _lazy_names():
         "verify": ".verify", "wisdom_holman": ".nbody", "cite": ".cite",
         "event": ".events", "section_event": ".events", "poincare": ".events",
         "save_trajectory": ".trajfile", "read_trajectory": ".trajfile",
+        "Lattice": ".lattice", "build_lattice": ".lattice_emit", "load_lattice_scene": ".lattice_scene",
     }
     found: list[frozenset] = []
 

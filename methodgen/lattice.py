@@ -252,16 +252,21 @@ class Lattice:
     params : mapping of str to float
         Parameter values (names declared for H); the size is not one of them.
     name : str
+    invariants : mapping of str to str, optional
+        Quantities to monitor, each a sum of site terms in the same grammar (e.g. the mass
+        ``"Sum(q[i]**2 + p[i]**2, i, 1, N)"`` of a Schrödinger lattice).  ``"H"`` is always one.
 
     Attributes
     ----------
     terms : tuple of SiteTerm
+    invariants : dict of str to tuple of SiteTerm
     nmin : int
         The smallest N at which every term's range and site is valid.
     """
 
     def __init__(self, H: str, q: str = "q", p: str = "p", *, size: str = "N",
-                 params: Mapping[str, float] | None = None, name: str = "lattice"):
+                 params: Mapping[str, float] | None = None, name: str = "lattice",
+                 invariants: Mapping[str, str] | None = None):
         if not isinstance(H, str):
             raise InputError(f"the lattice Hamiltonian must be text, got {type(H).__name__}")
         if len(H) > MAX_TEXT:
@@ -285,26 +290,34 @@ class Lattice:
         self.size = sp.Symbol(size, integer=True, positive=True)
         self.params = {k: float(v) for k, v in params.items()}
         self.param_symbols = tuple(sp.Symbol(k, real=True) for k in params)
-        self.terms = self._parse(H)
+        self.terms = self._parse(H, "Hamiltonian")
+        self.invariant_texts = dict(invariants or {})
+        self.invariants = {}
+        for k, text in self.invariant_texts.items():
+            if not isinstance(k, str) or not _NAME_RE.fullmatch(k) or k == "H":
+                raise InputError(f"invariant name {k!r} is not a valid name other than H")
+            if not isinstance(text, str):
+                raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
+            self.invariants[k] = self._parse(text, f"invariant {k}")
         self.nmin = self._nmin()
 
-    def _parse(self, text: str) -> tuple[SiteTerm, ...]:
+    def _parse(self, text: str, what: str) -> tuple[SiteTerm, ...]:
         symbols = {s.name: s for s in self.param_symbols}
-        b = _LatticeBuilder(symbols, (self.q_name, self.p_name), self.size, "Hamiltonian")
+        b = _LatticeBuilder(symbols, (self.q_name, self.p_name), self.size, what)
         try:
             tree = ast.parse(text.strip(), mode="eval")
         except SyntaxError as exc:
-            raise ParseError(f"syntax error in Hamiltonian: {exc.msg}: {text!r}") from None
+            raise ParseError(f"syntax error in {what}: {exc.msg}: {text!r}") from None
         top = b.build(tree.body, 0)
         if not isinstance(top, sp.Expr):
-            raise ParseError("Hamiltonian must be a scalar expression")
+            raise ParseError(f"{what} must be a scalar expression")
         terms = []
         placeholders = [s for s, *_ in b.sums]
         for ph, template, lo, hi, src in b.sums:
             coeff = sp.diff(top, ph)
             if coeff.free_symbols & (set(placeholders) | set(b.anchors)):
-                raise ParseError(f"Hamiltonian: {src} enters H non-linearly (times another sum or a field); "
-                                 "H must be a sum of site terms")
+                raise ParseError(f"{what}: {src} enters non-linearly (times another sum or a field); "
+                                 "it must be a sum of site terms")
             terms.append(self._term(coeff * template, lo, hi, src))
         rest = sp.sympify(top.xreplace({ph: sp.S.Zero for ph in placeholders}))
         for t in sp.Add.make_args(rest):
@@ -313,14 +326,14 @@ class Lattice:
                 continue      # a constant: no dynamics
             terms.append(self._anchored(t, used, b.anchors))
         if not terms:
-            raise ParseError("Hamiltonian has no term in the fields")
+            raise ParseError(f"{what} has no term in the fields")
         for t in terms:
-            check_smooth(t.template, "Hamiltonian")
-            _check_double_range(t.template, "Hamiltonian")
+            check_smooth(t.template, what)
+            _check_double_range(t.template, what)
             if t.template.has(sp.I) or t.template.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
-                raise ParseError(f"Hamiltonian term {t.source} is not a finite real expression")
+                raise ParseError(f"{what} term {t.source} is not a finite real expression")
             if t.width() > 1:
-                raise ParseError(f"Hamiltonian term {t.source} couples sites {t.width()} apart; lattice terms "
+                raise ParseError(f"{what} term {t.source} couples sites {t.width()} apart; lattice terms "
                                  "may couple nearest neighbours only (wider stencils are not supported yet)")
         return tuple(terms)
 
@@ -338,7 +351,7 @@ class Lattice:
 
     def _nmin(self) -> int:
         n = MIN_SIZE
-        for t in self.terms:
+        for t in self.terms + tuple(x for ts in self.invariants.values() for x in ts):
             for (f, o) in t.slots:
                 for bnd in (t.lo, t.hi):
                     # a fixed-count bound c and its slots must fit: c + o ≤ N

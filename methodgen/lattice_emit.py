@@ -46,7 +46,7 @@ def _sources_hash() -> str:
 def lattice_signature(lattice: Lattice, method: str) -> str:
     """Hash of everything the module depends on: the text, names, defaults and method, the
     versions, the printers and helpers it shares with other modules, and its own sources."""
-    parts = [lattice.text, lattice.q_name, lattice.p_name, lattice.size.name, lattice.name,
+    parts = [lattice.text, repr(sorted(lattice.invariant_texts.items())), lattice.q_name, lattice.p_name, lattice.size.name, lattice.name,
              repr(sorted(lattice.params.items())), method, __version__, sp.__version__,
              template_hash("numpy"), generator_hash(), _sources_hash()]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
@@ -85,12 +85,18 @@ def render(scheme: LatticeScheme, sig: str) -> str:
     lat = scheme.lattice
     printer = VectorPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
     fields = lat.fields
+    def values(t, z0):
+        pre, (value,) = _cse_lines([t.template], printer, "_e")
+        return (_bind([t.template], lat) + _gathers(z0, t.slots, "Y", fields) + pre
+                + [f"return numpy.broadcast_to({value}, ix[{t.slots[0][1]}].shape)"])
+
+    def entry(t):
+        return {"source": _docsafe(t.source), "lo": (t.lo.from_end, t.lo.c), "hi": (t.hi.from_end, t.hi.c),
+                "offsets": sorted({o for _, o in t.slots})}
+
     terms = []
     for tp in scheme.terms:
         t = tp.term
-        energy_pre, (energy,) = _cse_lines([t.template], printer, "_e")
-        energy_lines = (_bind([t.template], lat) + _gathers(tp.z0, t.slots, "Y", fields) + energy_pre
-                        + [f"return numpy.broadcast_to({energy}, ix[{t.slots[0][1]}].shape)"])
         flat_jac = [e for row in tp.jac for e in row]
         g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
         j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
@@ -100,13 +106,17 @@ def render(scheme: LatticeScheme, sig: str) -> str:
                        + _gathers(tp.z0, t.slots, "Y0", fields) + _gathers(tp.z1, t.slots, "Z", fields)
                        + ["if not jac:"] + ["    " + ln for ln in g_pre] + [f"    return {_tuple(g_out)}, None"]
                        + j_pre + [f"return {_tuple(j_out[:k])}, {_tuple(jac_rows)}"])
-        terms.append({
-            "source": _docsafe(t.source), "lo": (t.lo.from_end, t.lo.c), "hi": (t.hi.from_end, t.hi.c),
-            "offsets": sorted({o for _, o in t.slots}),
-            "slots": [(fields.index(f), o) for f, o in t.slots],
-            "slot_names": [s.name for s in tp.z0],
-            "energy_lines": energy_lines, "piece_lines": piece_lines})
-    code = "\n".join(ln for t in terms for ln in t["energy_lines"] + t["piece_lines"])
+        terms.append({**entry(t), "slots": [(fields.index(f), o) for f, o in t.slots],
+                      "slot_names": [s.name for s in tp.z0],
+                      "energy_lines": values(t, tp.z0), "piece_lines": piece_lines})
+    quantities = [("H", list(range(len(terms))))]
+    extra = []
+    for name, its_terms in lat.invariants.items():
+        first = len(terms) + len(extra)
+        for t in its_terms:
+            extra.append({**entry(t), "energy_lines": values(t, t.symbols()), "piece_lines": []})
+        quantities.append((name, list(range(first, first + len(its_terms)))))
+    code = "\n".join(ln for t in terms + extra for ln in t["energy_lines"] + t["piece_lines"])
     known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
     helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
     env = _environment()
@@ -128,7 +138,8 @@ def render(scheme: LatticeScheme, sig: str) -> str:
     text = env.get_template(TEMPLATE).render(
         header=header, method=scheme.method, name=lat.name, source=_docsafe(lat.text), description=description,
         q=lat.q_name, p=lat.p_name, size=lat.size.name, nmin=lat.nmin, param_names=list(lat.params),
-        defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special)
+        defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special, extra=extra,
+        quantities=quantities, quantity_names=[q for q, _ in quantities])
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
 

@@ -642,6 +642,11 @@ def _cli_overrides(args):
 
 
 def cmd_run(args) -> int:
+    from ..lattice_scene import is_lattice_scene
+
+    if is_lattice_scene(args.scene):
+        from . import lattice
+        return lattice.run(args)
     try:
         y0, params = _cli_overrides(args)
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,

@@ -17,10 +17,21 @@ def cmd_scenes(args) -> int:
                      "state": len(s.system.y), "constraints": len(s.system.constraints),
                      "order": s.order, "composition": s.composition, "stages": s.stages,
                      "time_transform": s.time_transform})
+    from ..lattice_scene import lattice_scene_names, load_lattice_scene
+
+    lattices = []
+    for name in lattice_scene_names():
+        s = load_lattice_scene(name)
+        lattices.append({"name": s.name, "description": s.description, "methods": list(s.methods),
+                         "size": s.lattice.size.name, "default_size": s.size, "min_size": s.lattice.nmin,
+                         "invariants": ["H", *s.lattice.invariants]})
     if args.json:
-        print(json.dumps({"scenes": rows}))
+        print(json.dumps({"scenes": rows, "lattices": lattices}))
     else:
         for r in rows:
+            print(f"{r['name']:<20} {', '.join(r['methods']):<32} {r['description']}")
+        print("\nlattices of any size (methodgen run NAME --param N=…; one module for every N):")
+        for r in lattices:
             print(f"{r['name']:<20} {', '.join(r['methods']):<32} {r['description']}")
     return 0
 
@@ -63,6 +74,9 @@ def cmd_methods(args) -> int:
         print(f"  processed (a kernel between two processors, any composable method; not symmetric, "
               f"invariants and symplecticity kept; pays off when few rows are kept): "
               f"{', '.join(PROCESSED_FAMILIES)}")
+        from ..lattice_scheme import LATTICE_METHODS
+        print("\nlattices of symbolic size (lattice scenes, methodgen.lattice): "
+              + "; ".join(f"{k}: {v}" for k, v in LATTICE_METHODS.items()))
         print(f"\n[nbody] scenes (run, verify, bench --peers): Wisdom–Holman splittings in Jacobi coordinates, "
               f"Kepler flows solved exactly, with the Laskar–Robutel corrector: {', '.join(WH_FAMILIES)}")
     return 0

@@ -39,6 +39,11 @@ def _timeout(text: str) -> float:
 
 def cmd_verify(args) -> int:
     """Run the verification for a scene; return the exit status."""
+    from ..lattice_scene import is_lattice_scene
+
+    if is_lattice_scene(args.scene):
+        from . import lattice
+        return lattice.verify(args)
     # Imported here: the verification layer is not needed by the other commands.
     from .common import (dump_json, effective_stages, resolve_order, resolve_stages, resolve_time_transform,
                       transformed_context)

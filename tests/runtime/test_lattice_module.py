@@ -197,8 +197,43 @@ def test_avf_term_lemmas_are_proved_and_a_wrong_piece_is_refuted(sg_lattice):
     negative control: a piece scaled by 3/2 is refuted at an exact point."""
     scheme = discretize_lattice(sg_lattice, "avf")
     certs = certificates(scheme)
-    assert [c.status for c in certs] == ["proved"] * 3
+    assert [c.status for c in certs] == ["proved"] * 6
+    assert [c.claim.split(":")[0] for c in certs[:2]] == ["term lemma", "symmetric"]
     tp = scheme.terms[2]
     bad = replace(tp, pieces=(tp.pieces[0] * sp.Rational(3, 2),))
     wrong = replace(scheme, terms=scheme.terms[:2] + (bad,))
-    assert certificates(wrong)[2].status == "refuted"
+    assert certificates(wrong)[4].status == "refuted"
+    assert certificates(wrong)[5].status == "proved"      # still symmetric: only the lemma sees it
+
+
+def test_symmetry_is_proved_and_a_one_sided_piece_is_refuted(sg_lattice):
+    scheme = discretize_lattice(sg_lattice, "midpoint")
+    certs = certificates(scheme)
+    assert [c.status for c in certs] == ["proved"] * 3
+    tp = scheme.terms[2]                         # sin at the midpoint -> sin at the start: not symmetric
+    bad = replace(tp, pieces=(sp.sin(tp.z0[0]),))
+    assert certificates(replace(scheme, terms=scheme.terms[:2] + (bad,)))[2].status == "refuted"
+
+
+NLS = ("Sum(((q[i % N + 1] - q[i])**2 + (p[i % N + 1] - p[i])**2)*N**2/L**2 - (q[i]**2 + p[i]**2)**2/2, "
+       "i, 1, N)")
+
+
+def test_schrodinger_lattice_mass_and_energy(tmp_path):
+    """Cubic NLS on a periodic lattice, u = q + i p: AVF keeps H to round-off and the midpoint
+    rule keeps the mass Σ|u|² (a quadratic invariant) to round-off; each is the other's control."""
+    lat = Lattice(NLS, params={"L": 8.0}, name="nls", invariants={"mass": "Sum(q[i]**2 + p[i]**2, i, 1, N)"})
+    avf = build_lattice(lat, "avf", tmp_path / "nls_avf.py")
+    mid = build_lattice(lat, "midpoint", tmp_path / "nls_mid.py")
+    assert avf.INVARIANT_NAMES == ("H", "mass")
+    n = 32
+    x = np.arange(n) * 8.0 / n - 4.0
+    u = 1.2 / np.cosh(1.2 * x) * np.exp(0.7j * x)
+    y0 = np.r_[u.real, u.imag]
+    sa = avf.solve(y0, (0, 1.0), 0.01)
+    sm = mid.solve(y0, (0, 1.0), 0.01)
+    I0 = avf.invariants(y0)
+    assert sa.invariant_errors["H"] < 1e-14 * abs(I0["H"]) * 20
+    assert sm.invariant_errors["mass"] < 1e-14 * I0["mass"] * 20
+    assert sa.invariant_errors["mass"] > 1e-10 * I0["mass"]
+    assert sm.invariant_errors["H"] > 1e-10 * abs(I0["H"])

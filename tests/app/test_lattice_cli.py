@@ -1,0 +1,100 @@
+"""Lattice scenes on the command line: `methodgen run` / `verify` at any N, and their refusals."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from methodgen import cli
+from methodgen.errors import SceneError
+from methodgen.lattice_scene import is_lattice_scene, lattice_scene_names, load_lattice_scene
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path_factory.getbasetemp() / "lattice-cache"))
+
+
+def _run(capsys, *argv):
+    code = cli.main(["run", *argv, "--json"])
+    out, err = capsys.readouterr()
+    return code, (json.loads(out) if out.strip() else None), err
+
+
+@pytest.mark.parametrize("name", lattice_scene_names())
+def test_every_builtin_lattice_scene_runs_and_keeps_what_avf_claims(capsys, name):
+    code, rep, err = _run(capsys, name, "--steps", "20", "--param", "N=40")
+    assert code == 0, err
+    assert rep["N"] == 40 and rep["method"] == "avf" and len(rep["y_final"]) == 80
+    H = rep["invariants"]["H"]
+    assert H["max_abs_error"] <= 1e-13 * max(1.0, abs(H["initial"]))
+
+
+def test_the_size_is_a_run_time_parameter(capsys):
+    """Two sizes from one module: nothing is re-derived (the second build is a load)."""
+    code, a, _ = _run(capsys, "sine-gordon", "--steps", "5", "--param", "N=16")
+    code2, b, _ = _run(capsys, "sine-gordon", "--steps", "5", "--param", "N=700")
+    assert code == code2 == 0 and (a["N"], b["N"]) == (16, 700)
+    assert b["build_seconds"] < 2.0        # a load, not a derivation (correctness, not speed: it is
+    # the same file; the derivation alone costs more than this on the slowest machine seen)
+
+
+def test_parameters_reach_the_module(capsys):
+    _, a, _ = _run(capsys, "sine-gordon", "--steps", "2", "--param", "N=16")
+    _, b, _ = _run(capsys, "sine-gordon", "--steps", "2", "--param", "N=16", "--param", "L=3")
+    assert a["invariants"]["H"]["initial"] != b["invariants"]["H"]["initial"]
+
+
+@pytest.mark.parametrize("argv,fragment", [
+    (["--backend", "numba"], "--backend: not available for a lattice scene"),
+    (["--param", "N=2.5"], "the size must be an integer"),
+    (["--param", "N=2"], "N ≥ 3"),
+    (["--param", "c=1"], "unknown parameter; this scene has: N, L"),
+    (["--method", "gauss"], "a lattice runs avf or midpoint"),
+])
+def test_refusals_exit_2_with_one_line(capsys, argv, fragment):
+    code = cli.main(["run", "sine-gordon", *argv])
+    out, err = capsys.readouterr()
+    assert code == 2 and fragment in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_an_unresolved_step_is_refused_and_can_be_accepted(capsys):
+    code = cli.main(["run", "sine-gordon", "--h", "80", "--steps", "2"])
+    _, err = capsys.readouterr()
+    assert code == 3 and "does not resolve the motion" in err
+    code, rep, _ = _run(capsys, "sine-gordon", "--h", "80", "--steps", "2", "--no-check-resolution")
+    assert code == 0
+
+
+def test_verify_proves_per_site_term(capsys):
+    code = cli.main(["verify", "nls", "--json"])
+    rep = json.loads(capsys.readouterr()[0])
+    assert code == 0 and rep["all_proved"]
+    claims = [c["claim"] for c in rep["certificates"]]
+    assert sum(c.startswith("term lemma") for c in claims) == 1      # one term: one lemma for AVF
+    assert sum(c.startswith("symmetric") for c in claims) == 2        # AVF and midpoint
+
+
+def test_scene_files_are_checked_key_by_key(tmp_path):
+    good = (tmp_path / "ok.toml")
+    good.write_text('[lattice]\nH = "Sum(p[i]**2/2 + q[i]**2/2, i, 1, N)"\n[initial]\nq = "sin(i)"\n'
+                    '[run]\nN = 8\nh = 0.1\nsteps = 3\n')
+    assert is_lattice_scene(good)
+    sc = load_lattice_scene(good)
+    assert np.allclose(sc.y0(8)[:8], np.sin(np.arange(1, 9))) and not sc.y0(8)[8:].any()
+    for text, fragment in [
+        ('[lattice]\nH = "Sum(p[i]**2, i, 1, N)"\nwhat = 1\n[run]\nN = 8\nh = 0.1\nsteps = 3\n', "unknown key 'what'"),
+        ('[lattice]\nH = "Sum(p[i]**2, i, 1, N)"\n[run]\nN = 8\nh = 0.1\n', "steps is missing"),
+        ('[lattice]\nH = "Sum(p[i]**2, i, 1, N)"\n[initial]\nq = "__import__(1)"\n[run]\nN = 8\nh = 0.1\nsteps = 3\n',
+         "unknown function"),
+        ('[lattice]\nH = "Sum(p[i]**2, i, 1, N)"\n[initial]\nr = "1"\n[run]\nN = 8\nh = 0.1\nsteps = 3\n',
+         "r is not a field"),
+        ('[lattice]\nH = "Sum(p[i]**2, i, 1, N)"\n[run]\nmethod = "gauss"\nN = 8\nh = 0.1\nsteps = 3\n',
+         "not available for a lattice"),
+    ]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(SceneError, match=fragment.replace("(", r"\(")):
+            load_lattice_scene(bad)
