@@ -20,9 +20,10 @@ import sympy as sp
 from ._version import __version__
 from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, template_dir,
                    file_status, generator_hash, load_module, template_hash, warn_regenerating)
+from .errors import InputError
 from .lattice import Lattice
 from .lattice_scheme import LATTICE_METHODS, LatticeScheme, discretize_lattice
-from .lower import _HELPER_CALL, VectorPrinter, _helper_closure
+from .lower import _HELPER_CALL, ScalarPrinter, VectorPrinter, _helper_closure
 from .progress import phase
 from .special import SPECIAL_FUNCTIONS
 from .store import cache_dir, check_cache_folder, write_module
@@ -37,18 +38,18 @@ def _sources_hash() -> str:
     and ``template_hash``, so that a change here does not make every other module stale)."""
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for path in (here / "lattice.py", here / "lattice_scheme.py", here / "lattice_emit.py",
+    for path in (here / "lattice.py", here / "lattice_scheme.py", here / "lattice_emit.py", here / "lattice_stepper.py",
                  template_dir() / TEMPLATE):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
 
-def lattice_signature(lattice: Lattice, method: str) -> str:
+def lattice_signature(lattice: Lattice, method: str, backend: str = "numpy") -> str:
     """Hash of everything the module depends on: the text, names, defaults and method, the
     versions, the printers and helpers it shares with other modules, and its own sources."""
     parts = [lattice.text, repr(sorted(lattice.invariant_texts.items())), lattice.q_name, lattice.p_name, lattice.size.name, lattice.name,
              repr(sorted(lattice.params.items())), method, __version__, sp.__version__,
-             template_hash("numpy"), generator_hash(), _sources_hash()]
+             template_hash("numpy"), generator_hash(), _sources_hash()] + ([] if backend == "numpy" else [backend])
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 
@@ -80,8 +81,63 @@ def _tuple(items) -> str:
     return "(" + ", ".join(items) + ("," if len(items) == 1 else "") + ")"
 
 
-def render(scheme: LatticeScheme, sig: str) -> str:
-    """The module's source text (deterministic: the same scheme gives the same bytes)."""
+def _bound_text(b) -> str:
+    """A range bound as 0-based Python text in ``n``."""
+    return f"n + {b.c - 1}" if b.from_end else str(b.c - 1)
+
+
+def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
+    """``_grad_sites(Y0, W, n, p, jac)``: ∇̄H(y0, z) into W[0:2] (z the rows W[14:16]) and, with
+    ``jac``, its derivative's block diagonals into W[2:14] (row 2 + 4 r + 2 f + g: site j to
+    j + r - 1, entry (f, g)), a
+    loop over the sites of each term -- the scalar form of the module's vectorised kernels, in
+    the subset :mod:`methodgen.llvmkernels` translates (:mod:`methodgen.lattice_stepper` inlines
+    it).  Sites are (i + o + n) % n: non-negative operands, so C's and Python's % agree."""
+    lat = scheme.lattice
+    printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+    lines = ["def _grad_sites(Y0, W, n, p, jac):"]
+    body = []
+    allx = [e for tp in scheme.terms for e in list(tp.pieces) + [x for row in tp.jac for x in row]]
+    body += _bind(allx, lat)
+    body = [ln.replace("float(n)", "n * 1.0") for ln in body]
+    for k, tp in enumerate(scheme.terms):
+        t = tp.term
+        body.append(f"# {_docsafe(t.source)}")
+        body.append(f"for i in range({_bound_text(t.lo)}, {_bound_text(t.hi)} + 1):")
+        inner = []
+        for o in sorted({o for _, o in t.slots}):
+            inner.append(f"i{_otag(o)} = i" if o == 0 else f"i{_otag(o)} = (i + {o + 0} + n) % n")
+        for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
+            inner.append(f"{s0.name} = Y0[{fields.index(f)}, i{_otag(o)}]")
+            inner.append(f"{s1.name} = W[{14 + fields.index(f)}, i{_otag(o)}]")
+        kk = len(tp.pieces)
+        flat_jac = [e for row in tp.jac for e in row]
+        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
+        scatter_g = lambda outs: [f"W[{fields.index(f)}, i{_otag(o)}] += {outs[a]}"  # noqa: E731
+                                  for a, (f, o) in enumerate(t.slots)]
+        inner.append("if jac != 0:")
+        inner += ["    " + ln for ln in j_pre + scatter_g(j_out[:kk])]
+        for a, (f, o) in enumerate(t.slots):
+            for b, (g, o2) in enumerate(t.slots):
+                row = 2 + 4 * (o2 - o + 1) + 2 * fields.index(f) + fields.index(g)
+                inner.append(f"    W[{row}, i{_otag(o)}] += {j_out[kk + a * kk + b]}")
+        inner.append("else:")
+        inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
+        body += ["    " + ln for ln in inner]
+    return lines + ["    " + ln for ln in body]
+
+
+def _otag(o: int) -> str:
+    return "0" if o == 0 else (f"p{o}" if o > 0 else f"m{-o}")
+
+
+def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
+    """The module's source text (deterministic: the same scheme gives the same bytes).
+
+    ``backend="compiled"`` adds the scalar kernel (:func:`_scalar_kernel`) and runs the steps on
+    :mod:`methodgen.lattice_stepper` compiled through LLVM (the module then imports methodgen)."""
     lat = scheme.lattice
     printer = VectorPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
     fields = lat.fields
@@ -116,7 +172,8 @@ def render(scheme: LatticeScheme, sig: str) -> str:
         for t in its_terms:
             extra.append({**entry(t), "energy_lines": values(t, t.symbols()), "piece_lines": []})
         quantities.append((name, list(range(first, first + len(its_terms)))))
-    code = "\n".join(ln for t in terms + extra for ln in t["energy_lines"] + t["piece_lines"])
+    scalar = _scalar_kernel(scheme) if backend == "compiled" else []
+    code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t["piece_lines"]] + scalar)
     known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
     helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
     env = _environment()
@@ -131,7 +188,7 @@ def render(scheme: LatticeScheme, sig: str) -> str:
     if scheme.notes:
         description += "\n" + "\n".join(scheme.notes)
     header = [f"Generated by methodgen {__version__} from templates/{TEMPLATE} -- do not edit.",
-              f"system: {lat.name}; method: {scheme.method} (lattice, any N)",
+              f"system: {lat.name}; method: {scheme.method} (lattice, any N); backend: {backend}",
               f"H = {_docsafe(lat.text)}",
               f"methodgen {__version__}; sympy {sp.__version__}; templates sha256 {template_hash('numpy')[:16]}",
               HEADER_SIGNATURE[2:] + sig]
@@ -139,12 +196,15 @@ def render(scheme: LatticeScheme, sig: str) -> str:
         header=header, method=scheme.method, name=lat.name, source=_docsafe(lat.text), description=description,
         q=lat.q_name, p=lat.p_name, size=lat.size.name, nmin=lat.nmin, param_names=list(lat.params),
         defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special, extra=extra,
-        quantities=quantities, quantity_names=[q for q, _ in quantities])
+        quantities=quantities, quantity_names=[q for q, _ in quantities], backend=backend, scalar=scalar)
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
 
 
-def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, progress=None):
+BACKENDS = ("numpy", "compiled")
+
+
+def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, backend: str = "numpy", progress=None):
     """The generated module of ``method`` for ``lattice``: one module for every N.
 
     Derived, printed and written once (to ``path``, default the per-user cache under a name with
@@ -155,6 +215,10 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, progress=
     lattice : Lattice
     method : {"avf", "midpoint"}
     path : path-like, optional
+    backend : {"numpy", "compiled"}
+        "numpy": vectorised numpy, the module imports numpy only.  "compiled": the steps run on
+        :mod:`methodgen.lattice_stepper` compiled through LLVM (needs llvmlite; the module
+        imports methodgen); the same results to round-off.
     progress : callable, optional
         ``progress(phase, elapsed, done)`` for derive, render, write and load.
 
@@ -164,9 +228,12 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, progress=
     """
     if method not in LATTICE_METHODS:
         discretize_lattice(lattice, method)     # raises with the list of methods
-    sig = lattice_signature(lattice, method)
+    if backend not in BACKENDS:
+        raise InputError(f"unknown backend {backend!r} for a lattice; backends are {', '.join(BACKENDS)}")
+    sig = lattice_signature(lattice, method, backend)
     if path is None:
-        path = cache_dir() / f"{lattice.name}_{method}_lattice_{sig[:12]}.py".replace("-", "_")
+        suffix = "" if backend == "numpy" else f"_{backend}"
+        path = cache_dir() / f"{lattice.name}_{method}_lattice{suffix}_{sig[:12]}.py".replace("-", "_")
     path = Path(path)
     check_cache_folder(path)
     status = file_status(path, sig)
@@ -176,7 +243,7 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, progress=
         with phase("derive", progress):
             scheme = discretize_lattice(lattice, method)
         with phase("render", progress):
-            text = render(scheme, sig)
+            text = render(scheme, sig, backend)
         with phase("write", progress):
             write_module(path, text)
     with phase("load", progress):

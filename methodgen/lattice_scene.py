@@ -203,10 +203,11 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
 
 
 def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None,
-                      t_final=None, solver="newton", check_resolution=True, progress=None) -> dict:
+                      t_final=None, solver="newton", check_resolution=True, backend="numpy", progress=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
-    ``size``: N for this run (default the scene's); ``params``: parameter values for this run.
+    ``size``: N for this run (default the scene's); ``params``: parameter values for this run;
+    ``backend``: "numpy" or "compiled" (:func:`methodgen.lattice_emit.build_lattice`).
     """
     from .lattice_emit import build_lattice
 
@@ -220,7 +221,7 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
         steps = max(1, math.ceil(t_final / h - 1e-12))
         h = t_final / steps
     t0 = time.perf_counter()
-    module = build_lattice(scene.lattice, method, progress=progress)
+    module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
     build_seconds = time.perf_counter() - t0
     y0 = scene.y0(n, params)
     every = max(1, steps // 1000)     # the invariant errors over ≤ ~1000 rows
@@ -232,7 +233,7 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     values = [module.invariants(r, params) for r in rows]
     inv = {k: {"initial": values[0][k], "final": values[-1][k],
                "max_abs_error": max(abs(v[k] - values[0][k]) for v in values)} for k in module.INVARIANT_NAMES}
-    return dict(scene=scene.name, method=method, N=n, h=h, steps=steps, t_final=h * steps, success=True,
+    return dict(scene=scene.name, method=method, backend=backend, N=n, h=h, steps=steps, t_final=h * steps, success=True,
                 build_seconds=build_seconds, seconds=seconds, seconds_per_step=seconds / steps,
                 newton_iterations_mean=float(np.mean(info["newton_iterations"])), invariants=inv,
                 traits=dict(module.TRAITS), y_final=rows[-1].tolist())

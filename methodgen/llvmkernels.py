@@ -435,6 +435,18 @@ class _Translator:
         if isinstance(node, ast.BinOp) and type(node.op) in (ast.Add, ast.Sub, ast.Mult):
             x, y = self.int_expr(node.left), self.int_expr(node.right)
             return {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(node.op)](x, y)
+        if isinstance(node, ast.BinOp) and type(node.op) in (ast.Mod, ast.FloorDiv):
+            # Python's floor semantics: C's truncated remainder, moved into the divisor's sign
+            # (a zero divisor is the caller's to exclude, as LLVM leaves it undefined)
+            x, y = self.int_expr(node.left), self.int_expr(node.right)
+            zero = ir.Constant(_I64, 0)
+            r = b.srem(x, y)
+            fix = b.and_(b.icmp_signed("!=", r, zero),
+                         b.icmp_signed("!=", b.icmp_signed("<", r, zero), b.icmp_signed("<", y, zero)))
+            if isinstance(node.op, ast.Mod):
+                return b.select(fix, b.add(r, y), r)
+            q = b.sdiv(x, y)
+            return b.select(fix, b.sub(q, ir.Constant(_I64, 1)), q)
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "int"
                 and len(node.args) == 1 and not node.keywords):
             # a float holding an integer (a row permutation kept in a float64 array)
@@ -454,7 +466,7 @@ class _Translator:
             if kind != "i":
                 raise Unsupported("float table as an index")
             return b.load(self.table_address(gv, shape, node.slice))
-        raise Unsupported("index expression")
+        raise Unsupported(f"index expression {ast.unparse(node)!r}")
 
     def table_address(self, gv, shape, idx):
         b = self.b

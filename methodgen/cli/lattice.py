@@ -9,19 +9,21 @@ from .common import EXIT_NUMERICAL, dump_json, parse_params
 
 #: the run options a lattice run takes; any other given option is refused, naming these
 _LATTICE_RUN_OPTIONS = {"method", "h", "steps", "t_final", "param", "json", "scene", "func", "command",
-                        "check_resolution"}
+                        "check_resolution", "backend"}
 
 
 def run(args) -> int:
     """``methodgen run LATTICE_SCENE``: the report, or one line on stderr and a non-zero exit."""
     from ..lattice_scene import load_lattice_scene, run_lattice_scene
 
-    given = [k for k, v in vars(args).items()
-             if k not in _LATTICE_RUN_OPTIONS and v not in (None, False, [], "numpy", True)]
+    from . import make_parser
+
+    defaults = vars(make_parser().parse_args(["run", args.scene]))
+    given = [k for k, v in vars(args).items() if k not in _LATTICE_RUN_OPTIONS and v != defaults.get(k)]
     if given:
         flags = ", ".join("--" + k.replace("_", "-") for k in sorted(given))
         raise InputError(f"{flags}: not available for a lattice scene; a lattice run takes --method, --h, "
-                         "--steps, --t-final, --param NAME=VALUE (N=… for the size), --no-check-resolution and --json")
+                         "--steps, --t-final, --param NAME=VALUE (N=… for the size), --backend, --no-check-resolution and --json")
     scene = load_lattice_scene(args.scene)
     names = [scene.lattice.size.name, *scene.lattice.params]
     values = parse_params(args.param, names)
@@ -34,7 +36,8 @@ def run(args) -> int:
         raise InputError(f"--method {args.method!r}: a lattice runs avf or midpoint")
     try:
         rep = run_lattice_scene(args.scene, args.method, args.h, args.steps, size=size, params=values or None,
-                                t_final=args.t_final, check_resolution=args.check_resolution)
+                                t_final=args.t_final, check_resolution=args.check_resolution,
+                                backend="compiled" if args.backend == "numba" else "numpy")
     except Exception as exc:     # the module's ConvergenceError / NonFiniteError: one line, non-zero
         if type(exc).__name__ not in ("ConvergenceError", "NonFiniteError", "ResolutionError"):
             raise
@@ -45,7 +48,7 @@ def run(args) -> int:
     if args.json:
         print(dump_json(rep))
         return 0
-    print(f"lattice {rep['scene']}  method {rep['method']}  N = {rep['N']}  h = {rep['h']:g}  steps = {rep['steps']}"
+    print(f"lattice {rep['scene']}  method {rep['method']}  backend {rep['backend']}  N = {rep['N']}  h = {rep['h']:g}  steps = {rep['steps']}"
           f"  (t = 0 .. {rep['t_final']:g})")
     print(f"{'invariant':>10} {'initial':>24} {'final':>24} {'max abs error':>14}")
     for k, v in rep["invariants"].items():

@@ -41,6 +41,14 @@ def test_the_size_is_a_run_time_parameter(capsys):
     # the same file; the derivation alone costs more than this on the slowest machine seen)
 
 
+def test_the_compiled_backend_gives_the_numpy_run(capsys):
+    pytest.importorskip("llvmlite")
+    _, a, _ = _run(capsys, "fpu-chain", "--steps", "30", "--param", "N=20")
+    _, b, _ = _run(capsys, "fpu-chain", "--steps", "30", "--param", "N=20", "--backend", "numba")
+    assert (a["backend"], b["backend"]) == ("numpy", "compiled")
+    assert np.max(np.abs(np.array(a["y_final"]) - np.array(b["y_final"]))) < 1e-13
+
+
 def test_parameters_reach_the_module(capsys):
     _, a, _ = _run(capsys, "sine-gordon", "--steps", "2", "--param", "N=16")
     _, b, _ = _run(capsys, "sine-gordon", "--steps", "2", "--param", "N=16", "--param", "L=3")
@@ -48,7 +56,7 @@ def test_parameters_reach_the_module(capsys):
 
 
 @pytest.mark.parametrize("argv,fragment", [
-    (["--backend", "numba"], "--backend: not available for a lattice scene"),
+    (["--extended"], "--extended: not available for a lattice scene"),
     (["--param", "N=2.5"], "the size must be an integer"),
     (["--param", "N=2"], "N ≥ 3"),
     (["--param", "c=1"], "unknown parameter; this scene has: N, L"),

@@ -237,3 +237,87 @@ def test_schrodinger_lattice_mass_and_energy(tmp_path):
     assert sm.invariant_errors["mass"] < 1e-14 * I0["mass"] * 20
     assert sa.invariant_errors["mass"] > 1e-10 * I0["mass"]
     assert sm.invariant_errors["H"] > 1e-10 * abs(I0["H"])
+
+
+# --- the compiled backend: the same steps through methodgen.lattice_stepper ------------------------
+
+@pytest.fixture(scope="module")
+def sg_compiled(sg_lattice, tmp_path_factory):
+    pytest.importorskip("llvmlite")
+    return build_lattice(sg_lattice, "avf", tmp_path_factory.mktemp("lat") / "sg_avf_c.py", backend="compiled")
+
+
+@pytest.mark.parametrize("text,params,n", [(SG, {"L": 2 * np.pi}, 7), (SG, {"L": 2 * np.pi}, 64),
+                                           (FPU, {"beta": 0.7}, 9), (NLS, {"L": 8.0}, 12)])
+@pytest.mark.parametrize("solver", ["newton", "simplified"])
+def test_compiled_steps_are_the_numpy_modules(text, params, n, solver, tmp_path):
+    pytest.importorskip("llvmlite")
+    lat = Lattice(text, params=params, name="lat")
+    a = build_lattice(lat, "avf", tmp_path / "a.py")
+    c = build_lattice(lat, "avf", tmp_path / "c.py", backend="compiled")
+    assert (a.BACKEND, c.BACKEND) == ("numpy", "compiled")
+    y0 = np.r_[np.sin(np.arange(n) * 0.7), 0.3 * np.cos(np.arange(n) * 1.3)]
+    ia, ic = {}, {}
+    ra = a.integrate(y0, 0.03, 25, save_every=4, solver=solver, info=ia)
+    rc = c.integrate(y0, 0.03, 25, save_every=4, solver=solver, info=ic)
+    assert ra.shape == rc.shape == (8, 2 * n)
+    assert np.max(np.abs(ra - rc)) < 1e-13
+    assert np.array_equal(ia["newton_iterations"], ic["newton_iterations"])
+
+
+def test_compiled_loop_is_its_python_source_bitwise(sg_compiled):
+    """The step loop compiled and the same source run as Python: the same bits."""
+    from methodgen.lattice_driver import run_steps
+
+    n = 6
+    out = []
+    for python in (False, True):
+        Y = sg_state(n).reshape(2, n).copy()
+        T, its, st = run_steps(sg_compiled._grad_sites, Y, 0.05, 4, 1, np.array([2 * np.pi]), 50, 4 * 2.2e-16,
+                               True, False, 1.0, python=python)
+        out.append((T, its, st))
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1]) and out[0][2] == out[1][2]
+
+
+@pytest.mark.parametrize("n", [3, 4, 5, 9, 32])
+@pytest.mark.parametrize("periodic", [True, False])
+def test_bordered_block_elimination_agrees_with_a_dense_solve(sg, n, periodic):
+    """methodgen.lattice_stepper's factor/solve (as Python) against numpy's dense solve of the
+    same Newton matrix; negative control: a wrong corner block is seen."""
+    from methodgen import lattice_stepper as ls
+
+    rng = np.random.default_rng(100 + n)
+    h = 0.3
+    W = np.zeros((ls.W_ROWS, n))
+    W[ls._ID:ls._ID + 12] = rng.normal(size=(12, n))
+    if not periodic:
+        W[ls._ID:ls._ID + 4, 0] = 0.0           # no coupling of site 0 to site n-1
+        W[ls._ID + 8:ls._ID + 12, n - 1] = 0.0
+    D = [[W[ls._ID + 4 * r + k] for k in range(4)] for r in range(3)]
+    M = [(-h * d[2], -h * d[3], h * d[0], h * d[1]) for d in D]
+    M = [tuple(a.copy() for a in blk) for blk in M]
+    M[1][0][:] += 1.0
+    M[1][3][:] += 1.0
+    dense = sg._dense(*M)
+    r = rng.normal(size=(n, 2))
+    W[ls._IR:ls._IR + 2] = -r.T                  # solve() takes -R and leaves the update
+    assert ls.factor(W, n, h) == 0
+    ls.solve(W, n, h)
+    x = W[ls._IR:ls._IR + 2].T
+    xd = np.linalg.solve(dense, r.reshape(-1)).reshape(n, 2)
+    assert np.max(np.abs(x - xd)) < 1e-11 * max(1.0, np.max(np.abs(xd)))
+    if periodic:
+        M[0][1][0] += 0.5                        # the corner block (site 0 to site n-1), wrong
+        wrong = np.linalg.solve(sg._dense(*M), r.reshape(-1)).reshape(n, 2)
+        assert np.max(np.abs(x - wrong)) > 1e-6
+
+
+def test_compiled_failures_raise_the_modules_errors(sg_compiled):
+    y0 = sg_state(16, amp=3.0)
+    with pytest.raises(sg_compiled.ConvergenceError) as info:
+        sg_compiled.integrate(y0, 50.0, 3, maxiter=3)
+    assert info.value.step == 0 and info.value.residual > 0 and info.value.trajectory.shape == (1, 32)
+    with pytest.raises(sg_compiled.ResolutionError, match="does not resolve the motion"):
+        sg_compiled.integrate(sg_state(16), 2.0, 3)
+    rows = sg_compiled.integrate(sg_state(16), 2.0, 3, check_resolution=False)
+    assert rows.shape == (4, 32)
