@@ -424,3 +424,32 @@ def test_and_or_short_circuit_as_python(tmp_path, guard):
         assert proc.stdout.split(None, 1)[1].strip() == "[[0.0, 0.0]]"
     else:
         assert proc.returncode != 0
+
+
+INTDIV = """
+def intdiv(_y, _r, n):
+    for i in range(-7, 8):
+        k = (i % n) * 100 + (i // n)
+        _r[i + 7] = k
+    for i in range(-7, 8):
+        k = (i % (-n)) * 100 + (i // (-n))
+        _r[15 + i + 7] = k
+"""
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5])
+def test_integer_floor_division_and_modulo_are_pythons(tmp_path, n):
+    """Run-time ``%`` and ``//`` of integers with Python's floor semantics for every sign (C's
+    remainder truncates); negative control: C's truncated remainder differs for negative i."""
+    from methodgen import ktypes as kt
+
+    mod = _load(tmp_path, "k_intdiv", INTDIV)
+    ll = lk.compile_kernel(mod.intdiv, kt.void(kt.float64[::1], kt.float64[::1], kt.int64), c_entry=True)
+    r = np.zeros(30)
+    y = np.zeros(1)
+    buf, (ay, ar) = lk.packed_structs([y, r])
+    ll.c_call(ay, ar, n)
+    expect = [(i % n) * 100 + (i // n) for i in range(-7, 8)] + [(i % -n) * 100 + (i // -n) for i in range(-7, 8)]
+    assert r.tolist() == expect
+    truncated = [math.fmod(i, n) * 100 + int(i / n) for i in range(-7, 8)]
+    assert n == 1 or truncated != expect[:15]
