@@ -321,3 +321,20 @@ def test_compiled_failures_raise_the_modules_errors(sg_compiled):
         sg_compiled.integrate(sg_state(16), 2.0, 3)
     rows = sg_compiled.integrate(sg_state(16), 2.0, 3, check_resolution=False)
     assert rows.shape == (4, 32)
+
+
+def test_midpoint_quadratic_invariants_are_decided_per_template():
+    """{Q, H} summed over a periodic lattice, decided by the discrete Euler operator of its site
+    density (N never enters): the NLS mass is proved kept by the midpoint rule; Σ q² (negative
+    control) and a discrete momentum (not an invariant of this lattice) are refuted; a lattice
+    with boundaries is not decided (nothing claimed)."""
+    from methodgen.lattice_scheme import quadratic_invariant_certificates
+
+    lat = Lattice(NLS, params={"L": 8.0}, invariants={
+        "mass": "Sum(q[i]**2 + p[i]**2, i, 1, N)", "bad": "Sum(q[i]**2, i, 1, N)",
+        "momentum": "Sum(q[i]*p[i % N + 1] - p[i]*q[i % N + 1], i, 1, N)"})
+    got = {c.claim.split(":")[0].rsplit(" ", 1)[1]: c.status for c in quadratic_invariant_certificates(lat)}
+    assert got == {"mass": "proved", "bad": "refuted", "momentum": "refuted"}
+    assert [c.status for c in certificates(discretize_lattice(lat, "midpoint"))].count("proved") == 2
+    open_chain = Lattice(FPU, params={"beta": 1.0}, invariants={"e": "Sum(p[i]**2, i, 1, N)"})
+    assert quadratic_invariant_certificates(open_chain) == []
