@@ -216,11 +216,13 @@ def main(argv=None):
         rec["methodgen_energy_rel"] = abs(energy(tr[-1], n) - energy(y0, n)) / energy(y0, n)
         rec["handwritten_energy_rel"] = abs(energy(yh, n) - energy(y0, n)) / energy(y0, n)
     if args.peers:
-        out["peers"] = peers(mod)
+        out["peers"] = peers(comp)
     print(json.dumps(out, indent=1))
 
 
 def peers(mod, n=256, T=10.0):
+    """N = 256 to T = 10: methodgen's compiled AVF at h = 0.01 against DOP853, Radau and heyoka
+    (compact mode), each at the loosest tolerance reaching methodgen's final error."""
     from scipy.integrate import solve_ivp
     from scipy.sparse import diags, bmat, eye
 
@@ -233,8 +235,9 @@ def peers(mod, n=256, T=10.0):
 
     ref = solve_ivp(f, (0, T), y0, method="DOP853", rtol=1e-13, atol=1e-13).y[:, -1]
     res = {"N": n, "T": T}
-    t0 = time.perf_counter()
     steps = 1000
+    mod.integrate(y0, T / steps, 2)                  # compiled before the clock starts
+    t0 = time.perf_counter()
     yT = mod.integrate(y0, T / steps, steps, save_every=steps)[-1]
     err = float(np.max(np.abs(yT - ref)))
     res["methodgen_avf"] = {"steps": steps, "seconds": time.perf_counter() - t0, "error": err,
