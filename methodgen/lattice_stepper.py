@@ -1,7 +1,7 @@
 """The step loop of a lattice module (:mod:`methodgen.lattice_emit`), one source run two ways.
 
 :func:`lattice_run` takes ``steps`` steps of ``y1 = y0 + h J ∇̄H(y0, y1)`` on a lattice of n
-sites: the explicit predictor, Newton's method ("newton" or "simplified") with the Newton matrix
+sites: the predictor, Newton's method ("newton" or "simplified") with the Newton matrix
 ``I - h J ∂∇̄H/∂y1`` block tridiagonal and cyclic (2 × 2 blocks per site), factored by block
 Gaussian elimination with a border (the periodic corner couples every row to the last site, and
 the last row to every site: both carried as one extra block column and row, O(n) operations),
@@ -16,7 +16,12 @@ Work array ``_W`` (``W_ROWS``, n): ``G`` (2 rows: ∇̄H), ``D`` (12: the deriva
 diagonals, entries 00 01 10 11 of site j to j-1, j, j+1), ``Z``, ``ZP`` (2 each: the iterate and
 the predictor), ``R`` (2: the residual, then the update), ``UI`` (4: the eliminated diagonal
 blocks' inverses), ``LL`` (4: the multipliers of the rows), ``E`` (4: the border column), ``ML``
-(4: the last row's multipliers), ``Y`` (2: the forward-substituted right-hand side).
+(4: the last row's multipliers), ``Y`` (2: the forward-substituted right-hand side), ``DY``, ``DY2``
+(2 each: the last two steps' increments).
+
+The predictor extrapolates the last two increments, ``z = y + 2 Δ₁ - Δ₂`` (error O(h³): fewer
+Newton iterations than from the explicit Euler step, and no evaluation of ∇H of its own); the
+second step takes ``y + Δ₁``, the first the explicit Euler step.
 
 References
 ----------
@@ -33,8 +38,8 @@ __all__ = ["lattice_run", "W_ROWS", "STATUS"]
 # flake8: noqa: F821  (``grad`` and the constants below are bound by the driver)
 
 #: rows of the work array
-_IG, _ID, _IZ, _IZP, _IR, _IUI, _ILL, _IE, _IML, _IY = 0, 2, 14, 16, 18, 20, 24, 28, 32, 36
-W_ROWS = 38
+_IG, _ID, _IZ, _IZP, _IR, _IUI, _ILL, _IE, _IML, _IY, _IDY, _IDY2 = 0, 2, 14, 16, 18, 20, 24, 28, 32, 36, 38, 40
+W_ROWS = 42
 # (named _I…: the translator reads a global integer constant only under a private name)
 #: failure status of a run (``_fst[0]``)
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2, "RESOLUTION": 3, "SINGULAR": 4}
@@ -235,16 +240,23 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
     h = _h
     row = 1
     for s in range(_steps):
-        # the explicit predictor: Z = Y + h J ∇H(Y)
+        if s == 0:
+            # the first step: the explicit Euler predictor Z = Y + h J ∇H(Y)
+            for j in range(n):
+                _W[_IG + 0, j] = 0.0
+                _W[_IG + 1, j] = 0.0
+                _W[_IZ + 0, j] = _Y[0, j]
+                _W[_IZ + 1, j] = _Y[1, j]
+            grad(_Y, _W, _n, _p, 0)
+            for j in range(n):
+                _W[_IDY + 0, j] = h * _W[_IG + 1, j]
+                _W[_IDY + 1, j] = -h * _W[_IG + 0, j]
         for j in range(n):
-            _W[_IG + 0, j] = 0.0
-            _W[_IG + 1, j] = 0.0
-            _W[_IZ + 0, j] = _Y[0, j]
-            _W[_IZ + 1, j] = _Y[1, j]
-        grad(_Y, _W, _n, _p, 0)
-        for j in range(n):
-            z0 = _Y[0, j] + h * _W[_IG + 1, j]
-            z1 = _Y[1, j] - h * _W[_IG + 0, j]
+            z0 = _Y[0, j] + _W[_IDY + 0, j]
+            z1 = _Y[1, j] + _W[_IDY + 1, j]
+            if s >= 2:
+                z0 = _Y[0, j] + (2.0 * _W[_IDY + 0, j] - _W[_IDY2 + 0, j])
+                z1 = _Y[1, j] + (2.0 * _W[_IDY + 1, j] - _W[_IDY2 + 1, j])
             _W[_IZ + 0, j] = z0
             _W[_IZ + 1, j] = z1
             _W[_IZP + 0, j] = z0
@@ -324,6 +336,10 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
                 _fst[3] = ratio
                 return
         for j in range(n):
+            _W[_IDY2 + 0, j] = _W[_IDY + 0, j]
+            _W[_IDY2 + 1, j] = _W[_IDY + 1, j]
+            _W[_IDY + 0, j] = _W[_IZ + 0, j] - _Y[0, j]
+            _W[_IDY + 1, j] = _W[_IZ + 1, j] - _Y[1, j]
             _Y[0, j] = _W[_IZ + 0, j]
             _Y[1, j] = _W[_IZ + 1, j]
         _its[s] = it
