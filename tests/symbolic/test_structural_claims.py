@@ -10,10 +10,10 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.schemes.base import STEP
-from methodgen.verify import kahan as K
-from methodgen.verify.constrained import field_zero, velocity_constraint, velocity_structural
-from methodgen.verify.maps import splitting_symplectic, symplectic_certificate
+from methodgen.symbolic.schemes.base import STEP
+from methodgen.symbolic.verify import kahan as K
+from methodgen.symbolic.verify.constrained import field_zero, velocity_constraint, velocity_structural
+from methodgen.symbolic.verify.maps import splitting_symplectic, symplectic_certificate
 
 USER = Path(__file__).resolve().parents[1] / "user_problems"
 HH2 = mg.Hamiltonian("(px**2 + py**2)/2 + (x**2 + y**2)/2 + x**2*y - y**3/3",
@@ -168,7 +168,7 @@ def test_formerly_slow_user_problems_are_decided(problem, method):
 def test_avf_exact_for_functions_of_affine_forms():
     """Toda's exp(q1 - q2), a pendulum pair's cos(q1 - q2), Calogero's 1/(q1 - q2)**2: exact
     divided differences, H claimed and proved — no quadrature."""
-    from methodgen.verify.discrete_gradients import dg_identity
+    from methodgen.symbolic.verify.discrete_gradients import dg_identity
     for system in (CALOGERO, mg.Hamiltonian("(p1**2 + p2**2)/2 + exp(q1 - q2) - k*cos(q1 - q2)*(1 + q1)",
                                             q=["q1", "q2"], p=["p1", "p2"], params={"k": 1.0})):
         scheme = mg.discretize(system, "avf")
@@ -184,7 +184,7 @@ def test_avf_exact_for_functions_of_affine_forms():
 
 
 def test_linear_form_detection_and_its_limits():
-    from methodgen.schemes.discrete_gradients import additive_terms, linear_form_term
+    from methodgen.symbolic.schemes.discrete_gradients import additive_terms, linear_form_term
     q1, q2, q3, g = sp.symbols("q1 q2 q3 g")
     ys = (q1, q2, q3)
     terms = additive_terms(g**2 * (1 / (q1 - q2)**2 + 1 / (q2 - q3)**2))
@@ -200,7 +200,7 @@ def test_linear_form_detection_and_its_limits():
 # --- midpoint: Cayley transform -----------------------------------------------------------
 
 def test_midpoint_symplectic_structurally_on_nonlinear_h():
-    from methodgen.verify.maps import midpoint_symplectic
+    from methodgen.symbolic.verify.maps import midpoint_symplectic
     scheme = mg.discretize(CALOGERO, "midpoint")
     cert = symplectic_certificate(scheme)
     assert cert.status == "proved" and cert.details["structural"] and "Cayley" in cert.claim
