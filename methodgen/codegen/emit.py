@@ -19,7 +19,7 @@
   from exactly the bytes that were checked.
 * Loading and checking a module needs neither SymPy, jinja2 nor the lowering:
   those are imported by the functions that derive and render (a warm start from
-  the cache stays light, see :func:`methodgen.build.build_text`).
+  the cache stays light, see :func:`methodgen.codegen.build.build_text`).
 """
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ def compiled_available() -> bool:
     """True when the compiled backend can run: llvmlite is installed (the ``methodgen[fast]``
     extra).  Found on the path, not imported.  Its kernels and its stepper are machine code
     printed through llvmlite; numba is needed only for a kernel the LLVM translator refuses
-    (:func:`methodgen.nbcache.numba` says so then) and for ``METHODGEN_KERNELS=numba``."""
+    (:func:`methodgen.codegen.nbcache.numba` says so then) and for ``METHODGEN_KERNELS=numba``."""
     return _findable("llvmlite")
 
 
@@ -212,7 +212,7 @@ def _environment():
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
     from .lower_rows import row_body
 
-    env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.abi)
+    env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.codegen.abi)
     env.globals["row_body"] = row_body   # loops over like rows in compiled kernels
     return env
 
@@ -249,7 +249,7 @@ def _docsafe(text: str) -> str:
 
 
 def runtime_sha256() -> str:
-    """The shared runtime's ``SOURCE_SHA256`` (:data:`methodgen.nbabi.SOURCE_SHA256`: over
+    """The shared runtime's ``SOURCE_SHA256`` (:data:`methodgen.runtime.nbabi.SOURCE_SHA256`: over
     ``nbabi.py`` and ``nbruntime.py``), without importing
     numba.  A numba module on the shared runtime records it and refuses another runtime."""
     from .abi import RUNTIME_SHA256
@@ -286,7 +286,7 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
         vector["hs"] = _vector_view(ir.vector["hs"], [("_out", (2,))], "_out")
     if "force" in ir.vector:   # first-same-as-last Störmer–Verlet: ∇U at a run's start
         vector["force"] = _vector_view(ir.vector["force"], [("_out", ir.vector["force"].shape)], "_out")
-    if "proj" in ir.vector:   # symmetric projection: g, then G row by row (methodgen.projection)
+    if "proj" in ir.vector:   # symmetric projection: g, then G row by row (methodgen.symbolic.projection)
         vector["proj"] = _vector_view(ir.vector["proj"], [("_out", ir.vector["proj"].shape)], "_out")
     if ir.n_constraints:
         m, d = ir.n_constraints, ir.dim
@@ -295,7 +295,7 @@ def render(ir: ModuleIR, backend: str = "numpy") -> str:
     if n and "guess" in ir.vector:
         vector["guess"] = _vector_view(ir.vector["guess"], [("_out", (n,))], "_out")
         vector["res"] = _vector_view(ir.vector["res"], [("_R", (n,))], "_R")
-        if ir.vector["resjac"].jac_rows:   # J = I + diag(s) _sB (methodgen.lower_loops)
+        if ir.vector["resjac"].jac_rows:   # J = I + diag(s) _sB (methodgen.codegen.lower_loops)
             vector["resjac"] = _vector_view(ir.vector["resjac"], [("_R", (n,)), ("_JS", (n,))],
                                             f"_R, _JS[..., :, None] * _sB + numpy.eye({n})")
         else:
@@ -425,12 +425,12 @@ def _exec_source(path: Path, source: bytes) -> ModuleType:
         # numba modules: cache entries of their own under this private name (a plain
         # `import` of the same file in another process must not load them).  A module on the
         # shared runtime does not import numba itself: its guard is installed when methodgen
-        # first imports numba (methodgen.nbcache.numba; a run on the fused loop never does)
+        # first imports numba (methodgen.codegen.nbcache.numba; a run on the fused loop never does)
         from .nbcache import defer_stamp_guard, install_stamp_guard
         guard = install_stamp_guard if b"\nimport numba\n" in source else defer_stamp_guard
         guard(str(path), hashlib.sha256(source).hexdigest(), owner=name, tag=digest)
     # the text the compiled route translates and keys its machine code by: these bytes, not
-    # the file (read again later) nor linecache's copy (methodgen.kernelsource)
+    # the file (read again later) nor linecache's copy (methodgen.codegen.kernelsource)
     module.__dict__[SOURCE_ATTR] = source.decode("utf-8")
     sys.modules[name] = module
     try:
@@ -447,7 +447,7 @@ def load_if_current(path, expected_signature: str) -> tuple[str, ModuleType | No
     As :func:`load_module` with ``expected_signature``, but a file that is not
     ``"ok"`` (missing, corrupt, untrusted, stale) is reported instead of raised,
     for callers that then rebuild it (the warm start of
-    :func:`methodgen.build.build_text`).  The checks and the import use the same
+    :func:`methodgen.codegen.build.build_text`).  The checks and the import use the same
     bytes, read once: a file replaced in between is never imported.
     """
     path = Path(path).resolve()
@@ -521,7 +521,7 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
         numpy module is returned.
     progress : callable, optional
         ``progress(phase, elapsed, done)`` for lower, render, write and load
-        (:mod:`methodgen.progress`); default: the installed reporter.
+        (:mod:`methodgen.codegen.progress`); default: the installed reporter.
 
     Returns
     -------
@@ -550,9 +550,9 @@ def emit_source(scheme, sig: str | None = None, module_name: str | None = None,
                 backend: str = "numpy", *, progress=None, expanded: bool = False) -> str:
     """The full source text of the generated module for ``scheme`` (no fallback: any backend renders).
 
-    ``progress``: reporter of the phases lower and render (:mod:`methodgen.progress`).
+    ``progress``: reporter of the phases lower and render (:mod:`methodgen.codegen.progress`).
     ``expanded``: internal (tests, benchmarks) -- an s-stage method's expanded stage system
-    instead of its loops over the stages (:func:`methodgen.lower.lower`).
+    instead of its loops over the stages (:func:`methodgen.codegen.lower.lower`).
     """
     from .lower import lower
 

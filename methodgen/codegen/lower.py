@@ -1,4 +1,4 @@
-"""Lowering: a symbolic :class:`~methodgen.schemes.base.Scheme` → frozen IR.
+"""Lowering: a symbolic :class:`~methodgen.symbolic.schemes.base.Scheme` → frozen IR.
 
 The IR is plain data (strings and tuples) that the templates render without
 further thought: every kernel is a list of common-subexpression assignments
@@ -130,7 +130,7 @@ for _cls in SPECIAL_FUNCTIONS:
 
 
 def _print_grouped(self, expr):
-    # A compensated stage sum (methodgen.compensate): its parentheses fix the association.
+    # A compensated stage sum (methodgen.symbolic.compensate): its parentheses fix the association.
     return "(" + self._print(expr.args[0]) + ")"
 
 
@@ -152,18 +152,18 @@ class Kernel:
         Shape of the output (without batch axes).
     loops, accs : tuple
         Loops over families of like terms that run before ``temps`` and the accumulator
-        arrays they fill (empty for straight-line kernels; see :mod:`methodgen.lower_loops`).
+        arrays they fill (empty for straight-line kernels; see :mod:`methodgen.codegen.lower_loops`).
     """
 
     temps: tuple[tuple[str, str], ...]
     outputs: tuple[tuple[tuple[int, ...], str], ...]
     shape: tuple[int, ...]
     #: Loops over families of like terms ahead of ``temps``
-    #: (:class:`methodgen.lower_loops.Loop`) and the accumulators they fill.
+    #: (:class:`methodgen.codegen.lower_loops.Loop`) and the accumulators they fill.
     loops: tuple = ()
     accs: tuple = ()
     #: A Newton kernel whose outputs after the residual are row scales s: the Jacobian
-    #: is ``I + diag(s) _sB`` (:func:`methodgen.lower_loops.jacobian_row_scales`).
+    #: is ``I + diag(s) _sB`` (:func:`methodgen.codegen.lower_loops.jacobian_row_scales`).
     jac_rows: bool = False
     #: Straight-line assignments ahead of the loops, and the names of the first outputs they
     #: give (Δq of a looped Störmer–Verlet step), which the loops read as slot increments
@@ -223,7 +223,7 @@ class ModuleIR:
     p_names: tuple[str, ...]
     state_vars: tuple[str, ...]
     #: Names of the state's compensations in the step kernels (``_c_<state var>``): the
-    #: kernels evaluate the step at the exact numerical state y + c (methodgen.compensate).
+    #: kernels evaluate the step at the exact numerical state y + c (methodgen.symbolic.compensate).
     comp_vars: tuple[str, ...]
     param_names: tuple[str, ...]
     param_vars: tuple[str, ...]
@@ -275,13 +275,13 @@ class ModuleIR:
     #: rows' fill stays within ``kl + ku``): a chain costs O(n), not O(n³), per solve
     #: (:func:`jacobian_band`).
     band: tuple[int, int] = (0, 0)
-    #: First-same-as-last Störmer–Verlet (:mod:`methodgen.fsal`): the names of the start
+    #: First-same-as-last Störmer–Verlet (:mod:`methodgen.symbolic.fsal`): the names of the start
     #: force ∇U(q0) that the post kernel takes as input ``_g`` and returns, as the end
     #: force, right after Δy; empty for every other method.
     fsal_vars: tuple[str, ...] = ()
     #: For first-same-as-last modules: each stage's step fractions (kick with the carried
     #: force, drift, kick with the new force), as reprs; (γ_k/2, γ_k, γ_k/2) for a
-    #: composition, the splitting's stages for a splitting (:mod:`methodgen.splittings`).
+    #: composition, the splitting's stages for a splitting (:mod:`methodgen.symbolic.splittings`).
     stage_kick_a: tuple[str, ...] = ("0.5",)
     stage_drift: tuple[str, ...] = ("1.0",)
     stage_kick_b: tuple[str, ...] = ("0.5",)
@@ -291,7 +291,7 @@ class ModuleIR:
     #: its residual and Newton-matrix loops read (float reprs); None where the residual and
     #: the Newton matrix are straight-line kernels.
     stage: dict | None = None
-    #: Symmetric projection (:mod:`methodgen.projection`): the projected invariants' names,
+    #: Symmetric projection (:mod:`methodgen.symbolic.projection`): the projected invariants' names,
     #: H first (kernel ``proj``: their values, their gradients row by row, then the metric
     #: w of the direction diag(w) Gᵀ); empty without projection.
     projection: tuple[str, ...] = ()
@@ -306,7 +306,7 @@ class ModuleIR:
     def gamma_ratios(self) -> tuple[str, ...]:
         """γ_i / γ_{i-1} (γ_0 / γ_{s-1} = 1 for i = 0: the sequence is palindromic), as reprs.
 
-        A processor's sequence (:mod:`methodgen.processing`) is not palindromic: its modules
+        A processor's sequence (:mod:`methodgen.symbolic.processing`) is not palindromic: its modules
         are run one step at a time, where the first stage starts from (γ_0 h / 2) f (ratio 1)."""
         g = [float(x) for x in self.gammas]
         return tuple(repr(g[i] / g[i - 1]) if i else "1.0" for i in range(len(g)))
@@ -336,18 +336,18 @@ class ModuleIR:
 
     @property
     def post(self) -> PostLayout:
-        """Where each value sits in the output of the post kernel (:mod:`methodgen.abi`)."""
+        """Where each value sits in the output of the post kernel (:mod:`methodgen.codegen.abi`)."""
         return post_layout(self)
 
     @property
     def int_config(self) -> dict:
-        """The compiled runtime's int configuration, by name (:func:`methodgen.abi.int_config_values`)."""
+        """The compiled runtime's int configuration, by name (:func:`methodgen.codegen.abi.int_config_values`)."""
         return int_config_values(self)
 
     @property
     def float_config(self) -> dict:
         """The compiled runtime's float configuration, by name, as the Python source of the
-        module's constants (:func:`methodgen.abi.float_config_sources`)."""
+        module's constants (:func:`methodgen.codegen.abi.float_config_sources`)."""
         return float_config_sources(self)
 
     @property
@@ -409,7 +409,7 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
 
 
 def _program_kernel(dag, printer, rename) -> Kernel:
-    """Kernel of a straight-line program already reduced (:class:`methodgen.stages.FieldDerivative`:
+    """Kernel of a straight-line program already reduced (:class:`methodgen.symbolic.stages.FieldDerivative`:
     f and the nonzeros of f'), printed as it is -- no second CSE over the derivative."""
     temps = tuple((str(s), printer.doprint(sp.sympify(e).xreplace(rename))) for s, e in dag.assignments)
     outs = list(dag.field) + list(dag.jacobian)
@@ -518,7 +518,7 @@ def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErro
     default the system's vector field.
 
     ``fsal``: ``(G0, G1, (ha, hd, hb))`` for a first-same-as-last stage kick ha - drift hd -
-    kick hb (:mod:`methodgen.fsal`; G0, G1 the symbols of ∇U at its start and end).  The
+    kick hb (:mod:`methodgen.symbolic.fsal`; G0, G1 the symbols of ∇U at its start and end).  The
     trapezoidal form above holds for ha = hb = hd/2 only; a splitting's stage (say
     (0, a, b)) is not a consistent step on its own, so E is written as what it is for
     Störmer–Verlet, ``(h²/4) M⁻¹ (∇U(q1) - ∇U(q0))``, with ``h²/4 → hd (ha + hb)/4``: the
@@ -635,7 +635,7 @@ def energy_jump(scheme, lplan, tguard) -> tuple[sp.Expr, ...]:
     y0 of the next step (one evaluation of H per step, sharing the force's subexpressions).  Not for methods that keep H exactly
     (their H does not jump), linear fields (exempt from the resolution guards, no lplan)
     and time-transformed systems (K = 0: their own level-set guard, see
-    :func:`methodgen.timetransform.time_scale_guard`).  The caller leaves it out where H has
+    :func:`methodgen.symbolic.timetransform.time_scale_guard`).  The caller leaves it out where H has
     domain conditions: H(y1) is evaluated in the kernel that gives the domain conditions, and a
     state outside the domain must be reported as such, not as a failure evaluating H there.
     """
@@ -659,7 +659,7 @@ def energy_jump_form(system) -> tuple[sp.Expr, sp.Expr]:
 def uses_loops(scheme, loops: bool | None = None) -> bool:
     """Whether the module of ``scheme`` loops over families of like terms.
 
-    ``loops=None`` (default): where the scheme has a :class:`~methodgen.schemes.base.LoopPlan`
+    ``loops=None`` (default): where the scheme has a :class:`~methodgen.symbolic.schemes.base.LoopPlan`
     with a family of at least :data:`LOOP_MIN_INSTANCES` instances.  ``True`` forces loops
     where there is a plan (a ValueError where there is none), ``False`` unrolls.  Forcing
     is for tests and benchmarks: :func:`methodgen.verify` certifies the loops of the
@@ -683,20 +683,20 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     ----------
     scheme : Scheme
     signature : str
-        The signature hash to embed (see :func:`methodgen.emit.signature`).
+        The signature hash to embed (see :func:`methodgen.codegen.emit.signature`).
     module_name : str
         Python module name of the generated file.
     loops : bool or None
         Loop over families of like terms instead of unrolling every term
         (:func:`uses_loops`; default: where a family has ≥ 3 instances).  For Störmer–Verlet
         (first-same-as-last, compensated) the families of U are those of
-        :func:`methodgen.lower_loops.force_plan`: the post kernel's end force and H at y1,
+        :func:`methodgen.codegen.lower_loops.force_plan`: the post kernel's end force and H at y1,
         and H in the initial-state kernels, are loops; Δq stays straight-line code.
     expanded : bool
         Internal (tests and benchmarks): emit the residual and the Newton matrix of an
         s-stage method (``scheme.stage_system``) as the expanded straight-line kernels of
         ``scheme.residual`` and its ``(s·n)²`` symbolic Jacobian, instead of the loops over
-        the stages (:mod:`methodgen.stages`, the default).
+        the stages (:mod:`methodgen.symbolic.stages`, the default).
     backend : str or None
         ``"numba"``: leave out the batch (numpy) flavour of the kernels the numba templates
         do not render (guess, residual, Newton matrix, scale, increment, post, hs) -- their
@@ -716,7 +716,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     n = len(scheme.unknowns)
     d2 = len(system.y)
     # The step's equations at the exact numerical state y + c (compensated stage sums:
-    # the round-off of long runs then follows Brouwer's law, see methodgen.compensate).
+    # the round-off of long runs then follows Brouwer's law, see methodgen.symbolic.compensate).
     # Only where the unknowns are named increments (``_d_*``).  Gauss collocation (stage
     # increments ``_z*``) is left out: measured on harmonic ensembles (200 phases), its
     # energy drift is the same with and without (h = 0.01, 20000 steps: -8.3e-17 vs
@@ -737,12 +737,12 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     looped = splan is None and uses_loops(scheme, loops) and n > 0
     plan = scheme.loops if looped else splan
     # An s-stage method: f and f' derived once, the stage system assembled by loops in the
-    # module (methodgen.stages) -- neither the residual's s copies of f per stage nor the
+    # module (methodgen.symbolic.stages) -- neither the residual's s copies of f per stage nor the
     # (s·n)² Jacobian are lowered.
     stage = getattr(scheme, "stage_system", None) if (n and not looped and not expanded) else None
     if looped:
         # The sums stay sums: the kernels below get loops over the families ahead of their
-        # straight-line code (methodgen.lower_loops), and the Newton matrix comes from the
+        # straight-line code (methodgen.codegen.lower_loops), and the Newton matrix comes from the
         # chain rule through the sums, never from the expanded residual.
         res = cmp_(list(plan.residual), comp)
         rows = jacobian_row_scales(plan.residual, scheme.unknowns, plan)
@@ -819,7 +819,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     links = tuple(sp.Symbol(f"_dy{i}", real=True) for i in range(d2))
     # First-same-as-last Störmer–Verlet: the post kernel takes the start force and returns
     # the end force after Δy (one ∇U per stage); Δy's code then differs from the increment
-    # kernel's only in reading the start force (see methodgen.fsal).
+    # kernel's only in reading the start force (see methodgen.symbolic.fsal).
     first, first_links = inc, links
     if fplan is None and is_splitting(scheme.composition):
         raise InputError(f"the {scheme.composition.family} splitting runs as first-same-as-last "
@@ -922,7 +922,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
                                         vp, rename)
         vector["minv"] = _kernel(list(Minv), (system.dim * system.dim,), vp, rename)
     if scheme.projection:
-        # Symmetric projection (methodgen.projection): the projected invariants g and their
+        # Symmetric projection (methodgen.symbolic.projection): the projected invariants g and their
         # gradients G (row by row), at one state.
         from ..symbolic.projection import gradients
         g, G, w = gradients(scheme)
@@ -977,7 +977,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
 
 
 def stage_tables(stage) -> dict:
-    """The constants of a stage system's loops (:class:`methodgen.stages.StageSystem`),
+    """The constants of a stage system's loops (:class:`methodgen.symbolic.stages.StageSystem`),
     floats as their reprs: ``s``, ``m``, ``nnz``; ``Q`` (s × m), ``P`` (m × s, None for
     ``u_k = y + Z_k``), ``sigma`` (s); ``rows``, ``cols``: f''s nonzeros in the order the
     ``fieldjac`` kernel returns them.  (The Newton matrix's weights ``Q_jk P_ki`` are

@@ -1,7 +1,7 @@
-"""Lowering of sums of like terms to loops (:class:`~methodgen.schemes.base.LoopPlan`).
+"""Lowering of sums of like terms to loops (:class:`~methodgen.symbolic.schemes.base.LoopPlan`).
 
 A scheme whose potential is a sum over families of like terms
-(:mod:`methodgen.families`) states its step equations with the sums left as symbols
+(:mod:`methodgen.problem.families`) states its step equations with the sums left as symbols
 (``A = Σ_t ∇̄U_t``, ``F = Σ_t ∇U_t(q0)``).  Here each kernel that uses such a symbol gets,
 ahead of its straight-line code, one loop per family: it loads the instance's slots from
 the state (``_y``), the increments (``_z``), the compensations (``_c``) and the
@@ -131,7 +131,7 @@ def potential_via_sums(system, plan) -> tuple[sp.Expr, sp.Expr] | None:
 
 
 def force_plan(system):
-    """A :class:`~methodgen.schemes.base.LoopPlan` of U's families of like terms for an
+    """A :class:`~methodgen.symbolic.schemes.base.LoopPlan` of U's families of like terms for an
     explicit method (Störmer–Verlet): only their gradients (``_sF``, ``_sG``) and values
     (``_sU``, ``_sV``) are accumulated, so the step equations are left empty.  None where U
     has no family of like terms or H is not separable."""
@@ -230,7 +230,7 @@ def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
         Degrees of freedom d.
     compensated : bool
         Evaluate ``A`` and ``B`` at the compensated state ``q0 + c`` (as the step's other
-        equations are, :func:`methodgen.compensate.compensate`).
+        equations are, :func:`methodgen.symbolic.compensate.compensate`).
     whole : tuple of str
         Accumulators the kernel reads as arrays (``_sB`` for a Newton matrix assembled by
         :func:`jacobian_row_scales`), accumulated even where no symbol of theirs is used.

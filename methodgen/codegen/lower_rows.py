@@ -1,6 +1,6 @@
 """Loops over like rows: a compiled kernel's per-coordinate straight-line code as loops.
 
-After :mod:`methodgen.lower_loops` has turned sums of like *terms* into loops, a kernel of a
+After :mod:`methodgen.codegen.lower_loops` has turned sums of like *terms* into loops, a kernel of a
 large system is still linear in the number of coordinates: one load per state variable
 (``p7 = _y[206]``), one unpacked accumulator entry per coordinate (``_sA7 = _sA[7]``), one
 residual row, one row of the Newton matrix's assembly, … each a line.  numba compiles a
@@ -197,7 +197,7 @@ def _reduction(code: str, names: dict, rowtemp: set):
     sign0, t0 = tpls[g0]
     lines = [f"_k = {k0}", f"_red = {'-' if sign0 == '-' else ''}({t0})"]
     lines.append(f"for _e in ({', '.join(str(k * 8 + g) for g, k in rest)},):  "
-                 f"# {len(rest) + 1} terms in their printed order (methodgen.lower_rows)")
+                 f"# {len(rest) + 1} terms in their printed order (methodgen.codegen.lower_rows)")
     lines.append("    _k = _e >> 3")
     for j, (sign, tpl) in enumerate(tpls):
         kw = "if" if j == 0 else "elif"
@@ -222,7 +222,7 @@ def _order(blocks):
 
 
 def row_body(kern, ir, args, outs) -> RowBody | None:
-    """Row loops for ``kern`` (a scalar :class:`~methodgen.lower.Kernel`) printed with inputs
+    """Row loops for ``kern`` (a scalar :class:`~methodgen.codegen.lower.Kernel`) printed with inputs
     ``args`` and outputs ``outs`` by the numba kernel macro, or None when nothing is looped
     (the macro then prints its straight-line body).  See the module docstring."""
     if not outs:
@@ -382,7 +382,7 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
                  for line in (temp_red[var] if var in temp_red else [f"{var} = {code}"])]
     kept = [(v, c) for v, c in kept if v not in pre_names]
     for a, b, tpl, _ in pre_blocks:
-        pre_lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.lower_rows)")
+        pre_lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.codegen.lower_rows)")
         pre_lines.append(f"    {outs[0]}[_i] = {tpl}")
     for r, v in enumerate(kern.pre_out):
         if r not in pre_looped:
@@ -403,7 +403,7 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
     for r, red in reductions.items():
         lines += [line.replace("_red", f"_red{r}") for line in red]
     for a, b, tpl, _ in order:
-        lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.lower_rows)")
+        lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.codegen.lower_rows)")
         lines.append(f"    {o0}[_i] = {tpl}")
     for r, c in enumerate(res):
         if r in reductions:
@@ -415,7 +415,7 @@ def row_body(kern, ir, args, outs) -> RowBody | None:
         lines.append("# Newton matrix I + diag(s) ∂A/∂Δq, A the accumulated discrete gradient (in place:")
         lines.append(f"# _sB is {o1})")
         for a, b, tpl, _ in scale_blocks:
-            lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.lower_rows)")
+            lines.append(f"for _i in range({a}, {b}):  # {b - a} like rows (methodgen.codegen.lower_rows)")
             lines.append(f"    _js = {tpl}")
             lines.append(f"    for _b in range({n}):")
             lines.append(f"        {o1}[_i, _b] = _js * _sB[_i, _b]")

@@ -10,7 +10,7 @@ is refused *before* any SymPy object is built.  ``sympify`` is never called on
 user text.
 
 Float literals are converted to exact rationals (``0.1`` becomes ``1/10``) so
-that the symbolic proofs of :mod:`methodgen.verify` stay exact.
+that the symbolic proofs of :mod:`methodgen.symbolic.verify` stay exact.
 
 Indexed sums.  ``Sum(body, i, lo, hi)`` is ``body`` summed over the integers
 ``lo ≤ i ≤ hi``, and ``q[e]`` inside it names the declared symbol ``q<e>`` (``q[i+1]``
@@ -21,7 +21,7 @@ integers, the bound indices and ``+ - * // %`` on them, evaluated here as Python
 integers; anything else, an unbound index, or a subscript that names no declared
 symbol is refused with one line.  The sum is expanded into its terms at parsing (at most
 :data:`MAX_SUM_TERMS`); the derivations group the terms back into families of like
-terms (:mod:`methodgen.families`) and derive each family once.
+terms (:mod:`methodgen.problem.families`) and derive each family once.
 """
 
 from __future__ import annotations
@@ -252,7 +252,7 @@ def check_smooth(expr: sp.Expr, what: str = "expression") -> sp.Expr:
     ``sqrt(q**2)`` for real ``q``), ``Max``/``Min``, ``sign``, ``Heaviside``,
     ``Piecewise``, ``floor`` …, and any other function — raises a one-line
     :class:`ParseError` naming the node and why it is refused: a discrete
-    gradient (and the exact proofs of :mod:`methodgen.verify`) need a smooth H.
+    gradient (and the exact proofs of :mod:`methodgen.symbolic.verify`) need a smooth H.
 
     The same check is applied to parsed text and to SymPy input
     (:class:`methodgen.Hamiltonian`), to the Hamiltonian and to constraints.

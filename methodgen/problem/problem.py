@@ -25,7 +25,7 @@ __all__ = ["Hamiltonian", "DeclaredInvariant", "builtin_monitor_names"]
 class DeclaredInvariant(NamedTuple):
     """A quantity the user declared as a first integral: ``name``, ``expr``, ``source`` text.
 
-    Declaring does not make it one: :func:`methodgen.derive.invariants` marks it exact
+    Declaring does not make it one: :func:`methodgen.symbolic.derive.invariants` marks it exact
     only when ``{I, H} = 0`` is shown symbolically, and ``methodgen verify`` proves or
     refutes it.
     """
@@ -36,10 +36,10 @@ class DeclaredInvariant(NamedTuple):
 
 
 def builtin_monitor_names(dim: int, n_constraints: int) -> set[str]:
-    """Names :mod:`methodgen.derive` may give its own monitored quantities (a declared
+    """Names :mod:`methodgen.symbolic.derive` may give its own monitored quantities (a declared
     invariant may not use them): ``H``, ``H_phys``, the angular-momentum names of every
     coordinate plane (``L`` in 2D, ``Lx Ly Lz`` in 3D, ``L_<qi>_<qj>`` otherwise, see
-    :func:`methodgen.derive.angular_momenta`) and the constraint monitors ``g<i>``, ``g<i>_v``.
+    :func:`methodgen.symbolic.derive.angular_momenta`) and the constraint monitors ``g<i>``, ``g<i>_v``.
     """
     out = {"H", "H_phys"}
     if dim == 2:
@@ -116,10 +116,10 @@ class Hamiltonian:
     ----------
     H : str or sympy.Expr
         The Hamiltonian.  Text is parsed with the safe whitelist parser of
-        :mod:`methodgen.parse` (never evaluated); a SymPy expression may use any
+        :mod:`methodgen.problem.parse` (never evaluated); a SymPy expression may use any
         symbols whose *names* are declared below.  Both must be smooth: only
         numbers, ``pi``, ``E``, ``+ * **`` (so ``sqrt``) and ``exp log sin cos tan
-        sinh cosh tanh atan`` are accepted (:func:`methodgen.parse.check_smooth`);
+        sinh cosh tanh atan`` are accepted (:func:`methodgen.problem.parse.check_smooth`);
         ``Abs`` — also as ``sqrt(q**2)`` —, ``Max``, ``sign``, ``Piecewise`` … are
         refused with the reason.
     q, p : sequence of str or sympy.Symbol, length d
@@ -231,7 +231,7 @@ class Hamiltonian:
         if name is not None:
             check_name(name.replace("-", "_"), "system")
         object.__setattr__(self, "name", name)
-        #: :class:`methodgen.timetransform.TimeTransform` when this system is the Poincaré
+        #: :class:`methodgen.symbolic.timetransform.TimeTransform` when this system is the Poincaré
         #: time transformation of another (set by :func:`methodgen.time_transform`), else None.
         object.__setattr__(self, "time_transform", None)
         object.__setattr__(self, "declared_invariants", self._declared(invariants, allnames))
@@ -271,7 +271,7 @@ class Hamiltonian:
     def _expr(self, value, what: str) -> tuple[sp.Expr, str]:
         """``(expr, source)``: parsed or mapped onto the declared symbols, checked, and with
         every ``sin(u)/u`` folded into ``sinc_u(u)`` (smooth at u = 0 and evaluated there,
-        :mod:`methodgen.special`) — H, constraints and declared invariants alike, so that
+        :mod:`methodgen.problem.special`) — H, constraints and declared invariants alike, so that
         brackets between them cancel symbol for symbol."""
         expr, source = self._checked(value, what)
         return fold_removable_quotients(expr), source

@@ -1,7 +1,7 @@
 """Symbolic analysis of a Hamiltonian: gradients, structure, invariants.
 
 Pure SymPy, no numerics.  Each function derives one thing and is cached on the
-(immutable) :class:`~methodgen.problem.Hamiltonian`, so a scheme asks only for
+(immutable) :class:`~methodgen.problem.problem.Hamiltonian`, so a scheme asks only for
 what it needs ("model only what the scene requires").
 
 References
@@ -85,7 +85,7 @@ def _cache(fn):
 def gradient(system: Hamiltonian) -> sp.Matrix:
     """∇H as a column of length 2d: ``(∂H/∂q, ∂H/∂p)``.
 
-    Where the potential is a sum of like terms (:func:`methodgen.families.term_families`:
+    Where the potential is a sum of like terms (:func:`methodgen.problem.families.term_families`:
     pair potentials, chains) each family's template is differentiated once and its
     derivatives renamed onto the instances, which is the derivative of each instance (a
     renaming of distinct symbols commutes with ∂; the sums are built as ``sp.diff`` builds
@@ -99,7 +99,7 @@ def gradient(system: Hamiltonian) -> sp.Matrix:
 
 @_cache
 def potential_families(system: Hamiltonian) -> tuple | None:
-    """The families of like terms of U (:func:`methodgen.families.term_families`) for a
+    """The families of like terms of U (:func:`methodgen.problem.families.term_families`) for a
     canonical H written term by term as ``T(p) + U(q)`` (not split only after ``expand``),
     or None.  What the derivations and schemes that work per family start from."""
     if is_poisson(system) or system.time_transform is not None:
@@ -153,7 +153,7 @@ def separable_gradients(system: Hamiltonian) -> tuple[list, list]:
 @_cache
 def vector_field(system: Hamiltonian) -> sp.Matrix:
     """``f(y) = J ∇H(y)`` with ``J = [[0, I], [-I, 0]]`` (column of length 2d); for a
-    :class:`~methodgen.poisson.PoissonSystem` ``f(y) = S(y) ∇H(y)``."""
+    :class:`~methodgen.problem.poisson.PoissonSystem` ``f(y) = S(y) ∇H(y)``."""
     g = gradient(system)
     if is_poisson(system):
         out = []
@@ -757,7 +757,7 @@ def declared(system: Hamiltonian) -> tuple[Invariant, ...]:
 
 @_cache
 def casimir_invariants(system) -> tuple[Invariant, ...]:
-    """The Casimirs of a Poisson system (:meth:`~methodgen.poisson.PoissonSystem.casimirs`) as
+    """The Casimirs of a Poisson system (:meth:`~methodgen.problem.poisson.PoissonSystem.casimirs`) as
     monitored first integrals (empty for a canonical Hamiltonian)."""
     if not is_poisson(system):
         return ()
