@@ -141,6 +141,14 @@ def test_non_editable_install_can_generate(tmp_path):
     res = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target",
                           str(target), str(wheel)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
+    # every module, template and scene of every layer is in the wheel (the package list is explicit)
+    def files(root, pattern):
+        return {p.relative_to(root).as_posix() for p in root.rglob(pattern) if "__pycache__" not in p.parts}
+    src = ROOT / "methodgen"
+    assert files(target / "methodgen", "*.py") == files(src, "*.py")
+    assert files(target / "methodgen", "*.toml") == files(src, "*.toml")
+    assert {p.name for p in (target / "methodgen" / "codegen" / "templates").glob("*.j2")} == \
+        {p.name for p in (ROOT / "templates").glob("*.j2")}
     code = textwrap.dedent("""
         import methodgen as mg, numpy as np, sys
         assert "site" in mg.__file__, mg.__file__

@@ -22,6 +22,7 @@ import methodgen as mg
 from methodgen.app.bench import nbody_system
 from methodgen.errors import ParseError
 from methodgen.symbolic.schemes import base, energy_momentum as em
+from methodgen.symbolic import derive
 
 USER = Path(__file__).parents[1] / "user_problems"
 
@@ -123,7 +124,7 @@ def test_long_summand_times_many_terms_is_refused_before_expanding():
     380-character text) built ~10⁷ nodes (11 s; a 20 kB summand, half an hour).  It is refused, one line, before expanding; the
     same text with the node bound raised parses (control: the refusal is the bound's); a
     nested sum whose inner ranges grow with the outer index is bounded as well."""
-    from methodgen.problem.problem import parse
+    from methodgen.problem import parse
     syms = {f"q{i}": sp.Symbol(f"q{i}", real=True) for i in range(1, 11)}
     body = " + ".join(f"sin(q[i % 10 + 1]*{j})" for j in range(1, 21))
     with pytest.raises(ParseError) as err:
@@ -184,7 +185,7 @@ def test_planar_gravity_keeps_L_and_P_per_family():
     assert {"L", "P_x", "P_y"} <= set(scheme.traits.preserved)
     terms = em.decompose(system)
     fams = em.decompose_families(system)
-    w = [sp.diff(next(i.expr for i in mg.derive.first_integrals(system) if i.name == "L"), pk) for pk in system.p]
+    w = [sp.diff(next(i.expr for i in derive.first_integrals(system) if i.name == "L"), pk) for pk in system.p]
     assert em._forms_commute_by_families(w, list(system.q), fams) is True
     assert [i.name for i in em.kept_angular_momenta(system, terms, by_families=False)] == ["L"]
 

@@ -36,7 +36,7 @@ from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
 import methodgen as mg
-from methodgen.problem.problem import special
+from methodgen.problem import special
 from methodgen.errors import InputError, MethodNotApplicable
 from methodgen.symbolic.verify.common import y1_symbols
 from methodgen.symbolic.verify.discrete_gradients import dg_identity

@@ -11,6 +11,7 @@ import sympy as sp
 
 import methodgen as mg
 from methodgen.symbolic.schemes.base import STEP
+from methodgen.symbolic import derive
 from methodgen.symbolic.verify import kahan as K
 from methodgen.symbolic.verify.constrained import field_zero, velocity_constraint, velocity_structural
 from methodgen.symbolic.verify.maps import splitting_symplectic, symplectic_certificate
@@ -61,7 +62,7 @@ def test_kahan_lemma_fails_for_another_linearly_implicit_scheme():
     # The θ = 1/3 map does not keep H̃ (exact rational point, 1 DOF): the claim was worth checking.
     s = CUBIC1
     y = sp.Matrix(s.y)
-    f = mg.derive.vector_field(s)
+    f = derive.vector_field(s)
     A = sp.eye(2) - third * STEP * f.jacobian(y)
     y1 = y + STEP * A.LUsolve(f)
     Ht = K.modified_energy_expr(s)
@@ -206,7 +207,7 @@ def test_midpoint_symplectic_structurally_on_nonlinear_h():
     assert cert.status == "proved" and cert.details["structural"] and "Cayley" in cert.claim
     # Negative control: a gradient not taken at the midpoint is not this structure.
     y0, y1 = CALOGERO.y, scheme.y1
-    at_y0 = mg.derive.gradient(CALOGERO)
+    at_y0 = derive.gradient(CALOGERO)
     assert midpoint_symplectic(replace(scheme, discrete_gradient=at_y0), "x") is None
     # and the Cayley lemma needs a symmetric block: with a generic (non-symmetric) S it fails.
     S = sp.Matrix(2, 2, sp.symbols("a b c d"))
