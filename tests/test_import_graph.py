@@ -15,6 +15,7 @@ door, above every layer.  The negative controls add one edge and see it caught.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -51,7 +52,7 @@ def import_graph() -> dict:
     graph = {m: set() for m in mods}
     for m, path in mods.items():
         package = m if path.name == "__init__.py" else m.rsplit(".", 1)[0]
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in _imports(path, path.stat().st_mtime_ns):
             if isinstance(node, ast.ImportFrom):
                 if node.level:
                     base = package.split(".")[:len(package.split(".")) - node.level + 1]
@@ -65,6 +66,13 @@ def import_graph() -> dict:
                 continue
             graph[m].update(t for t in targets if t in mods and t != m)
     return graph
+
+
+@functools.lru_cache(maxsize=None)
+def _imports(path: Path, mtime: int) -> list:
+    """The import statements of one file (parsed once per version of the file)."""
+    return [n for n in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+            if isinstance(n, (ast.Import, ast.ImportFrom))]
 
 
 def cycles(graph: dict) -> list[set]:
