@@ -23,7 +23,7 @@ import numpy as np
 import sympy as sp
 
 import methodgen as mg
-from methodgen.build import build
+from methodgen.codegen.build import build
 
 
 def main(argv=None):

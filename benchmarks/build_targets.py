@@ -15,7 +15,7 @@ cold (an empty disk cache of heyoka's compiled code) and warm (its cache filled 
 before).  The machine's cores and load average are printed (and kept in the JSON): quote them
 with every figure.
 ``--kernels numba`` sets ``METHODGEN_KERNELS=numba`` (every kernel compiled by numba: the route
-before methodgen.llvmkernels).
+before methodgen.codegen.llvmkernels).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ PROBE = textwrap.dedent(r"""
     t0 = time.perf_counter()
     import numpy as np
     import methodgen as mg
-    from methodgen import llvmkernels
+    from methodgen.codegen import llvmkernels
     name, method, k = sys.argv[1], sys.argv[2], int(sys.argv[3])
     sys.path.insert(0, sys.argv[4])      # benchmarks/: the problems by name
     from _problems import problem
@@ -69,7 +69,7 @@ HEYOKA = textwrap.dedent(r"""
     import sys, time, json
     import numpy as np
     import methodgen as mg
-    from methodgen.peers import heyoka_system, import_peer
+    from methodgen.app.peers import heyoka_system, import_peer
     hy = import_peer("heyoka")
     sc = mg.load_scene(sys.argv[1])
     _, sys_ = heyoka_system(sc.system)

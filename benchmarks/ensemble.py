@@ -44,7 +44,7 @@ import time
 import numpy as np
 
 import methodgen as mg
-from methodgen import nbabi
+from methodgen.runtime import nbabi
 
 H_TEXT = "(px**2 + py**2)/2 - 1/sqrt(x**2 + y**2)"
 #: (label, order, composition) of methodgen's rows
@@ -93,7 +93,7 @@ def cpu_min(fn, repeats):
 
 def ours(mod, Y0, T, N, repeats, block=True):
     """(CPU s, final states) of N steps of T/N; ``block`` False forces the one-trajectory path."""
-    # the threshold lives in methodgen.nbabi (read by use_block at every call)
+    # the threshold lives in methodgen.runtime.nbabi (read by use_block at every call)
     saved = nbabi.MIN_BATCH
     nbabi.MIN_BATCH = saved if block else 1 << 62
     try:
@@ -136,7 +136,7 @@ def ours_logh(mod, e, M, w, T, k, repeats):
     lane ending at its own physical time t_b near T (the fictive time of an orbit is 2π
     whatever e, the physical times differ by up to 2e); the error is against the exact
     state at t_b.  Landing every lane on T exactly would take a last step of its own size
-    (``methodgen.physical_time.run_to_time`` does it for one trajectory; not for batches)."""
+    (``methodgen.runtime.physical_time.run_to_time`` does it for one trajectory; not for batches)."""
     N = round(T * k / (2 * np.pi))
     h = 2 * np.pi / k
     Y0 = mod.initial_state(kepler_state(e, M, w))

@@ -5,8 +5,8 @@ Not a test: run it and read the tables (it takes minutes per scene).
     python benchmarks/frontier.py [--scenes kepler,henon-heiles-2d] [--backend numba]
                                   [--orders 2,4,6,8,10] [--quick] [--json out.json]
 
-For each scene: ``methodgen bench SCENE --peers`` (:func:`methodgen.bench.work_precision`
-with ``peers=True``), then its frontier table (:func:`methodgen.bench.frontier`): per final
+For each scene: ``methodgen bench SCENE --peers`` (:func:`methodgen.app.bench.work_precision`
+with ``peers=True``), then its frontier table (:func:`methodgen.app.bench.frontier`): per final
 error level, the cheapest run of methodgen, of methodgen with the energy kept to round-off,
 and of each peer (heyoka on every unconstrained scene; REBOUND on scenes that declare
 ``[nbody]``), and our CPU time over each peer's.  Constrained scenes are skipped (the peers
@@ -19,9 +19,9 @@ import argparse
 import json
 
 import methodgen as mg
-from methodgen.bench import work_precision
-from methodgen.cli.bench import _print_frontier
-from methodgen.scene import load_scene
+from methodgen.app.bench import work_precision
+from methodgen.app.cli.bench import _print_frontier
+from methodgen.symbolic.scene import load_scene
 
 
 def main() -> None:

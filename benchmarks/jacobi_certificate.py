@@ -4,7 +4,7 @@ Not a test: run it and read the table (wall seconds on this machine, with its lo
 
     python benchmarks/jacobi_certificate.py [--bodies 4 8 11 21]
 
-For each N, in a fresh process: the exact Jacobi identities (:func:`methodgen.nbody._jacobi_identities`:
+For each N, in a fresh process: the exact Jacobi identities (:func:`methodgen.symbolic.nbody._jacobi_identities`:
 canonical map, kinetic energy, Kepler masses; SymPy, no floating point) and the whole
 ``mg.wisdom_holman(scene, "saba3")`` (H compared with the ``[nbody]`` H, the identities, the
 numerical certificate) for a star and N − 1 planets on a ring.  (A scene's H is text: at 21
@@ -42,7 +42,7 @@ PROBE = textwrap.dedent(r"""
     with open(path, "w") as f:
         f.write(text.replace("'", '"'))
     import methodgen as mg
-    from methodgen import nbody
+    from methodgen.symbolic import nbody
     scene = mg.load_scene(path)
     t = time.perf_counter(); ids = nbody._jacobi_identities(n); t_ids = time.perf_counter() - t
     nbody._jacobi_identities.cache_clear()

@@ -7,7 +7,7 @@ Not a test: run it and read the table (never assert wall time).
 For each eccentricity, in one run on this machine: the generated Störmer–Verlet module of the
 logarithmic Hamiltonian (``methodgen.time_transform(system, form="log")``, drift–kick–drift
 leapfrog of Λ = log(T + e) − log(−U), composed to order 2…10) run to the physical time T with
-:func:`methodgen.physical_time.run_to_time` (whole fictive steps, then one step solved to land
+:func:`methodgen.runtime.physical_time.run_to_time` (whole fictive steps, then one step solved to land
 on t = T); heyoka ``taylor_adaptive`` (tol 1e-15, double); REBOUND IAS15 (default ε = 1e-9).
 Rows: least CPU seconds of the integration call over 3 repeats (module build / compile and
 integrator set-up excluded), the max-norm error of (q, p) at T against the exact Kepler
@@ -27,7 +27,7 @@ import mpmath
 import numpy as np
 
 import methodgen as mg
-from methodgen.physical_time import run_to_time
+from methodgen.runtime.physical_time import run_to_time
 
 H_TEXT = "(px**2 + py**2 + pz**2)/(2*m) - k/sqrt(x**2 + y**2 + z**2)"
 
@@ -85,7 +85,7 @@ def ours(system, ecc, T, order, h, backend, project=None):
 
 
 def heyoka_row(system, ecc, T, tol=1e-15):
-    from methodgen.peers import _heyoka_integrator
+    from methodgen.app.peers import _heyoka_integrator
     y0 = kepler_y0(ecc)
     ta = _heyoka_integrator(system, y0, tol)
 
@@ -101,7 +101,7 @@ def heyoka_row(system, ecc, T, tol=1e-15):
 def ias15_row(ecc, T, epsilon=1e-9):
     import rebound
 
-    from methodgen.peers import _configure
+    from methodgen.app.peers import _configure
     y0 = kepler_y0(ecc)
     sims = []
 

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import fsolve
 
 import methodgen as mg
-from methodgen.build import scene_module_path
+from methodgen.codegen.build import scene_module_path
 
 Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
 H_STEP = 0.01

@@ -180,7 +180,7 @@ def main(argv=None):
 
     sizes = [int(s) for s in args.sizes.split(",")]
     out = {"load": os.getloadavg()[0], "sizes": {}}
-    from methodgen.store import untagged
+    from methodgen.codegen.store import untagged
 
     files = set()
     for n in sizes:

@@ -33,10 +33,10 @@ import time
 import numpy as np
 import numba as nb
 
-from methodgen.bench import nbody_initial, nbody_system
-from methodgen.emit import load_module, render, write_atomic
-from methodgen.lower import lower
-from methodgen.schemes import discretize
+from methodgen.app.bench import nbody_initial, nbody_system
+from methodgen.codegen.emit import load_module, render, write_atomic
+from methodgen.codegen.lower import lower
+from methodgen.symbolic.schemes import discretize
 
 
 @nb.njit(cache=True)

@@ -6,9 +6,9 @@ machine compare only rows of one run).
     python benchmarks/nbruntime_step_cost.py [--steps N] [--repeat R] [--route shared|template|both]
 
 For each configuration a module is generated into a fresh folder on each route: the
-stepper (methodgen.stepper compiled per module, the default route) and, where it still exists, the
+stepper (methodgen.runtime.stepper compiled per module, the default route) and, where it still exists, the
 template route (one compiled loop per module, ``templates/numba_runtime.py.j2``) by
-forcing ``methodgen.emit.shared_runtime_supports`` to False *in this script only*.  Each
+forcing ``methodgen.codegen.emit.shared_runtime_supports`` to False *in this script only*.  Each
 row gives µs per step, Newton iterations per step, and whether the two routes' trajectories
 agree bitwise.
 """
@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 import methodgen as mg
-from methodgen import emit
-from methodgen.emit import module_filename
+from methodgen.codegen import emit
+from methodgen.codegen.emit import module_filename
 
 CONFIGS = [("kepler", "stormer-verlet", dict(order=10)), ("henon-heiles-2d", "energy-momentum", dict(order=8)),
            ("outer-solar-system", "energy-momentum", dict(order=2)), ("kepler", "energy-momentum", dict(order=2)),

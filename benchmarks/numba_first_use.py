@@ -1,5 +1,5 @@
 """First use of a numba module: fresh process → first step, on a cold machine and with the
-shared runtime (methodgen.nbruntime) already compiled.  Not a test: run it and read the lines.
+shared runtime (methodgen.runtime.nbruntime) already compiled.  Not a test: run it and read the lines.
 
     python benchmarks/numba_first_use.py [--steps N]
 
@@ -57,7 +57,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as root:
         runtime = os.path.join(root, "runtime")
         base = {**os.environ, "NUMBA_CACHE_DIR": runtime}
-        subprocess.run([sys.executable, "-c", "import methodgen.nbruntime"], env=base, check=True)
+        subprocess.run([sys.executable, "-c", "import methodgen.runtime.nbruntime"], env=base, check=True)
         for i, (scene, method, order) in enumerate(CONFIGS):
             cold = {**os.environ, "METHODGEN_CACHE": os.path.join(root, f"c{i}"),
                     "NUMBA_CACHE_DIR": os.path.join(root, f"n{i}")}

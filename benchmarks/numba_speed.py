@@ -131,7 +131,7 @@ COLD = """
 import json, sys, time
 t0 = time.perf_counter()
 import numpy as np
-from methodgen.emit import load_module
+from methodgen.codegen.emit import load_module
 t1 = time.perf_counter()
 mod = load_module(sys.argv[1])
 t2 = time.perf_counter()

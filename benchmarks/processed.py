@@ -1,6 +1,6 @@
 """Processed compositions against the unprocessed ones and heyoka, at equal final error.
 
-Not a test: run it and read the table (issue 26, item 2; methodgen/processing.py).
+Not a test: run it and read the table (issue 26, item 2; methodgen/symbolic/processing.py).
 
     python benchmarks/processed.py [--problems kepler,hh,oss] [--backend numba] [--json FILE]
 
@@ -26,8 +26,8 @@ import sys
 import numpy as np
 
 import methodgen as mg
-from methodgen import peers
-from methodgen.build import build_processed
+from methodgen.app import peers
+from methodgen.codegen.build import build_processed
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from projection_vs_em import cpu_at  # noqa: E402

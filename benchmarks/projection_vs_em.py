@@ -8,9 +8,9 @@ Not a test: run it and read the table (wall time is never asserted anywhere).
 For each problem, every (method, order, h) row reports the CPU seconds of the integration
 call (``time.process_time``, minimum of 3; compiled before timing), the final-state error
 against a reference (heyoka in long double where installed, else DOP853 at rtol 1e-13:
-:func:`methodgen.bench.reference`), and the largest |H - H0| over ~1000 saved states.
+:func:`methodgen.app.bench.reference`), and the largest |H - H0| over ~1000 saved states.
 Methods: ``stormer-verlet`` (explicit), ``stormer-verlet-projected`` (symmetric projection
-onto H = H0, methodgen.projection), ``standard-projected`` (the standard projection onto
+onto H = H0, methodgen.symbolic.projection), ``standard-projected`` (the standard projection onto
 H = H0: Φ_h once per step, not symmetric) and ``energy-momentum`` (implicit, H exact), each
 composed to the orders given.  Then, at error levels every family reaches, the CPU of each
 family's cheapest row reaching that error (interpolated log-log between its rows), and the
@@ -29,8 +29,8 @@ import math
 import numpy as np
 
 import methodgen as mg
-from methodgen.bench import reference
-from methodgen.peers import min_cpu
+from methodgen.app.bench import reference
+from methodgen.app.peers import min_cpu
 
 PROBLEMS = {
     # name: (scene, y0 override, T, {order: h ladder})

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 import methodgen as mg
-from methodgen import peers
+from methodgen.app import peers
 
 #: (order, family, step sizes) per scene: the rows of methodgen.
 ROWS = {

@@ -25,8 +25,8 @@ import time
 import numpy as np
 
 import methodgen as mg
-from methodgen import peers
-from methodgen.nbody import MAX_STEP_FRACTION, wisdom_holman
+from methodgen.app import peers
+from methodgen.runtime.nbody import MAX_STEP_FRACTION, wisdom_holman
 
 T = 2.0e5
 LEVELS = (1e-6, 1e-8, 1e-9, 1e-10, 1e-11, 4e-12)

@@ -1,9 +1,13 @@
 """methodgen: geometric integrators generated from your Hamiltonian.
 
-Pipeline (data flows one way)::
+Pipeline (data flows one way, and so do the imports: each layer imports only the layers
+before it; tests/test_import_graph.py checks it)::
 
-    scene.toml -> Hamiltonian -> derive -> discretize (Scheme) -> verify
-               -> lower (IR) -> emit (templates) -> generated/*.py -> run / bench
+    problem/   scene text -> Hamiltonian, PoissonSystem (parse, special functions)
+    symbolic/  derive -> discretize (Scheme) -> verify; compositions, splittings, scenes
+    codegen/   lower (IR) -> emit (templates) -> generated/*.py; kernels to machine code
+    runtime/   the stepper the generated modules run on; trajectories on disk
+    app/       the command line, bench, sweep, figures
 
 Public API
 ----------
@@ -28,7 +32,7 @@ methods() / scenes()
 """
 
 from ._version import __version__
-from .build import build, build_text, generate
+from .codegen.build import build, build_text, generate
 from .errors import (GenerationError, InputError, MethodgenError, MethodNotApplicable,
                      ParseError, SceneError)
 
@@ -44,20 +48,19 @@ __all__ = [
 def _lazy_names():
     """``__getattr__`` and ``__dir__`` of the package (PEP 562); its helpers stay out of the namespace."""
     import importlib
-    import sys
-    import types
 
     # Public names imported on first use (they import SymPy and the derivation code).
     lazy = {
-        "Hamiltonian": ".problem", "PoissonSystem": ".poisson",
-        "Scheme": ".schemes", "Traits": ".schemes", "applicable_methods": ".schemes",
-        "discretize": ".schemes", "method_names": ".schemes",
-        "Scene": ".scene", "load_scene": ".scene", "scene_names": ".scene",
-        "autonomise": ".timetransform", "time_transform": ".timetransform",
-        "verify": ".verify", "wisdom_holman": ".nbody", "cite": ".cite",
-        "event": ".events", "section_event": ".events", "poincare": ".events",
-        "save_trajectory": ".trajfile", "read_trajectory": ".trajfile",
-        "Lattice": ".lattice", "build_lattice": ".lattice_emit", "load_lattice_scene": ".lattice_scene",
+        "Hamiltonian": ".problem.problem", "PoissonSystem": ".problem.poisson",
+        "Scheme": ".symbolic.schemes", "Traits": ".symbolic.schemes", "applicable_methods": ".symbolic.schemes",
+        "discretize": ".symbolic.schemes", "method_names": ".symbolic.schemes",
+        "Scene": ".symbolic.scene", "load_scene": ".symbolic.scene", "scene_names": ".symbolic.scene",
+        "autonomise": ".symbolic.timetransform", "time_transform": ".symbolic.timetransform",
+        "verify": ".symbolic.verify", "wisdom_holman": ".runtime.nbody", "cite": ".app.cite",
+        "event": ".runtime.events", "section_event": ".runtime.events", "poincare": ".runtime.events",
+        "save_trajectory": ".runtime.trajfile", "read_trajectory": ".runtime.trajfile",
+        "Lattice": ".problem.lattice", "build_lattice": ".codegen.lattice_emit",
+        "load_lattice_scene": ".app.lattice_scene",
     }
     found: list[frozenset] = []
 
@@ -75,28 +78,13 @@ def _lazy_names():
             value = getattr(importlib.import_module(where, __name__), name)
             globals()[name] = value
             return value
-        if name in submodules():   # methodgen.derive, methodgen.schemes … as before the lazy import
+        if name in submodules():   # methodgen.problem, methodgen.symbolic … (the layers)
             return importlib.import_module(f"{__name__}.{name}")
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
     def __dir__() -> list[str]:
         return sorted(set(globals()) | set(lazy) | submodules())
 
-    class Package(types.ModuleType):
-        """Keeps ``methodgen.verify`` the function when the subpackage of that name is imported.
-
-        Importing a subpackage binds it as an attribute of its parent; the eager
-        ``from .verify import verify`` used to rebind the function right after.  With
-        the lazy import the subpackage may be imported first (by a test or by the
-        CLI): the function must still win, as before.
-        """
-
-        def __setattr__(self, name, value):
-            if name == "verify" and isinstance(value, types.ModuleType):
-                return
-            super().__setattr__(name, value)
-
-    sys.modules[__name__].__class__ = Package
     return __getattr__, __dir__
 
 
@@ -106,13 +94,13 @@ del _lazy_names
 
 def methods() -> list[str]:
     """Names of all methods in the library."""
-    from .schemes import method_names
+    from .symbolic.schemes import method_names
 
     return method_names()
 
 
 def scenes() -> list[str]:
     """Names of the built-in scenes."""
-    from .scene import scene_names
+    from .symbolic.scene import scene_names
 
     return scene_names()

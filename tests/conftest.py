@@ -8,7 +8,7 @@ import pytest
 from pathlib import Path
 
 import methodgen as mg
-from methodgen.emit import file_status, load_module, module_filename, signature
+from methodgen.codegen.emit import file_status, load_module, module_filename, signature
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -121,7 +121,7 @@ def pair(modules, tmp_path_factory):
     return get
 
 
-# Progress lines on stderr depend on how long a phase takes (methodgen.progress: over 2 s), so
+# Progress lines on stderr depend on how long a phase takes (methodgen.codegen.progress: over 2 s), so
 # on a loaded machine they would come and go; the suite runs without them (subprocesses too)
 # unless a test sets the threshold itself (tests/test_progress.py).
 import os as _os  # noqa: E402

@@ -8,9 +8,9 @@ import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
-from methodgen.emit import _environment
-from methodgen.problem import Hamiltonian
-from methodgen.special import SPECIAL_FUNCTIONS
+from methodgen.codegen.emit import _environment
+from methodgen.problem.problem import Hamiltonian
+from methodgen.problem.special import SPECIAL_FUNCTIONS
 
 
 @functools.lru_cache(maxsize=None)
@@ -66,7 +66,7 @@ t0 = 0.5
 
 def cli_main(capsys, *argv):
     """Run ``methodgen argv`` in-process: (exit code, stdout, stderr)."""
-    import methodgen.cli as cli
+    import methodgen.app.cli as cli
     code = cli.main([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err

@@ -1,6 +1,6 @@
 """``.. methodgen-cli::`` — the command-line reference, printed from the parser itself.
 
-The directive asks :func:`methodgen.cli.make_parser` for the ``--help`` text of the program
+The directive asks :func:`methodgen.app.cli.make_parser` for the ``--help`` text of the program
 and of every sub-command, so the reference can never disagree with the CLI.
 """
 
@@ -19,7 +19,7 @@ class MethodgenCli(Directive):
     has_content = False
 
     def run(self):
-        from methodgen.cli import make_parser
+        from methodgen.app.cli import make_parser
 
         os.environ["COLUMNS"] = "100"   # the same wrapping on every machine
         parser = make_parser()

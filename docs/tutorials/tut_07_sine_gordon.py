@@ -32,7 +32,7 @@ for t in sg.terms:
 # AVF keeps H because each term's pieces satisfy the discrete-gradient identity
 # Σ_s A_s (Z1_s - Z0_s) = h(Z1) - h(Z0) — one small exact lemma per template, whatever N.
 
-from methodgen.lattice_scheme import certificates, discretize_lattice  # noqa: E402
+from methodgen.symbolic.lattice_scheme import certificates, discretize_lattice  # noqa: E402
 
 for c in certificates(discretize_lattice(sg, "avf")):
     print(f"[{c.status}] {c.claim}")
@@ -56,7 +56,7 @@ for n in (64, 512):
 # The wave, compiled
 # ------------------
 # ``backend="compiled"`` runs the same steps (to round-off) as machine code: the step loop of
-# :mod:`methodgen.lattice_stepper` with this module's kernel inlined, compiled through LLVM.
+# :mod:`methodgen.runtime.lattice_stepper` with this module's kernel inlined, compiled through LLVM.
 
 fast = mg.build_lattice(sg, "avf", backend="compiled")
 n = 256

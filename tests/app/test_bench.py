@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import bench
+from methodgen.app import bench
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import bench
-from methodgen.cli import main
+from methodgen.app import bench
+from methodgen.app.cli import main
 from methodgen.errors import InputError
 
 

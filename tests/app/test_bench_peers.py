@@ -16,11 +16,11 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen import bench, peers
-from methodgen.build import scene_module_path
-from methodgen.cli import main
-from methodgen.derive import vector_field
-from methodgen.emit import load_module
+from methodgen.app import bench, peers
+from methodgen.codegen.build import scene_module_path
+from methodgen.app.cli import main
+from methodgen.symbolic.derive import vector_field
+from methodgen.codegen.emit import load_module
 from methodgen.errors import SceneError
 
 KEPLER_NBODY = """
@@ -272,7 +272,7 @@ def test_henon_heiles_2d_is_not_the_figure_2_scene():
 
 def test_work_precision_plot_with_peer_rows(tmp_path):
     pytest.importorskip("matplotlib")
-    from methodgen.plots import plot_work_precision
+    from methodgen.app.plots import plot_work_precision
     rows = [{"method": "energy-momentum", "kind": "methodgen", "seconds": s, "error": e, "energy_rel_error": 0.0}
             for s, e in [(0.1, 1e-3), (0.2, 2.5e-4)]]
     rows += [{"method": "heyoka (Taylor)", "kind": "heyoka", "seconds": s, "error": e, "energy_rel_error": de}

@@ -7,11 +7,11 @@ import re
 import pytest
 
 import methodgen as mg
-from methodgen.cite import BIBTEX, KEYS_OF, cite
-from methodgen.compositions import ALL_FAMILIES
-from methodgen.emit import load_module
+from methodgen.app.cite import BIBTEX, KEYS_OF, cite
+from methodgen.symbolic.compositions import ALL_FAMILIES
+from methodgen.codegen.emit import load_module
 from methodgen.errors import InputError
-from methodgen.schemes import METHODS
+from methodgen.symbolic.schemes import METHODS
 
 from conftest import ROOT
 

@@ -14,17 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import methodgen.cli as cli
-import methodgen.cli.bench as cli_bench
-import methodgen.cli.run as cli_run
-import methodgen.emit as emit
-import methodgen.limits as limits
-import methodgen.parse as parse
-import methodgen.sweep as sw
-from methodgen import bench
-from methodgen.cli.common import fmt, join_negative_values
+import methodgen.app.cli as cli
+import methodgen.app.cli.bench as cli_bench
+import methodgen.app.cli.run as cli_run
+import methodgen.codegen.emit as emit
+import methodgen.app.limits as limits
+import methodgen.problem.parse as parse
+import methodgen.app.sweep as sw
+from methodgen.app import bench
+from methodgen.app.cli.common import fmt, join_negative_values
 from methodgen.errors import InputError
-from methodgen.stats import ErrorMax, max_abs_error, max_value
+from methodgen.app.stats import ErrorMax, max_abs_error, max_value
 
 from helpers import FORCED_SCENE, cli_main as _main, one_line as _one_line, strict_json as _no_nan_json
 

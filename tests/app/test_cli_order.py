@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import cli
-from methodgen.cli import generate as cli_generate
-from methodgen.emit import load_module
+from methodgen.app import cli
+from methodgen.app.cli import generate as cli_generate
+from methodgen.codegen.emit import load_module
 from methodgen.errors import SceneError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -128,7 +128,7 @@ def test_scene_order_is_parsed_and_overridden(tmp_path, capsys):
 
 
 def test_sweep_builds_the_scenes_order(tmp_path):
-    from methodgen.sweep import load_spec, plan_sweep
+    from methodgen.app.sweep import load_spec, plan_sweep
 
     _scene(tmp_path, "order = 4", name="s4.toml")
     spec = tmp_path / "sweep.toml"
@@ -165,7 +165,7 @@ def test_bad_scene_order_is_refused_at_load(tmp_path, capsys, extra, fragments):
 
 
 def test_non_symmetric_method_in_a_scene_is_refused_at_run(tmp_path, capsys):
-    kepler = (ROOT / "methodgen" / "scenes" / "kepler.toml").read_text()
+    kepler = (ROOT / "methodgen" / "symbolic" / "scenes" / "kepler.toml").read_text()
     f = tmp_path / "k.toml"
     f.write_text(kepler.replace('method = ["energy-momentum", "midpoint"]', 'method = "itoh-abe"\norder = 4'))
     assert mg.load_scene(f).order == 4

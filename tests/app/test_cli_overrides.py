@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from methodgen import cli
+from methodgen.app import cli
 
 
 def _run(capsys, *argv):

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import cli
-from methodgen.emit import load_module
+from methodgen.app import cli
+from methodgen.codegen.emit import load_module
 from methodgen.errors import SceneError
-from methodgen.runio import load_trajectory
+from methodgen.runtime.runio import load_trajectory
 
 ROOT = Path(__file__).resolve().parents[2]
 R = "sqrt(x**2 + y**2 + z**2)"

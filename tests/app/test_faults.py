@@ -17,14 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import methodgen.cli as cli
-import methodgen.cli.run as cli_run
-import methodgen.cli.scenes as cli_scenes
-from methodgen.cli.common import dump_json
-import methodgen.runio as runio
-import methodgen.sweep as sw
+import methodgen.app.cli as cli
+import methodgen.app.cli.run as cli_run
+import methodgen.app.cli.scenes as cli_scenes
+from methodgen.app.cli.common import dump_json
+import methodgen.runtime.runio as runio
+import methodgen.app.sweep as sw
 from methodgen.errors import StorageError
-from methodgen.runio import ChunkWriter, load_trajectory, recover_orphans
+from methodgen.runtime.runio import ChunkWriter, load_trajectory, recover_orphans
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -273,7 +273,7 @@ def test_disk_full_while_generating_the_module(tmp_path, capsys, monkeypatch):
     """Was: an 18-line OSError traceback.  The write goes to /dev/full: a real ENOSPC."""
     if not os.path.exists("/dev/full"):
         pytest.skip("needs /dev/full")
-    import methodgen.store as store
+    import methodgen.codegen.store as store
 
     real = store.make_temp
 

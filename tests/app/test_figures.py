@@ -11,8 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from methodgen import figures as F
-from methodgen.cli.figures import _summary as _figures_summary
+from methodgen.app import figures as F
+from methodgen.app.cli.figures import _summary as _figures_summary
 from methodgen.errors import InputError
 
 A = F.LINEAR_A
@@ -103,8 +103,8 @@ def test_figure2_caption(fig2):
 
 def test_drift_check_rejects_explicit_euler():
     """Explicit Euler's energy grows steadily: the "no drift" check must say so."""
-    from methodgen.scene import load_scene
-    from methodgen.build import build, scene_module_path
+    from methodgen.symbolic.scene import load_scene
+    from methodgen.codegen.build import build, scene_module_path
 
     scene = load_scene("henon-heiles")
     mod = build(scene.system, "midpoint", path=scene_module_path(scene, "midpoint"))
@@ -145,7 +145,7 @@ def test_modified_energy_check_rejects_wrong_formulas(fig2):
 def test_modified_energy_matches_verification_layer():
     import sympy as sp
 
-    from methodgen.scene import load_scene
+    from methodgen.symbolic.scene import load_scene
 
     system = load_scene("henon-heiles").system
     _, expr = F.modified_energy_function(system)
@@ -164,7 +164,7 @@ SHORT = {"fig1": {"t_right": 20.0}, "fig2": {"t_final": 50.0}}
 
 
 def test_figures_render_png(tmp_path):
-    from methodgen.plots import plot_figure1, write_figures
+    from methodgen.app.plots import plot_figure1, write_figures
 
     res = write_figures(tmp_path, "png", **SHORT)
     f1, f2 = res["files"]
@@ -181,7 +181,7 @@ def test_figures_render_png(tmp_path):
 
 @pytest.mark.parametrize("fmt,magic", [("svg", b"<?xml"), ("pdf", b"%PDF")])
 def test_figure1_renders_svg_pdf(tmp_path, fmt, magic):
-    from methodgen.plots import plot_figure1
+    from methodgen.app.plots import plot_figure1
 
     data = F.figure1_data(**SHORT["fig1"])
     f = plot_figure1(data, tmp_path / f"f.{fmt}")
@@ -192,9 +192,9 @@ def test_figure1_renders_svg_pdf(tmp_path, fmt, magic):
 
 
 def test_plot_run(tmp_path):
-    from methodgen.build import build, scene_module_path
-    from methodgen.plots import plot_run
-    from methodgen.scene import load_scene
+    from methodgen.codegen.build import build, scene_module_path
+    from methodgen.app.plots import plot_run
+    from methodgen.symbolic.scene import load_scene
 
     s = load_scene("henon-heiles")
     mod = build(s.system, "kahan", path=scene_module_path(s, "kahan"))
@@ -212,9 +212,9 @@ def test_plots_return_figures_without_a_path(tmp_path):
     the same picture as the file written with a path (control: another run is another picture)."""
     from matplotlib.figure import Figure
 
-    from methodgen.build import build, scene_module_path
-    from methodgen.plots import plot_run, plot_scene, plot_work_precision
-    from methodgen.scene import load_scene
+    from methodgen.codegen.build import build, scene_module_path
+    from methodgen.app.plots import plot_run, plot_scene, plot_work_precision
+    from methodgen.symbolic.scene import load_scene
 
     s = load_scene("henon-heiles")
     mod = build(s.system, "kahan", path=scene_module_path(s, "kahan"))
@@ -232,14 +232,14 @@ def test_plots_return_figures_without_a_path(tmp_path):
 
 
 def test_plot_scene_constrained(tmp_path):
-    from methodgen.plots import plot_scene
+    from methodgen.app.plots import plot_scene
 
     out = plot_scene("double-pendulum", tmp_path / "dp.png", steps=30)  # with the residual panel
     assert png_size(out) == (1200, 750)  # (x1, y1), (x1, p1x), (y1, p1y) on top, two panels below
 
 
 def test_plot_work_precision(tmp_path):
-    from methodgen.plots import plot_work_precision
+    from methodgen.app.plots import plot_work_precision
 
     rows = [{"method": m, "seconds": s * k, "error": e / k ** 2}
             for m, s, e in (("midpoint", 1e-3, 1e-2), ("kahan", 5e-4, 3e-2)) for k in (1, 2, 4, 8)]
@@ -252,8 +252,8 @@ def test_plot_work_precision(tmp_path):
 
 
 def test_missing_matplotlib_message(tmp_path, monkeypatch, capsys):
-    from methodgen.cli import main
-    from methodgen.plots import PlotUnavailable, plot_work_precision
+    from methodgen.app.cli import main
+    from methodgen.app.plots import PlotUnavailable, plot_work_precision
 
     monkeypatch.setitem(sys.modules, "matplotlib.backends.backend_agg", None)
     with pytest.raises(PlotUnavailable, match=r'pip install "methodgen\[plot\]"'):
@@ -265,8 +265,8 @@ def test_missing_matplotlib_message(tmp_path, monkeypatch, capsys):
 
 
 def test_cli_figures(tmp_path, monkeypatch, capsys):
-    import methodgen.plots as plots
-    from methodgen.cli import main
+    import methodgen.app.plots as plots
+    from methodgen.app.cli import main
 
     full = plots.write_figures
     monkeypatch.setattr(plots, "write_figures", lambda out, fmt="png": full(out, fmt, **SHORT))

@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from methodgen import cli
+from methodgen.app import cli
 from methodgen.errors import SceneError
-from methodgen.lattice_scene import is_lattice_scene, lattice_scene_names, load_lattice_scene
+from methodgen.app.lattice_scene import is_lattice_scene, lattice_scene_names, load_lattice_scene
 
 
 @pytest.fixture(autouse=True)

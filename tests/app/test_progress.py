@@ -8,9 +8,9 @@ import warnings
 import pytest
 
 import methodgen as mg
-import methodgen.cli as cli
-from methodgen import progress
-from methodgen.progress import StderrReporter, phase
+import methodgen.app.cli as cli
+from methodgen.codegen import progress
+from methodgen.codegen.progress import StderrReporter, phase
 
 
 @pytest.fixture(autouse=True)
@@ -293,7 +293,7 @@ def test_unnamed_systems_keep_their_own_estimates(tmp_path):
 
 def test_the_cli_compile_phase_names_its_module(tmp_path, capsys, monkeypatch):
     """The numba branch of ``run`` on a numpy module marked numba (no compile: fast); lines name the module."""
-    import methodgen.cli.run as cli_run
+    import methodgen.app.cli.run as cli_run
 
     real, built = cli_run.build, []
 

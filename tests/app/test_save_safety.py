@@ -23,9 +23,9 @@ import warnings
 import numpy as np
 import pytest
 
-import methodgen.cli as cli
-import methodgen.runio as runio
-from methodgen.runio import ChunkWriter, extent, load_trajectory, recover_orphans
+import methodgen.app.cli as cli
+import methodgen.runtime.runio as runio
+from methodgen.runtime.runio import ChunkWriter, extent, load_trajectory, recover_orphans
 
 
 @pytest.fixture(autouse=True)
@@ -203,8 +203,8 @@ def test_kill_9_recovery_records_the_steps_its_rows_cover(osc, tmp_path, capsys,
     states, meta = load_trajectory(folder / "long.recovered.npz")
     assert len(states) > 201 and (len(states) - 1) % 200 == 0
     assert int(meta["steps_done"]) == (len(states) - 1) * 10 and int(meta["save_every"]) == 10
-    from methodgen.scene import load_scene
-    from methodgen.build import build
+    from methodgen.symbolic.scene import load_scene
+    from methodgen.codegen.build import build
     module = build(load_scene(str(osc)).system, "midpoint")
     assert _rows_match_steps(module, [1.0, 0.0], 0.01, states, meta)
 

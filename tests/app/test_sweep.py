@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import methodgen.sweep as sw
-from methodgen.cli import main
+import methodgen.app.sweep as sw
+from methodgen.app.cli import main
 from methodgen.errors import InputError, MethodgenError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,7 +87,7 @@ def test_inapplicable_method_is_an_input_error():
 
 def test_spec_defaults_scene_path_and_tasks(tmp_path):
     # A scene file next to the spec, referenced relatively; defaults from the scene.
-    scene = (ROOT / "methodgen" / "scenes" / "harmonic.toml").read_text().replace('"harmonic"', '"osc"')
+    scene = (ROOT / "methodgen" / "symbolic" / "scenes" / "harmonic.toml").read_text().replace('"harmonic"', '"osc"')
     _write(tmp_path, scene, "osc.toml")
     spec = sw.load_spec(_write(tmp_path, 'scene = "osc.toml"\nh = 0.1\nt_final = 0.42\n'))
     assert spec.scene.name == "osc" and spec.methods == ("midpoint", "energy-momentum")
@@ -234,7 +234,7 @@ def test_local_cluster_matches_in_process():
 @pytest.fixture(scope="module")
 def threaded_cluster():
     """Threads, not processes: the failure injection below monkeypatches this process's
-    methodgen.sweep, which worker threads share (worker processes would not see it)."""
+    methodgen.app.sweep, which worker threads share (worker processes would not see it)."""
     import distributed
 
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,

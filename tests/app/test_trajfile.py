@@ -1,4 +1,4 @@
-"""Open, versioned trajectory files (``methodgen-trajectory`` 1, HDF5): :mod:`methodgen.trajfile`.
+"""Open, versioned trajectory files (``methodgen-trajectory`` 1, HDF5): :mod:`methodgen.runtime.trajfile`.
 
 * What is written reads back bitwise, by methodgen and by h5py, netCDF4 and xarray in a
   process that cannot import methodgen; the dimensions are netCDF dimensions.
@@ -30,11 +30,11 @@ import pytest
 h5py = pytest.importorskip("h5py")
 
 import methodgen as mg  # noqa: E402
-import methodgen.cli as cli  # noqa: E402
-import methodgen.runio as runio  # noqa: E402
-import methodgen.trajfile as tf  # noqa: E402
+import methodgen.app.cli as cli  # noqa: E402
+import methodgen.runtime.runio as runio  # noqa: E402
+import methodgen.runtime.trajfile as tf  # noqa: E402
 from methodgen.errors import InputError, StorageError  # noqa: E402
-from methodgen.trajfile import (H5ChunkWriter, load_trajectory, read_trajectory, recover_orphans,  # noqa: E402
+from methodgen.runtime.trajfile import (H5ChunkWriter, load_trajectory, read_trajectory, recover_orphans,  # noqa: E402
                                 row_times, save_trajectory)
 
 
@@ -113,7 +113,7 @@ def test_a_newer_format_version_and_a_foreign_hdf5_file_are_refused(tmp_path):
     with pytest.raises(InputError, match="not a methodgen-trajectory file"):
         read_trajectory(tmp_path / "other.h5")
     # runio's reader (the .npz one) points to this module instead of failing obscurely
-    with pytest.raises(InputError, match="methodgen.trajfile.load_trajectory"):
+    with pytest.raises(InputError, match="methodgen.runtime.trajfile.load_trajectory"):
         runio.load_trajectory(where)
 
 
@@ -274,7 +274,7 @@ def test_save_trajectory_after_solve(osc, tmp_path):
 KILLED = textwrap.dedent('''
     import sys, time
     import numpy as np
-    from methodgen.trajfile import H5ChunkWriter
+    from methodgen.runtime.trajfile import H5ChunkWriter
 
     w = H5ChunkWriter(sys.argv[1], meta={"h": 0.25, "save_every": 10, "steps": 10000,
                                          "state_names": ["q", "p"], "time_transform": "", "scene": "k"})

@@ -1,4 +1,4 @@
-"""methodgen.abi: the one owner of the interface between generated kernels and the runtime.
+"""methodgen.codegen.abi: the one owner of the interface between generated kernels and the runtime.
 
 The post kernel's output layout is computed once (abi.PostLayout, from the module's IR); the
 templates and the compiled runtime's configuration read it from there.  These tests check
@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import abi, nbabi
-from methodgen.emit import module_filename
-from methodgen.lower import lower
+from methodgen.codegen import abi
+from methodgen.runtime import nbabi
+from methodgen.codegen.emit import module_filename
+from methodgen.codegen.lower import lower
 
 # (scene, method): each kind of post output -- a carried estimate (energy-momentum), Kahan's
 # linearly implicit step with the energy-jump values, a trapezoidal "direct" estimate, a

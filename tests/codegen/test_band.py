@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.bench import nbody_system
-from methodgen.emit import load_module, render, write_atomic
-from methodgen.lower import jacobian_band, lower
+from methodgen.app.bench import nbody_system
+from methodgen.codegen.emit import load_module, render, write_atomic
+from methodgen.codegen.lower import jacobian_band, lower
 
 from helpers import fpu_chain
 

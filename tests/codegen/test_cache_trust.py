@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 import methodgen as mg
-from methodgen.emit import (HEADER_CONTENT, HEADER_KEYED, KEY_FILE, emit_source, file_status, load_module,
+from methodgen.codegen.emit import (HEADER_CONTENT, HEADER_KEYED, KEY_FILE, emit_source, file_status, load_module,
                             signature, untagged, write_module)
 from methodgen.errors import GenerationError, UntrustedCacheError
 
@@ -87,7 +87,7 @@ def test_intact_cache_file_is_imported_without_regeneration(cache, monkeypatch):
     def boom(*a, **k):
         raise AssertionError("re-derived although the cached file is intact")
 
-    monkeypatch.setattr(sys.modules["methodgen.schemes"], "discretize", boom)  # build imports it on the cold path
+    monkeypatch.setattr(sys.modules["methodgen.symbolic.schemes"], "discretize", boom)  # build imports it on the cold path
     mod = no_runtime_warnings(mg.build, QUARTIC, "midpoint")
     assert Path(mod.__file__) == path and path.stat().st_mtime_ns == mtime
 
@@ -204,7 +204,7 @@ def test_generated_folder_modules_load_with_their_plain_hash():
 
 def test_orphaned_temporary_module_of_a_killed_generation_is_removed(cache):
     path = built(cache)
-    from methodgen.runio import make_temp
+    from methodgen.runtime.runio import make_temp
     fd, tmp = make_temp(cache, path.name)
     os.write(fd, b"# half a module")
     os.close(fd)  # the writer is gone: its lock with it

@@ -1,11 +1,11 @@
-"""Compensated stage sums (methodgen.compensate): the rewrite is the identity at c = 0 and
+"""Compensated stage sums (methodgen.symbolic.compensate): the rewrite is the identity at c = 0 and
 keeps the compensation where a stage point is formed, in floating point."""
 
 from __future__ import annotations
 
 import sympy as sp
 
-from methodgen.compensate import compensate, compensation_symbols, grouped
+from methodgen.symbolic.compensate import compensate, compensation_symbols, grouped
 
 x, y, dx, dy, h, k = sp.symbols("x y _d_x _d_y h k", real=True)
 C = compensation_symbols([x, y])

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.bench import nbody_initial, nbody_system
-from methodgen.emit import load_module, render, write_atomic
-from methodgen.lower import lower
-from methodgen.lower_loops import force_plan, potential_via_sums
+from methodgen.app.bench import nbody_initial, nbody_system
+from methodgen.codegen.emit import load_module, render, write_atomic
+from methodgen.codegen.lower import lower
+from methodgen.codegen.lower_loops import force_plan, potential_via_sums
 
 #: Round-off agreement of one kernel evaluation (|values| ~ 1).
 TOL = 1e-13

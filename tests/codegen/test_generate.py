@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import methodgen as mg
-from methodgen.emit import emit_source, file_status, signature
+from methodgen.codegen.emit import emit_source, file_status, signature
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -41,7 +41,7 @@ def test_check_detects_a_modified_file(tmp_path):
 def test_same_input_same_bytes_across_hash_seeds(tmp_path):
     code = textwrap.dedent("""
         import sys, methodgen as mg
-        from methodgen.emit import emit_source
+        from methodgen.codegen.emit import emit_source
         sc = mg.load_scene("kepler")
         sys.stdout.write(emit_source(mg.discretize(sc.system, "energy-momentum")))
     """)
@@ -78,7 +78,7 @@ def test_edited_file_is_detected_and_never_trusted(tmp_path, kepler):
     assert mod2.SIGNATURE == sig
     with pytest.raises(mg.GenerationError):
         path.write_text(text + "\nprint('x')\n")
-        from methodgen.emit import load_module
+        from methodgen.codegen.emit import load_module
         load_module(path)
 
 
@@ -90,7 +90,7 @@ def test_build_reuses_an_up_to_date_file_without_deriving(tmp_path, kepler, monk
     def boom(*a, **k):
         raise AssertionError("re-derived although nothing changed")
 
-    monkeypatch.setattr(sys.modules["methodgen.schemes"], "discretize", boom)  # build imports it on the cold path
+    monkeypatch.setattr(sys.modules["methodgen.symbolic.schemes"], "discretize", boom)  # build imports it on the cold path
     mod = mg.build(kepler, "energy-momentum", path)
     assert mod.METHOD == "energy-momentum" and path.stat().st_mtime_ns == mtime
     # A different system has a different signature: it must derive (and here hits the trap).
@@ -118,7 +118,7 @@ def test_two_processes_generating_at_once_leave_one_valid_file(tmp_path):
     path = tmp_path / "k.py"
     code = textwrap.dedent(f"""
         import methodgen as mg
-        from methodgen.emit import emit_source, write_atomic
+        from methodgen.codegen.emit import emit_source, write_atomic
         sc = mg.load_scene("kepler")
         src = emit_source(mg.discretize(sc.system, "midpoint"))
         for _ in range(20):
@@ -141,10 +141,18 @@ def test_non_editable_install_can_generate(tmp_path):
     res = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target",
                           str(target), str(wheel)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
+    # every module, template and scene of every layer is in the wheel (the package list is explicit)
+    def files(root, pattern):
+        return {p.relative_to(root).as_posix() for p in root.rglob(pattern) if "__pycache__" not in p.parts}
+    src = ROOT / "methodgen"
+    assert files(target / "methodgen", "*.py") == files(src, "*.py")
+    assert files(target / "methodgen", "*.toml") == files(src, "*.toml")
+    assert {p.name for p in (target / "methodgen" / "codegen" / "templates").glob("*.j2")} == \
+        {p.name for p in (ROOT / "templates").glob("*.j2")}
     code = textwrap.dedent("""
         import methodgen as mg, numpy as np, sys
         assert "site" in mg.__file__, mg.__file__
-        from methodgen.emit import template_dir
+        from methodgen.codegen.emit import template_dir
         assert str(template_dir()).startswith(sys.argv[1]), template_dir()
         sc = mg.load_scene("kepler")
         mod = mg.generate(mg.discretize(sc.system, "energy-momentum"), sys.argv[2])

@@ -3,7 +3,7 @@ import shutil
 from pathlib import Path
 
 import methodgen
-from methodgen import emit
+from methodgen.codegen import emit
 
 
 def _copy_package(tmp_path):
@@ -17,10 +17,10 @@ def test_generator_edit_changes_hash(tmp_path):
     root = _copy_package(tmp_path)
     before = emit._generator_tree_hash(root)
     assert before == emit.generator_hash()  # the copy hashes like the package itself
-    lower = root / "lower.py"
+    lower = root / "codegen" / "lower.py"
     lower.write_text(lower.read_text() + "\n# a derivation change\n")
     assert emit._generator_tree_hash(root) != before
-    scheme = root / "schemes" / "midpoint.py"
+    scheme = root / "symbolic" / "schemes" / "midpoint.py"
     lower.write_text(lower.read_text().replace("\n# a derivation change\n", ""))
     assert emit._generator_tree_hash(root) == before
     scheme.write_text(scheme.read_text() + "\n# x\n")
@@ -31,7 +31,8 @@ def test_front_end_edit_keeps_hash(tmp_path):
     # Negative control of the exclusions: the CLI and verify never shape a module.
     root = _copy_package(tmp_path)
     before = emit._generator_tree_hash(root)
-    for rel in ("cli/run.py", "cli/common.py", "verify/report.py", "bench.py"):
+    for rel in ("app/cli/run.py", "app/cli/common.py", "symbolic/verify/report.py", "app/bench.py",
+                "runtime/trajfile.py", "symbolic/scenes/kepler.toml"):
         f = root / rel
         f.write_text(f.read_text() + "\n# front end\n")
     assert emit._generator_tree_hash(root) == before

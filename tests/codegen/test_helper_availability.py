@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.emit import _environment, emit_source
+from methodgen.codegen.emit import _environment, emit_source
 import dataclasses
 
-from methodgen.lower import _helpers_called, lower
-from methodgen.problem import Hamiltonian
-from methodgen.special import SPECIAL_FUNCTIONS
+from methodgen.codegen.lower import _helpers_called, lower
+from methodgen.problem.problem import Hamiltonian
+from methodgen.problem.special import SPECIAL_FUNCTIONS
 
 TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
 DEF_RE = re.compile(r"^def _f_(\w+)\(", re.M)
@@ -116,7 +116,7 @@ def _numba_helper_module(tmp_path, compiled=None):
     default all), and one jitted function that calls every one of them (one compile for
     the lot)."""
     numba_tpl = (TEMPLATES / "numba_module.py.j2").read_text()
-    # (the module's spelling is the same njit, applied lazily through methodgen.nbabi.jit)
+    # (the module's spelling is the same njit, applied lazily through methodgen.runtime.nbabi.jit)
     inline = re.search(r"^_inline = _rt\.jit\((.*)\)$", numba_tpl, re.M)
     inline = f"_inline = numba.njit({inline.group(1)})"
     loop = re.search(r"\{% for name in ir.helpers %\}\n.*?\{% endfor %\}\n", numba_tpl, re.S).group(0)

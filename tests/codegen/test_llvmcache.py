@@ -1,4 +1,4 @@
-"""The disk cache of LLVM machine code (methodgen.llvmcache).
+"""The disk cache of LLVM machine code (methodgen.codegen.llvmcache).
 
 A later process adds a module's kernels and fused loop from the cache without translating
 anything, and runs bitwise what a fresh compilation runs.  Object code is executable: an
@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.emit import module_filename
+from methodgen.codegen.emit import module_filename
 
 pytest.importorskip("numba")
 
 PROBE = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from methodgen import llvmkernels as lk
+    from methodgen.codegen import llvmkernels as lk
     calls = []
     real = lk._translate_and_compile
 
@@ -34,7 +34,7 @@ PROBE = textwrap.dedent("""
         return real(py_func, *args)
 
     lk._translate_and_compile = counting
-    from methodgen.emit import load_module
+    from methodgen.codegen.emit import load_module
     m = load_module(sys.argv[1])
     np.save(sys.argv[3], m.integrate(np.array(json.loads(sys.argv[2])), 0.05, 60))
     print(json.dumps(sorted(calls)))
@@ -129,7 +129,7 @@ def test_the_cache_stays_bounded_and_drops_killed_writers_files(tmp_path, monkey
     used.  Control: below the limit nothing is removed."""
     import time
 
-    from methodgen import llvmcache
+    from methodgen.codegen import llvmcache
 
     monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(llvmcache, "_MAX_OBJECTS", 4)

@@ -1,4 +1,4 @@
-"""Straight-line kernels compiled through LLVM IR (methodgen.llvmkernels).
+"""Straight-line kernels compiled through LLVM IR (methodgen.codegen.llvmkernels).
 
 A numba module's kernels for the shared runtime are translated from their Python source
 to LLVM IR and compiled by LLVM directly (numba's typing of a large kernel took seconds).
@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.emit import module_filename
+from methodgen.codegen.emit import module_filename
 
 numba = pytest.importorskip("numba")
 
-from methodgen import llvmkernels as lk  # noqa: E402
-from methodgen import nbruntime as rt  # noqa: E402
+from methodgen.codegen import llvmkernels as lk  # noqa: E402
+from methodgen.runtime import nbruntime as rt  # noqa: E402
 
 RES = rt.KERNEL_TYPES["res"]
 
@@ -42,7 +42,7 @@ _ROWS = []
 
 def _res_rows():
     """A numba-compiled loop calling a kernel of signature ``res`` as a first-class function
-    (numba's public API; an LLVM kernel is one through methodgen.nbruntime's registration)."""
+    (numba's public API; an LLVM kernel is one through methodgen.runtime.nbruntime's registration)."""
     if not _ROWS:
         t = numba.types
         V, M = t.float64[::1], t.float64[:, ::1]
@@ -195,7 +195,7 @@ def test_control_flow_helpers_and_stack_buffers_are_bitwise_numbas(tmp_path):
     except !=), the module's scalar helpers (called) and array kernels (inlined into a stack
     buffer's rows, or returning a float in an expression, as a scale kernel): translated, and
     bitwise numba's on random inputs with NaN and inf."""
-    mod = _load(tmp_path, "k_flow", "from methodgen import nbruntime as _rt\n" + FLOW)
+    mod = _load(tmp_path, "k_flow", "from methodgen.runtime import nbruntime as _rt\n" + FLOW)
     ll = lk.compile_kernel(mod.flow, RES)
     assert isinstance(ll, lk.LLVMKernel)
     rng = np.random.default_rng(3)
@@ -355,7 +355,7 @@ def test_a_c_entry_called_through_ctypes_is_the_kernel(tmp_path):
     (arrays as numba's structures by pointer; the fused loop's route, no numba dispatcher) --
     bitwise the compiled runtime's call of the kernel.  Arrays the translated code cannot index
     (not C-contiguous, not float64) are refused by name, never passed."""
-    mod = _load(tmp_path, "k_centry", "from methodgen import nbruntime as _rt\n" + FLOW)
+    mod = _load(tmp_path, "k_centry", "from methodgen.runtime import nbruntime as _rt\n" + FLOW)
     ll = lk.compile_kernel(mod.flow, RES, c_entry=True)
     rng = np.random.default_rng(5)
     Y = rng.normal(size=(40, 3))
@@ -401,7 +401,8 @@ def test_and_or_short_circuit_as_python(tmp_path, guard):
     path.write_text("import math\nimport numba\nimport numpy\n" + src)
     code = textwrap.dedent(f"""
         import importlib.util, numba, numpy as np
-        from methodgen import llvmkernels as lk, nbruntime as rt
+        from methodgen.codegen import llvmkernels as lk
+        from methodgen.runtime import nbruntime as rt
         spec = importlib.util.spec_from_file_location("k_short", {str(path)!r})
         mod = importlib.util.module_from_spec(spec); spec.loader.exec_module(mod)
         ll = lk.compile_kernel(mod.guarded, rt.KERNEL_TYPES["res"])

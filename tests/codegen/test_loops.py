@@ -1,5 +1,5 @@
-"""Sums of like terms: families (methodgen.families) and modules that loop over them
-(methodgen.lower_loops) agree with the unrolled modules to round-off."""
+"""Sums of like terms: families (methodgen.problem.families) and modules that loop over them
+(methodgen.codegen.lower_loops) agree with the unrolled modules to round-off."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.bench import nbody_initial, nbody_system
-from methodgen.derive import separable_split
-from methodgen.emit import load_module, render, write_atomic
-from methodgen.families import term_families
-from methodgen.lower import LOOP_MIN_INSTANCES, lower, uses_loops
+from methodgen.app.bench import nbody_initial, nbody_system
+from methodgen.symbolic.derive import separable_split
+from methodgen.codegen.emit import load_module, render, write_atomic
+from methodgen.problem.families import term_families
+from methodgen.codegen.lower import LOOP_MIN_INSTANCES, lower, uses_loops
 
 from helpers import fpu_chain
 
@@ -205,7 +205,7 @@ def test_chain_loops_agree_with_unrolled(tmp_path, method):
     if method != "midpoint":    # energy-preserving: H to round-off along the looped run
         H = loop.hamiltonian(a)
         assert np.abs(H - H[0]).max() < 1e-13 * abs(H[0])
-    from methodgen.verify.loops import loop_certificates
+    from methodgen.symbolic.verify.loops import loop_certificates
     assert {c.status for c in loop_certificates(scheme)} == {"proved"}
 
 
@@ -215,7 +215,7 @@ def test_chain_loops_agree_with_unrolled(tmp_path, method):
 def test_loop_certificates_prove_and_can_refute(method):
     import dataclasses
 
-    from methodgen.verify.loops import loop_certificates, loop_identities
+    from methodgen.symbolic.verify.loops import loop_certificates, loop_identities
 
     scheme = mg.discretize(nbody_system(3), method)
     certs = loop_certificates(scheme)
@@ -258,7 +258,7 @@ def test_verify_reports_the_loop_claims():
 def test_gradient_by_families_is_the_derivative(system):
     """∇H built from the families' template derivatives is sp.diff's expression, term for term
     (the oracle: differentiating H itself)."""
-    from methodgen.derive import _gradient_by_families, gradient
+    from methodgen.symbolic.derive import _gradient_by_families, gradient
 
     want = [sp.diff(system.H, s) for s in system.y]
     assert list(gradient(system)) == want
@@ -272,8 +272,8 @@ def test_gradient_by_families_is_the_derivative(system):
 def test_brackets_by_families_prove_momenta_and_refuse_what_they_cannot():
     """{P, H} = 0 and {L, H} = 0 of an N-body H shown once per family pattern; an external
     field breaks translation invariance (not shown here, and refuted by the whole bracket)."""
-    from methodgen.derive import _commutes, _commutes_by_families
-    from methodgen.problem import Hamiltonian
+    from methodgen.symbolic.derive import _commutes, _commutes_by_families
+    from methodgen.problem.problem import Hamiltonian
 
     s = nbody_system(4)
     names = {v.name: v for v in s.y}
@@ -293,8 +293,8 @@ def test_avf_template_of_several_terms_is_integrated_term_by_term():
     """A template k*(cos(u0 - u1) + cos(u2 - u3)) is two of AVF's terms: each is integrated
     exactly (a divided difference), as the scheme integrates them, not by quadrature; the
     loop certificates are then exact proofs (review finding: it was quadrature, numerical)."""
-    from methodgen.problem import Hamiltonian
-    from methodgen.verify.loops import loop_certificates
+    from methodgen.problem.problem import Hamiltonian
+    from methodgen.symbolic.verify.loops import loop_certificates
 
     q, p = [f"q{i}" for i in range(1, 7)], [f"p{i}" for i in range(1, 7)]
     H = ("+".join(f"{x}**2/2" for x in p)

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.build import default_path, scene_module_path
-from methodgen.emit import emit_source, module_filename, signature, template_hash
+from methodgen.codegen.build import default_path, scene_module_path
+from methodgen.codegen.emit import emit_source, module_filename, signature, template_hash
 
 pytest.importorskip("numba")
 
@@ -281,7 +281,7 @@ def test_signature_file_names_and_locations(kepler, monkeypatch, tmp_path):
 def test_emitted_source_is_deterministic_and_self_contained(kepler):
     code = textwrap.dedent("""
         import sys, methodgen as mg
-        from methodgen.emit import emit_source
+        from methodgen.codegen.emit import emit_source
         sc = mg.load_scene("kepler")
         sys.stdout.write(emit_source(mg.discretize(sc.system, "energy-momentum"), backend="numba"))
     """)
@@ -305,14 +305,14 @@ def test_emitted_source_is_deterministic_and_self_contained(kepler):
             imported |= {f"{node.module}.{a.name}" for a in node.names}
     # numpy, numba and, of methodgen, only its compiled runtime (on the shared route its
     # numba-free interface nbabi) and the LLVM kernel compiler (never SymPy or the generator)
-    assert imported <= {"math", "operator", "sys", "numba", "numpy", "methodgen.nbruntime", "methodgen.nbabi",
-                        "methodgen.llvmkernels"}
+    assert imported <= {"math", "operator", "sys", "numba", "numpy", "methodgen.runtime.nbruntime", "methodgen.runtime.nbabi",
+                        "methodgen.codegen.llvmkernels"}
 
 
 def test_compiled_code_is_cached_on_disk(tmp_path, monkeypatch):
     """Kernels numba compiles are cached next to the module; straight-line kernels compiled
-    through LLVM IR (methodgen.llvmkernels, milliseconds) are compiled in each process."""
-    from methodgen import llvmkernels
+    through LLVM IR (methodgen.codegen.llvmkernels, milliseconds) are compiled in each process."""
+    from methodgen.codegen import llvmkernels
 
     scheme = mg.discretize(mg.load_scene("kepler").system, "energy-momentum")
     y0 = np.array(mg.load_scene("kepler").y0)

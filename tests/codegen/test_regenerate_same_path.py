@@ -1,7 +1,7 @@
 """A compiled module regenerated at the same path runs its own machine code, never the previous one's.
 
 The compiled route translates a module's kernels from the text the module was executed
-from and keys the machine code by that text (methodgen.kernelsource).  It once read the text
+from and keys the machine code by that text (methodgen.codegen.kernelsource).  It once read the text
 through ``linecache``, which keeps a file's first text for the life of the process: the
 second Hamiltonian generated at ``osc.py`` ran the first one's kernels (energy-momentum's H
 went 2.25 -> 2.50 under a method that keeps H exactly).
@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import kernelsource
+from methodgen.codegen import kernelsource
 
 pytest.importorskip("numba")
 

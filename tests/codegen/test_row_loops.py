@@ -1,4 +1,4 @@
-"""Loops over like rows in compiled kernels (issue 25; methodgen/lower_rows.py).
+"""Loops over like rows in compiled kernels (issue 25; methodgen/codegen/lower_rows.py).
 
 (a) A numba module whose kernels print like rows as loops gives the straight-line module's
     trajectory *bitwise* (Toda ring and FPU chain; energy-momentum, Störmer–Verlet with its
@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-import methodgen.lower_rows as LR
-from methodgen.emit import load_module, render, write_atomic
-from methodgen.lower import lower
+import methodgen.codegen.lower_rows as LR
+from methodgen.codegen.emit import load_module, render, write_atomic
+from methodgen.codegen.lower import lower
 
 numba = pytest.importorskip("numba")
 
@@ -62,7 +62,7 @@ def restamp(text: str) -> str:
     """An edited module with its content hash made to match (a control edits on purpose)."""
     import hashlib
 
-    from methodgen.emit import HEADER_CONTENT
+    from methodgen.codegen.emit import HEADER_CONTENT
     body = text.partition("\n")[2]
     return HEADER_CONTENT + hashlib.sha256(body.encode()).hexdigest() + "\n" + body
 
@@ -107,7 +107,7 @@ def test_row_loops_are_bitwise_the_straight_line_kernels(tmp_path, request, kind
         scheme = mg.discretize(system, method)
         text = source(scheme, True, f"{kind}{n}{method}")
         B = load(source(scheme, False, f"{kind}{n}{method}"), tmp_path, "rows_off")
-    assert "like rows (methodgen.lower_rows)" in text
+    assert "like rows (methodgen.codegen.lower_rows)" in text
     A = load(text, tmp_path, "rows_on")
     y0 = start(system)
     a, b = A.integrate(y0, 0.05, 200), B.integrate(y0, 0.05, 200)

@@ -1,7 +1,7 @@
 """The generated helpers against mpmath, near and at their removable points (numerical).
 
 The exact side — that each helper's formula *is* the function the proofs use — is
-proved by :mod:`methodgen.verify.helpers` (tested at the end of this file, with
+proved by :mod:`methodgen.symbolic.verify.helpers` (tested at the end of this file, with
 negative controls).  Here: floating-point accuracy of the emitted scalar (`_f_`) and
 vector (`_v_`) helpers at gaps from 1e-1 down to 0.
 """
@@ -16,9 +16,9 @@ import pytest
 import sympy as sp
 
 from helpers import special_helpers
-from methodgen.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, dexp_dd, exp_dd, log_dd, sinc_dd, sinc_u,
+from methodgen.problem.special import (DIVIDED_DIFFERENCES, atan_dd, atanc, dexp_dd, exp_dd, log_dd, sinc_dd, sinc_u,
                                sinhc, tan_dd)
-from methodgen.verify.helpers import _certificate, helper_certificate
+from methodgen.symbolic.verify.helpers import _certificate, helper_certificate
 
 MP = {"exp": mpmath.exp, "log": mpmath.log, "sin": mpmath.sin, "cos": mpmath.cos, "tan": mpmath.tan,
       "sinh": mpmath.sinh, "cosh": mpmath.cosh, "tanh": mpmath.tanh, "atan": mpmath.atan}
@@ -222,7 +222,7 @@ def test_a_wrong_atan_branch_is_refuted_inside_its_domain(monkeypatch):
 
 def test_a_wrong_log_form_is_not_proved(monkeypatch):
     """Negative control: log[a, b] as atanhc((b-a)/(a+b))/(a+b) (factor 2 missing)."""
-    from methodgen.special import atanhc
+    from methodgen.problem.special import atanhc
     monkeypatch.setattr(log_dd, "stable_form",
                         classmethod(lambda cls, a, b: atanhc((b - a) / (a + b)) / (a + b)))
     _certificate.cache_clear()

@@ -21,7 +21,7 @@ import pytest
 import methodgen as mg
 from methodgen.errors import InputError
 
-mb = importlib.import_module("methodgen.build")   # the module (methodgen.build is the function)
+mb = importlib.import_module("methodgen.codegen.build")   # the module (methodgen.build is the function)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -36,8 +36,8 @@ mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k"
 y = mod.step(np.array([1.0, 0.0]), 0.1)
 print(json.dumps({"y": list(map(float, y)), "module": mod.__file__,
                   "loaded": sorted(m for m in sys.modules if m == "sympy" or m.startswith(("sympy.", "jinja2",
-                           "methodgen.derive", "methodgen.schemes", "methodgen.problem", "methodgen.lower",
-                           "methodgen.verify")))}))
+                           "methodgen.symbolic.derive", "methodgen.symbolic.schemes", "methodgen.problem.problem",
+                           "methodgen.codegen.lower", "methodgen.symbolic.verify")))}))
 """
 
 
@@ -52,8 +52,8 @@ def test_a_cached_module_imports_and_runs_without_sympy(tmp_path):
     cache = tmp_path / "cache"
     cold = probe(cache)
     # Negative control: the cold path (nothing cached) derives, so SymPy and the schemes are loaded.
-    assert "sympy" in cold["loaded"] and "methodgen.schemes" in cold["loaded"]
-    assert "methodgen.derive" in cold["loaded"]
+    assert "sympy" in cold["loaded"] and "methodgen.symbolic.schemes" in cold["loaded"]
+    assert "methodgen.symbolic.derive" in cold["loaded"]
     warm = probe(cache)
     assert warm["loaded"] == [], warm["loaded"]
     assert warm["module"] == cold["module"] and warm["y"] == cold["y"]
@@ -83,14 +83,14 @@ mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k"
                     backend="numba")
 y = mod.integrate(np.array([1.0, 0.0]), 0.1, 50)
 print(json.dumps({"y": y[-1].tolist(), "module": mod.__file__,
-                  "loaded": sorted(m for m in ("numba", "sympy", "methodgen.nbruntime") if m in sys.modules)}))
+                  "loaded": sorted(m for m in ("numba", "sympy", "methodgen.runtime.nbruntime") if m in sys.modules)}))
 """
 
 
 def test_a_cached_numba_module_runs_fused_without_importing_numba(tmp_path):
     """A cached numba module on its compiled stepper (kernels and loop machine code from the
     caches) imports neither SymPy nor numba (its import alone was 0.18 s of a 0.3 s warm start):
-    the runtime's interface it reads is methodgen.nbabi, plain data.  Control: with every
+    the runtime's interface it reads is methodgen.runtime.nbabi, plain data.  Control: with every
     kernel compiled by numba (METHODGEN_KERNELS=numba) numba is imported, and the stepper,
     run as Python with those kernels, gives the same bits."""
     pytest.importorskip("numba")
@@ -117,7 +117,7 @@ GUARD_PROBE = r"""
 import json, sys
 import numpy as np
 import methodgen as mg
-from methodgen import nbcache
+from methodgen.codegen import nbcache
 mod = mg.build_text(sys.argv[1], ["q"], ["p"], "midpoint", params={"m": 1.0, "k": 2.0}, name="osc",
                     backend="numba")
 mod.integrate(np.array([1.0, 0.0]), 0.1, 5)
@@ -140,7 +140,7 @@ print(json.dumps(out))
 
 def test_a_deferred_cache_guard_is_installed_before_numba_compiles(tmp_path):
     """A cached module on the fused loop defers its numba cache guard (numba is not imported);
-    the first numba compile of one of its functions goes through methodgen.nbcache.numba, which
+    the first numba compile of one of its functions goes through methodgen.codegen.nbcache.numba, which
     installs it first, so no function of the module is cached or loaded unguarded.  Control:
     numba imported by other code does not install it by itself (the door does)."""
     pytest.importorskip("numba")
@@ -162,8 +162,8 @@ def test_a_deferred_cache_guard_is_installed_before_numba_compiles(tmp_path):
 
 
 def test_import_methodgen_itself_does_not_import_sympy(tmp_path):
-    code = ("import sys, methodgen as mg; print(sorted(m for m in ('sympy', 'methodgen.schemes', "
-            "'methodgen.derive', 'jinja2') if m in sys.modules)); mg.Hamiltonian; "
+    code = ("import sys, methodgen as mg; print(sorted(m for m in ('sympy', 'methodgen.symbolic.schemes', "
+            "'methodgen.symbolic.derive', 'jinja2') if m in sys.modules)); mg.Hamiltonian; "
             "print('sympy' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**os.environ, "PYTHONPATH": str(ROOT)}).stdout.split("\n")
@@ -171,9 +171,9 @@ def test_import_methodgen_itself_does_not_import_sympy(tmp_path):
 
 
 def test_lazy_names_are_the_real_ones():
-    import methodgen.verify  # noqa: F401  (the subpackage must not shadow the function)
-    from methodgen.problem import Hamiltonian
-    from methodgen.verify import verify
+    import methodgen.symbolic.verify  # noqa: F401  (the subpackage must not shadow the function)
+    from methodgen.problem.problem import Hamiltonian
+    from methodgen.symbolic.verify import verify
 
     assert mg.Hamiltonian is Hamiltonian and mg.verify is verify and callable(mg.build)
     assert set(mg.__all__) <= set(dir(mg))
@@ -231,7 +231,7 @@ def test_an_index_entry_not_written_by_this_user_is_ignored(tmp_path, monkeypatc
 
 
 def _sig_of(path) -> str:
-    from methodgen.emit import HEADER_SIGNATURE
+    from methodgen.codegen.emit import HEADER_SIGNATURE
 
     for line in Path(path).read_text().splitlines():
         if line.startswith(HEADER_SIGNATURE):
@@ -256,7 +256,7 @@ def _plant(module: Path, marker: Path) -> None:
     """Replace ``module`` by an untagged copy that writes ``marker`` when run, with a recomputed content hash."""
     import hashlib
 
-    from methodgen.emit import HEADER_CONTENT, untagged
+    from methodgen.codegen.emit import HEADER_CONTENT, untagged
 
     body = untagged(module.read_text()).partition("\n")[2]
     body += f"\nimport pathlib\npathlib.Path({str(marker)!r}).write_text('PLANTED CODE RAN')\n"
@@ -310,7 +310,7 @@ def test_an_entry_for_a_given_path_names_exactly_that_path(tmp_path, monkeypatch
 
 def test_index_tags_have_their_own_domain(tmp_path):
     """An index entry's tag is never the tag of a module with the same text (another HMAC domain)."""
-    from methodgen.emit import _cache_key, _keyed_tag
+    from methodgen.codegen.emit import _cache_key, _keyed_tag
 
     root = tmp_path / "cache"
     root.mkdir(mode=0o700)
@@ -360,7 +360,7 @@ def test_the_key_covers_build_py_and_the_sympy_that_would_be_imported(tmp_path, 
     fake.mkdir(parents=True)
     (fake / "__init__.py").write_text("raise ImportError('not a real sympy')\n")
     (fake / "release.py").write_text('__version__ = "0.0.1"\n')
-    code = ("import sys, json, importlib, importlib.metadata as md; mb = importlib.import_module('methodgen.build');"
+    code = ("import sys, json, importlib, importlib.metadata as md; mb = importlib.import_module('methodgen.codegen.build');"
             "k = mb.text_key('p**2/2 + q**2/2', ['q'], ['p'], 'midpoint');"
             "print(json.dumps([k, md.version('sympy'), 'sympy' in sys.modules]))")
 
@@ -412,7 +412,7 @@ def test_the_warm_path_refuses_what_the_cold_path_refuses(tmp_path, monkeypatch)
 # --- one read: the bytes checked are the bytes run (item 4) -------------------------------------
 
 def test_a_module_replaced_between_check_and_import_is_never_imported(tmp_path, monkeypatch):
-    import methodgen.emit as emit
+    import methodgen.codegen.emit as emit
 
     monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
     shared, other = tmp_path / "out" / "shared.py", tmp_path / "out" / "other.py"
@@ -438,7 +438,7 @@ def test_a_module_replaced_between_check_and_import_is_never_imported(tmp_path, 
 
 
 def test_load_module_refuses_another_signature(tmp_path, monkeypatch):
-    from methodgen.emit import load_module
+    from methodgen.codegen.emit import load_module
     from methodgen.errors import GenerationError
 
     monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
@@ -451,7 +451,7 @@ def test_load_module_refuses_another_signature(tmp_path, monkeypatch):
 # --- an index that cannot be used means no warm start, not a failure (item 7) -------------------
 
 def test_an_untrusted_cache_folder_does_not_stop_a_build_elsewhere(tmp_path, monkeypatch):
-    from methodgen.emit import check_cache_folder
+    from methodgen.codegen.emit import check_cache_folder
     from methodgen.errors import UntrustedCacheError
 
     cache = tmp_path / "cache"
@@ -480,18 +480,19 @@ def test_every_public_name_and_submodule_is_an_attribute_in_a_fresh_process():
 import json, pkgutil, sys, types
 import methodgen as mg
 subs = sorted(m.name for m in pkgutil.iter_modules(mg.__path__) if not m.name.startswith("__"))
-light = sorted(m for m in ("sympy", "jinja2", "methodgen.schemes", "methodgen.derive") if m in sys.modules)
+light = sorted(m for m in ("sympy", "jinja2", "methodgen.symbolic.schemes", "methodgen.symbolic.derive") if m in sys.modules)
 bad = [n for n in mg.__all__ + subs if not hasattr(mg, n)]
-kinds = {n: type(getattr(mg, n)).__name__ for n in ("derive", "schemes", "build", "verify", "emit")}
+kinds = {n: type(getattr(mg, n)).__name__ for n in ("problem", "symbolic", "codegen", "runtime", "app", "build",
+                                                   "verify")}
 print(json.dumps({"light": light, "bad": bad, "subs": subs, "kinds": kinds, "dir": dir(mg)}))
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**os.environ, "PYTHONPATH": str(ROOT)})
     got = json.loads(out.stdout)
-    assert got["light"] == [] and got["bad"] == [] and {"derive", "schemes", "cli"} <= set(got["subs"])
-    # build and verify stay the functions (the submodules of those names are not attributes)
-    assert got["kinds"] == {"derive": "module", "schemes": "module", "build": "function",
-                            "verify": "function", "emit": "module"}
+    layers = ("problem", "symbolic", "codegen", "runtime", "app")
+    assert got["light"] == [] and got["bad"] == [] and set(layers) <= set(got["subs"])
+    # the layers are modules; build and verify are the functions (their modules are inside layers)
+    assert got["kinds"] == {**{layer: "module" for layer in layers}, "build": "function", "verify": "function"}
     for helper in ("importlib", "types", "_sys", "_Package", "_LAZY"):
         assert helper not in got["dir"], helper
     assert set(mg.__all__) <= set(got["dir"])

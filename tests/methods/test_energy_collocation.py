@@ -12,9 +12,9 @@ import sympy as sp
 import methodgen as mg
 from conftest import HH_T, HH_Y0
 from methodgen.errors import InputError
-from methodgen.verify import verify
-from methodgen.verify.collocation import energy_collocation_certificates
-from methodgen.verify.report import NUMERICAL, PROVED, REFUTED
+from methodgen.symbolic.verify import verify
+from methodgen.symbolic.verify.collocation import energy_collocation_certificates
+from methodgen.symbolic.verify.report import NUMERICAL, PROVED, REFUTED
 
 
 
@@ -185,7 +185,7 @@ def test_verify_polynomial_h_certificate_once(hh):
 
 def test_measured_order_can_fail(monkeypatch):
     """Negative control of the measured order: claiming order 6 for s = 2 is refuted."""
-    from methodgen.verify import collocation as C
+    from methodgen.symbolic.verify import collocation as C
 
     sc = mg.discretize(mg.load_scene("simple-pendulum").system, "energy-collocation", stages=2)
     assert C._measured_order(sc, 6).status == REFUTED
@@ -200,7 +200,7 @@ def test_measured_order_near_a_singularity_is_not_refuted(monkeypatch):
     finest h, and the full ladder costs 10 s more)."""
     from pathlib import Path
 
-    from methodgen.verify import collocation as C
+    from methodgen.symbolic.verify import collocation as C
 
     scene = mg.load_scene(str(Path(__file__).parents[1] / "user_problems" / "calogero.toml"))
     sc = mg.discretize(scene.system, "energy-collocation", stages=2)
@@ -228,7 +228,7 @@ def test_energy_does_not_drift(tmp_path):
     evaluated in a fixed order, the ensemble mean of H − H0 has no slope (measured
     ~2e-21 per step, below AVF's 1.3e-20).  Negative control: the same scheme with every
     table entry rounded on its own drifts."""
-    from methodgen.schemes.energy_collocation import build
+    from methodgen.symbolic.schemes.energy_collocation import build
 
     duffing = mg.Hamiltonian("p**2/2 + q**2/2 + q**4/4", q=["q"], p=["p"], name="duffing")
     good = mg.generate(build(duffing, 2), tmp_path / "duffing_ec.py")

@@ -1,4 +1,4 @@
-"""First-same-as-last Störmer–Verlet (issue 26, item 2; methodgen/fsal.py): the force at a
+"""First-same-as-last Störmer–Verlet (issue 26, item 2; methodgen/symbolic/fsal.py): the force at a
 stage's end starts the next stage, step and chunk.
 
 (a) Against the step without first-same-as-last: a plain numpy reference written here
@@ -271,7 +271,7 @@ def test_the_plan_is_checked_against_the_scheme(hh):
     expression (exact, no floating point); a scheme whose increment differs gets no plan."""
     import dataclasses
 
-    from methodgen.fsal import fsal_plan
+    from methodgen.symbolic.fsal import fsal_plan
     scheme = mg.discretize(hh, "stormer-verlet")
     plan = fsal_plan(scheme)
     assert plan is not None and len(plan.symbols) == 2

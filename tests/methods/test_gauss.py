@@ -10,9 +10,9 @@ import sympy as sp
 import methodgen as mg
 from conftest import HH_T, HH_Y0
 from methodgen.errors import InputError
-from methodgen.schemes.gauss import coefficients
-from methodgen.verify.collocation import gauss_certificates, moments
-from methodgen.verify.report import NUMERICAL, PROVED, REFUTED
+from methodgen.symbolic.schemes.gauss import coefficients
+from methodgen.symbolic.verify.collocation import gauss_certificates, moments
+from methodgen.symbolic.verify.report import NUMERICAL, PROVED, REFUTED
 
 E = 0.6
 KEPLER_Y0 = np.array([1 - E, 0.0, 0.0, 0.0, np.sqrt((1 + E) / (1 - E)), 0.0])
@@ -127,7 +127,7 @@ def test_numba_equals_numpy(gauss):
 def test_gauss_on_a_large_system_says_its_newton_is_dense():
     """Where Gauss is offered for many degrees of freedom (two bodies in 3-D: 2d = 12) its
     notes say the stage Newton is dense and name the cheaper choices; control: not for 2 DOF."""
-    from methodgen.bench import nbody_system
+    from methodgen.app.bench import nbody_system
 
     big = mg.discretize(nbody_system(2, 1.0, [1.0, 1e-3]), "gauss", stages=2)
     note = [n for n in big.traits.notes if "dense linear system" in n]

@@ -1,7 +1,7 @@
 """The logarithmic Hamiltonian (issue 26, item 1): explicit adaptivity that keeps the structure.
 
 ``time_transform(system, form="log")`` gives Λ = log(T + e) − log(−U), separable, so
-Störmer–Verlet and its compositions are explicit; :func:`methodgen.physical_time.run_to_time`
+Störmer–Verlet and its compositions are explicit; :func:`methodgen.runtime.physical_time.run_to_time`
 reaches a physical time exactly.  Checked: Kepler's orbit kept to round-off at e = 0.99 with
 50 steps per orbit (control: the kick–drift–kick leapfrog of Λ is not exact); the orders of the
 compositions measured in physical time at a fixed physical T (control: without the last solved
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import cli
+from methodgen.app import cli
 from methodgen.errors import InputError
-from methodgen.physical_time import run_to_time
+from methodgen.runtime.physical_time import run_to_time
 
 KEPLER = "(px**2 + py**2 + pz**2)/(2*m) - k/sqrt(x**2 + y**2 + z**2)"
 
@@ -218,7 +218,7 @@ def test_run_to_time_reports_and_refuses(build):
 def test_run_to_time_refuses_a_far_T_before_running_past_max_steps(build, monkeypatch):
     # A T far out is refused after at most max_steps + 1 whole steps of work (the chunks grow
     # up to 3x the steps so far, so without the cap up to 4x max_steps ran before the refusal)
-    import methodgen.physical_time as pt
+    import methodgen.runtime.physical_time as pt
 
     mod = build()
     Y0 = mod.initial_state(pericentre(0.6))
@@ -250,7 +250,7 @@ def test_run_to_time_refuses_a_last_step_that_misses_T(build, monkeypatch):
     # A module whose t(σ) is coarse (t rounded to 1e-3 on single steps) cannot land on T: the
     # miss is an error naming the distance, not a returned state off T.  Control: the check
     # disabled (tolerance inf), the same run returns a state 1e-4 or more away from T
-    import methodgen.physical_time as pt
+    import methodgen.runtime.physical_time as pt
 
     mod = build()
     Y0 = mod.initial_state(pericentre(0.6))
@@ -277,7 +277,7 @@ def test_run_to_time_in_calls_is_the_run_in_one_piece(build, monkeypatch):
     # T = t after n whole steps of one integrate() call: run_to_time reaches it in its calls
     # (chunks, discarded crossings, halvings) bitwise; control: without handing the
     # compensation (and force) from call to call the states differ
-    import methodgen.physical_time as pt
+    import methodgen.runtime.physical_time as pt
 
     mod = build(4)
     Y0, h, n = mod.initial_state(pericentre(0.6)), 2 * math.pi / 40, 3000
@@ -455,7 +455,7 @@ def test_plot_pairs_of_the_exchanged_state(build, tmp_path):
     # The log form's state is (p..., e, q..., t): the default pairs by column order drew the
     # momentum plane px-py (the hodograph) and px-x; now the orbit x-y and x-px, y-py.
     # Control: the Poincaré form's (q..., t, p..., e) keeps the column-order pairs
-    from methodgen.plots import default_pairs, module_pairs
+    from methodgen.app.plots import default_pairs, module_pairs
 
     mod = build()
     names = mod.STATE_NAMES
@@ -486,8 +486,8 @@ def test_cli_refuses_where_the_log_form_does_not_apply(capsys, scene, fragment):
 # --- exact certificates --------------------------------------------------------------------------
 
 def test_log_form_certificates_are_proved(logh):
-    from methodgen.verify.report import PROVED
-    from methodgen.verify.timetransform import time_transform_certificates
+    from methodgen.symbolic.verify.report import PROVED
+    from methodgen.symbolic.verify.timetransform import time_transform_certificates
 
     certs = time_transform_certificates(logh)
     assert len(certs) == 3 and all(c.status == PROVED for c in certs), [(c.claim, c.status) for c in certs]
@@ -495,8 +495,8 @@ def test_log_form_certificates_are_proved(logh):
 
 def test_control_certificates_refute_the_sign_flipped_lambda(logh):
     # Λ itself (not −Λ) on the exchanged state runs the flow backwards: 1L and 3L are refuted.
-    from methodgen.verify.report import PROVED, REFUTED
-    from methodgen.verify.timetransform import time_transform_certificates
+    from methodgen.symbolic.verify.report import PROVED, REFUTED
+    from methodgen.symbolic.verify.timetransform import time_transform_certificates
 
     wrong = mg.Hamiltonian(-logh.H, q=[s.name for s in logh.q], p=[s.name for s in logh.p],
                            params=logh.param_values, name="wrong")
@@ -527,7 +527,7 @@ def test_cli_method_not_applicable_to_the_log_form_says_so(capsys):
 
 
 def test_bench_peers_has_log_form_rows_at_the_physical_T():
-    from methodgen import bench
+    from methodgen.app import bench
 
     out = bench.work_precision(mg.load_scene("kepler-logh"), peers=True, quick=True, orders=(2,), T=2 * math.pi)
     log = [r for r in out["rows"] if r["method"].endswith("[log]")]
@@ -541,7 +541,7 @@ def test_bench_peers_has_log_form_rows_at_the_physical_T():
 def test_bench_peers_log_rows_use_the_family():
     # --composition F chose the family of the rows on H but the [log] rows kept the order's
     # default (suzuki at order 4): both now use F
-    from methodgen import bench
+    from methodgen.app import bench
 
     out = bench.work_precision(mg.load_scene("kepler-logh"), peers=True, quick=True, orders=(4,),
                                T=2 * math.pi, composition="mclachlan")
@@ -554,7 +554,7 @@ def test_bench_peers_log_rows_use_the_family():
 @pytest.mark.parametrize("form", ["log", "poincare"])
 def test_angular_momenta_keep_their_original_names_and_signs(form):
     """The monitored L of a transformed Kepler system are the original's (Lx, Ly, Lz of q × p)."""
-    from methodgen import derive
+    from methodgen.symbolic import derive
     sy = kepler_system()
     tt = (mg.time_transform(sy, form="log") if form == "log"
           else mg.time_transform(sy, "sqrt(x**2 + y**2 + z**2)"))

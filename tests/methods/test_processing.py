@@ -1,4 +1,4 @@
-"""Processed compositions (issue 26, item 2; methodgen/processing.py).
+"""Processed compositions (issue 26, item 2; methodgen/symbolic/processing.py).
 
 (a) Effective order decided in the free algebra (60 digits, to the published digits): the
     whole sequence pre-processor, kernel, post-processor has order 6 / 8 while the kernel
@@ -25,8 +25,8 @@ import pytest
 import methodgen as mg
 from conftest import HH_T, HH_Y0, KEPLER_Y0
 from methodgen.errors import InputError, MethodNotApplicable
-from methodgen.build import build_processed
-from methodgen.processing import (PROCESSED, Processed, ProcessedIntegrator, achieved_order, order_defects,
+from methodgen.codegen.build import build_processed
+from methodgen.symbolic.processing import (PROCESSED, Processed, ProcessedIntegrator, achieved_order, order_defects,
                                   processed_composition)
 
 CASES = [(f, o) for f, orders in PROCESSED.items() for o in orders]
@@ -192,7 +192,7 @@ def test_build_with_a_processed_family(kep):
 
 
 def _cli(capsys, *args):
-    import methodgen.cli as cli
+    import methodgen.app.cli as cli
     code = cli.main([str(a) for a in args])
     out, err = capsys.readouterr()
     return code, out, err
@@ -219,7 +219,7 @@ def test_cli_run_verify_generate(capsys):
 
 
 def test_effective_order_certificate_and_its_control():
-    from methodgen.verify.processed import effective_order_certificate, float64_certificate
+    from methodgen.symbolic.verify.processed import effective_order_certificate, float64_certificate
     proc = processed_composition(8)
     c = effective_order_certificate(proc)
     assert c.status == "numerical" and c.details["passed"] and c.details["kernel_order"] == 4
@@ -234,7 +234,7 @@ def test_effective_order_certificate_and_its_control():
 
 def test_bench_peers_rows_of_a_processed_family():
     pytest.importorskip("heyoka")
-    from methodgen import bench
+    from methodgen.app import bench
     wp = bench.work_precision(mg.load_scene("henon-heiles-2d"), ["stormer-verlet"], quick=True,
                               T=2.0, peers=True, orders=(8,), composition="blanes-casas-murua")
     rows = [r for r in wp["rows"] if r["kind"] == "methodgen" and r["order"] == 8]

@@ -1,4 +1,4 @@
-"""Symmetric projection (methodgen.projection): energy to round-off, symmetry, order kept.
+"""Symmetric projection (methodgen.symbolic.projection): energy to round-off, symmetry, order kept.
 
 Every property has a negative control: the unprojected base step (``_base_integrate``)
 drifts in H; the standard (non-symmetric) projection, built here from the same module's
@@ -179,8 +179,8 @@ def test_numba_agrees(hh):
 
 
 def test_verify_certificates(hh):
-    from methodgen.verify.projection import projection_certificates
-    from methodgen.verify.report import NUMERICAL, PROVED, REFUTED, Certificate
+    from methodgen.symbolic.verify.projection import projection_certificates
+    from methodgen.symbolic.verify.report import NUMERICAL, PROVED, REFUTED, Certificate
 
     s = mg.discretize(hh, "stormer-verlet-projected", order=4)
     assert s.key == "stormer-verlet-projected-order4-suzuki" and s.projection == ("H",)
@@ -225,8 +225,8 @@ def test_bench_and_run_take_the_method():
     """`methodgen bench` rows of the projected method: its own rows, no fsolve row (which would
     be the unprojected step under its name: the failure seen before the fix), and the solver
     table runs it; `run` labels its iterations as the projection's."""
-    from methodgen import bench
-    from methodgen.cli import main
+    from methodgen.app import bench
+    from methodgen.app.cli import main
 
     sc = mg.load_scene("henon-heiles-2d")
     rep = bench.work_precision(sc, ["stormer-verlet-projected"], quick=True)
@@ -257,8 +257,8 @@ def test_sixty_digit_measure_and_control(hh):
     """The 60-digit projected step of the verify certificates: H kept and symmetric to ~1e-55;
     control: the standard projection (no pre-correction of y0) keeps H but is not symmetric,
     and fed to the certificates it refutes the symmetry claim."""
-    from methodgen.verify import projection as vp
-    from methodgen.verify.report import REFUTED
+    from methodgen.symbolic.verify import projection as vp
+    from methodgen.symbolic.verify.report import REFUTED
 
     s = mg.discretize(hh, "stormer-verlet", project="energy")
     good = vp.measure(s)
@@ -292,8 +292,8 @@ def test_projected_splitting_certificates(hh):
     """verify names the splitting's symmetry for the projected step (it was left out: the
     filter looked for "composition" in the claim); control: without a symmetry certificate of
     the step the claim is undecided, not omitted."""
-    from methodgen.verify.projection import projection_certificates
-    from methodgen.verify.report import NUMERICAL, PROVED, UNDECIDED
+    from methodgen.symbolic.verify.projection import projection_certificates
+    from methodgen.symbolic.verify.report import NUMERICAL, PROVED, UNDECIDED
 
     s = mg.discretize(hh, "stormer-verlet", order=4, composition="blanes-moan-rkn", project="energy")
     rep = mg.verify(s)
@@ -309,7 +309,7 @@ def test_projected_splitting_certificates(hh):
 def test_cli_extended_is_one_line_exit_2(capsys):
     """`run --extended` with the projected method: exit 2 and one line (was a ValueError
     traceback from integrate(), exit 1); control: the same run without --extended runs."""
-    from methodgen.cli import main
+    from methodgen.app.cli import main
 
     argv = ["run", "henon-heiles-2d", "--method", "stormer-verlet-projected", "--steps", "5"]
     assert main(argv + ["--extended"]) == 2
@@ -322,7 +322,7 @@ def test_projected_method_name_takes_a_splitting(hh, capsys):
     """`--method stormer-verlet-projected --composition blanes-moan-rkn` (was refused: 'run
     with method stormer-verlet only'): the same steps as project="energy" on the splitting;
     control: a splitting family on another method is still refused."""
-    from methodgen.cli import main
+    from methodgen.app.cli import main
 
     a = mg.build(hh, "stormer-verlet-projected", order=4, composition="blanes-moan-rkn")
     b = mg.build(hh, "stormer-verlet", order=4, composition="blanes-moan-rkn", project="energy")
@@ -353,9 +353,9 @@ def test_sixty_digit_measure_keeps_the_time_budget(kepler):
     """The 60-digit measurement runs under verify's per-claim budget (it ran unbounded: 21 s
     on the outer solar system with 7 invariants): out of time it is undecided, not proved;
     control: with the default budget the same claim is numerical."""
-    from methodgen.verify.budget import budget_supported
-    from methodgen.verify.projection import projection_certificates
-    from methodgen.verify.report import NUMERICAL, UNDECIDED
+    from methodgen.symbolic.verify.budget import budget_supported
+    from methodgen.symbolic.verify.projection import projection_certificates
+    from methodgen.symbolic.verify.report import NUMERICAL, UNDECIDED
 
     if not budget_supported():
         pytest.skip("no SIGALRM budget here")

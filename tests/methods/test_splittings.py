@@ -1,4 +1,4 @@
-"""Splitting methods made for H = T + U (issue 26, item 2; methodgen/splittings.py).
+"""Splitting methods made for H = T + U (issue 26, item 2; methodgen/symbolic/splittings.py).
 
 (a) Order conditions in the free associative algebra on {A, B} (60 digits): each family's
     general order is what is claimed (4, 6; 4 for the RKN families), exactly zero defects (< 1e-40) for McLachlan's
@@ -30,7 +30,7 @@ import pytest
 import methodgen as mg
 from conftest import HH_T, HH_Y0
 from methodgen.errors import InputError, MethodNotApplicable
-from methodgen.splittings import (SPLITTING_FAMILIES, Splitting, general_order, splitting,
+from methodgen.symbolic.splittings import (SPLITTING_FAMILIES, Splitting, general_order, splitting,
                                   splitting_defects)
 
 CASES = [(f, o) for f, orders in SPLITTING_FAMILIES.items() for o in orders]
@@ -78,7 +78,7 @@ def test_srkn6_applies_to_a_non_quadratic_t_with_order_4():
 def test_rkn_order_decided(family, order):
     """Modulo the ideal of [B, [B, [B, A]]] (zero for T quadratic): every family has its order
     for RKN problems, SRKN_11^b 6 although its general order is 4."""
-    from methodgen.splittings import rkn_defects, rkn_order
+    from methodgen.symbolic.splittings import rkn_defects, rkn_order
     s = splitting(order, family)
     assert rkn_order(s) == order, rkn_defects(s, order + 1)
 
@@ -87,7 +87,7 @@ def test_rkn_ideal_is_what_makes_srkn11_order_6():
     """Control: without the ideal (general conditions) the degree-5 defect of SRKN_11^b is
     1e-5; modulo the ideal it is at the printed digits; a symmetric perturbation of two
     kicks (the sum kept) breaks the RKN conditions at degree 3."""
-    from methodgen.splittings import rkn_defects, rkn_order
+    from methodgen.symbolic.splittings import rkn_defects, rkn_order
     s = splitting(6, "blanes-moan-rkn")
     assert splitting_defects(s, 5)[5] > 1e-6 and rkn_defects(s, 5)[5] < 1e-15
     b = [float(x) for x in s.kicks]
@@ -249,8 +249,8 @@ def test_extended_is_refused(hh):
 # --- (f) verify ---------------------------------------------------------------------------
 
 def test_verify_certificates():
-    from methodgen.verify.report import NUMERICAL, PROVED
-    from methodgen.verify.splittings import (splitting_float_certificate, splitting_order_certificate,
+    from methodgen.symbolic.verify.report import NUMERICAL, PROVED
+    from methodgen.symbolic.verify.splittings import (splitting_float_certificate, splitting_order_certificate,
                                              splitting_symmetry_certificate)
     mcl = splitting(4, "mclachlan")
     assert splitting_order_certificate(mcl).status == PROVED          # √19: exact zeros
@@ -266,8 +266,8 @@ def test_verify_negative_controls():
     """A perturbed exact coefficient (symmetric, sums kept) is refuted exactly; a perturbed
     decimal one numerically; a non-palindromic set is not symmetric."""
     import sympy as sp
-    from methodgen.verify.report import REFUTED
-    from methodgen.verify.splittings import splitting_order_certificate, splitting_symmetry_certificate
+    from methodgen.symbolic.verify.report import REFUTED
+    from methodgen.symbolic.verify.splittings import splitting_order_certificate, splitting_symmetry_certificate
     mcl = splitting(4, "mclachlan")
     d = list(mcl.drifts)
     eps = sp.Rational(1, 1000)
@@ -294,7 +294,7 @@ def test_verify_negative_controls():
 
 def test_cli_run_with_a_splitting(capsys, tmp_path, monkeypatch):
     import json
-    from methodgen import cli
+    from methodgen.app import cli
     monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
     code = cli.main(["run", "henon-heiles-2d", "--method", "stormer-verlet", "--order", "6",
                      "--composition", "blanes-moan-rkn", "--steps", "20", "--json"])
@@ -313,7 +313,7 @@ def test_bench_peers_rows_use_the_family():
     """``work_precision(..., peers=True, composition=F)``: the rows above order 2 of
     stormer-verlet are F's; a method F does not apply to keeps the order's default family."""
     pytest.importorskip("heyoka")
-    from methodgen import bench
+    from methodgen.app import bench
     wp = bench.work_precision(mg.load_scene("henon-heiles-2d"), ["stormer-verlet", "midpoint"], quick=True,
                               T=2.0, peers=True, orders=(6,), composition="blanes-moan-rkn")
     labels = {r["method"] for r in wp["rows"] if r["kind"] == "methodgen"}
@@ -347,7 +347,7 @@ def test_verify_report_of_a_splitting_scheme(hh):
 
 
 def test_a_scene_declares_a_splitting(tmp_path, capsys, monkeypatch):
-    from methodgen import cli
+    from methodgen.app import cli
     monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
     f = tmp_path / "hh.toml"
     f.write_text('name = "hh"\n[system]\nH = "(p1**2 + p2**2)/2 + (q1**2 + q2**2)/2 + q1**2*q2 - q2**3/3"\n'

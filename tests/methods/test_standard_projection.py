@@ -1,4 +1,4 @@
-"""The standard projection (``project="energy-standard"``, methodgen.projection): the base step
+"""The standard projection (``project="energy-standard"``, methodgen.symbolic.projection): the base step
 once, then onto H = H0 -- energy to round-off and the order kept at about the explicit cost,
 not symmetric.
 
@@ -143,7 +143,7 @@ def test_key_traits_and_bad_value(hh):
 
 
 def test_verify_certificates(hh):
-    from methodgen.verify.report import NUMERICAL
+    from methodgen.symbolic.verify.report import NUMERICAL
 
     s = mg.discretize(hh, "stormer-verlet", project="energy-standard")
     rep = mg.verify(s)
@@ -162,7 +162,7 @@ def test_verify_decides_at_a_strong_force():
     a plain fixed-point iteration for y1 = ŷ1 + D(y1)λ diverged and verify said "undecided";
     solved by Newton it decides (the invariant to 60 digits).  The symmetric projection of the
     same base is decided too, and symmetric (control of the defect's size)."""
-    from methodgen.verify.report import NUMERICAL
+    from methodgen.symbolic.verify.report import NUMERICAL
 
     cm = mg.Hamiltonian("(p1**2 + p2**2 + p3**2)/2 + w**2*(q1**2 + q2**2 + q3**2)/2"
                         " + g**2*(1/(q1 - q2)**2 + 1/(q1 - q3)**2 + 1/(q2 - q3)**2)",

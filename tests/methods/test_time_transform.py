@@ -10,8 +10,8 @@ import sympy as sp
 
 import methodgen as mg
 from methodgen.errors import InputError, ParseError
-from methodgen.verify.report import PROVED, REFUTED
-from methodgen.verify.timetransform import time_transform_certificates
+from methodgen.symbolic.verify.report import PROVED, REFUTED
+from methodgen.symbolic.verify.timetransform import time_transform_certificates
 
 E = 0.99
 Y0 = np.array([-(1 + E), 0.0, 0.0, 0.0, -np.sqrt((1 - E) / (1 + E)), 0.0])   # apocentre, a = 1

@@ -1,4 +1,4 @@
-"""Wisdom–Holman splittings of [nbody] problems (methodgen.nbody, methodgen.kepler_flow).
+"""Wisdom–Holman splittings of [nbody] problems (methodgen.symbolic.nbody, methodgen.runtime.nbody, methodgen.runtime.kepler_flow).
 
 Numerical checks are labelled as such; the exact ones are SymPy reductions to 0.
 """
@@ -13,17 +13,18 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import kepler_flow as kf
-from methodgen import nbody as W
+from methodgen.runtime import kepler_flow as kf
+from methodgen.runtime import nbody as W
+from methodgen.symbolic import nbody as S
 from methodgen.errors import InputError, MethodNotApplicable
-from methodgen.scene import NBody
+from methodgen.symbolic.scene import NBody
 
 pytest.importorskip("numba")   # the runtime runs as Python without it: too slow for these runs
 
 
 def star_and_planets(eps: float, n_planets: int = 2):
     """A star (mass 1) and planets of mass ``eps`` (G = 1), with an initial state near circular orbits."""
-    from methodgen.bench import nbody_system
+    from methodgen.app.bench import nbody_system
 
     nb = n_planets + 1
     system = nbody_system(nb, 1.0, [1.0] + [eps] * n_planets, name=f"star{n_planets}")
@@ -44,7 +45,7 @@ def star_and_planets(eps: float, n_planets: int = 2):
 
 def star_scene(tmp_path, eps: float = 1e-3, n_planets: int = 2):
     """:func:`star_and_planets` as a scene file with its ``[nbody]`` table: ``(scene, y0)``."""
-    from methodgen.scene import load_scene
+    from methodgen.symbolic.scene import load_scene
 
     system, nbody, y0 = star_and_planets(eps, n_planets)
     text = "\n".join([
@@ -62,7 +63,7 @@ def reference(system, y0, T):
     """DOP853 at rtol 1e-13 (numerical; ~1e-13 off on these short runs)."""
     from scipy.integrate import solve_ivp
 
-    from methodgen.derive import vector_field
+    from methodgen.symbolic.derive import vector_field
     import sympy as sp
 
     f = sp.lambdify([sp.Matrix(system.y)], vector_field(system).subs(
@@ -101,10 +102,10 @@ def error(wh, y0, ref, T, steps):
 
 # --- coefficients (numerical, 50 digits) ------------------------------------------------------------
 
-@pytest.mark.parametrize("name", W.FAMILIES)
+@pytest.mark.parametrize("name", S.FAMILIES)
 def test_coefficients_conditions(name):
-    s = W.splitting(name)
-    cert = W.numerical_certificate(s)
+    s = S.splitting(name)
+    cert = S.numerical_certificate(s)
     assert cert["consistency"] == (0.0, 0.0) or max(cert["consistency"]) < 1e-40
     assert cert["epsilon_order"] == 2 * s.n          # exactly 2n: the next condition fails
     assert cert["quadrature"][2 * s.n] > 1e-10
@@ -120,61 +121,61 @@ def test_corrector_coefficients_are_laskar_robutels():
     want = {"saba1": 1 / 12, "saba2": (2 - math.sqrt(3)) / 24, "saba3": (54 - 13 * math.sqrt(15)) / 648,
             "saba4": 0.003396775048208601, "sbab1": -1 / 24, "sbab2": 1 / 72}
     for name, g in want.items():
-        assert abs(float(W.splitting(name).g) - g) < 1e-15, name
+        assert abs(float(S.splitting(name).g) - g) < 1e-15, name
 
 
 def test_a_moved_node_is_caught():
     """Negative control: a kick moved by 1e-6 of the step fails the quadrature condition of order 2."""
-    s = W.splitting("saba3")
+    s = S.splitting("saba3")
     drifts = list(s.drifts)
     drifts[1] += mp.mpf("1e-6")
     drifts[2] -= mp.mpf("1e-6")
     bad = dataclasses.replace(s, drifts=tuple(drifts))
-    cert = W.numerical_certificate(bad)
+    cert = S.numerical_certificate(bad)
     assert cert["epsilon_order"] < 6
     assert cert["quadrature"][2] > 1e-8
 
 
 def test_unknown_splitting_is_named():
     with pytest.raises(InputError, match="valid: wisdom-holman, saba1"):
-        W.splitting("saba9")
+        S.splitting("saba9")
 
 
 # --- the splitting of H (exact) ----------------------------------------------------------------------
 
 def test_splitting_certificate_exact():
     sc = mg.load_scene("outer-solar-system")
-    cert = W.certify(sc.system, sc.nbody)
+    cert = S.certify(sc.system, sc.nbody)
     assert cert["hamiltonian"] == "symbolic"
     assert cert["splitting"] == {"canonical": True, "kinetic": True, "kepler": True}
 
 
 def test_kepler_scene_is_certified_at_its_parameter_values_only():
     sc = mg.load_scene("kepler")   # H = p²/2m − k/r, declared G k m/r: equal for m = 1
-    assert W.certify(sc.system, sc.nbody)["hamiltonian"] == "at the parameter values"
+    assert S.certify(sc.system, sc.nbody)["hamiltonian"] == "at the parameter values"
     other = mg.Hamiltonian(sc.system.source, q=["x", "y", "z"], p=["px", "py", "pz"], params={"m": 2.0, "k": 1.0})
     # negative control: with m = 2 the Hamiltonian is not the declared one
-    assert W.certify(other, sc.nbody)["hamiltonian"] is False
+    assert S.certify(other, sc.nbody)["hamiltonian"] is False
     with pytest.raises(MethodNotApplicable, match="not the one its \\[nbody\\] table declares"):
         W.wisdom_holman(other, "saba2", nbody=sc.nbody)
 
 
 def test_wrong_jacobi_momenta_fail_the_identities(monkeypatch):
     """Negative control: momenta mapped with A_q instead of A⁻ᵀ are not canonical."""
-    real = W._jacobi_matrices
+    real = S._jacobi_matrices
 
     def wrong(n, m):
         Aq, Ap, M = real(n, m)
         return Aq, Aq, M
 
-    monkeypatch.setattr(W, "_jacobi_matrices", wrong)
-    W._jacobi_identities.cache_clear()
+    monkeypatch.setattr(S, "_jacobi_matrices", wrong)
+    S._jacobi_identities.cache_clear()
     try:
-        ids = W._jacobi_identities(3)
+        ids = S._jacobi_identities(3)
         assert not ids["canonical"] and not ids["kinetic"]
     finally:
         monkeypatch.undo()
-        W._jacobi_identities.cache_clear()
+        S._jacobi_identities.cache_clear()
 
 
 def _brute_force_identities(n):
@@ -184,7 +185,7 @@ def _brute_force_identities(n):
 
     m = sp.symbols(f"m0:{n}", positive=True)
     P = sp.symbols(f"p0:{n}", real=True)
-    Aq, Ap, M = W._jacobi_matrices(n, m)
+    Aq, Ap, M = S._jacobi_matrices(n, m)
     canonical = all(sp.cancel(e) == 0 for e in (Ap * Aq.T - sp.eye(n)))
     pj = Ap * sp.Matrix(P)
     mj = [M[n - 1]] + [m[i] * M[i - 1] / M[i] for i in range(1, n)]
@@ -195,7 +196,7 @@ def _brute_force_identities(n):
 
 @pytest.mark.parametrize("n", [2, 3, 4])
 def test_structural_identities_agree_with_the_whole_reduction(n):
-    assert W._jacobi_identities(n) == _brute_force_identities(n) == \
+    assert S._jacobi_identities(n) == _brute_force_identities(n) == \
         {"canonical": True, "kinetic": True, "kepler": True}
 
 
@@ -205,7 +206,7 @@ def test_one_wrong_entry_of_the_last_body_fails(monkeypatch, where):
     row 0) changed is caught at 4 and at 21 bodies, as the whole reduction catches it at 4."""
     import sympy as sp
 
-    real = W._jacobi_matrices
+    real = S._jacobi_matrices
 
     def wrong(n, m):
         Aq, Ap, M = real(n, m)
@@ -221,25 +222,25 @@ def test_one_wrong_entry_of_the_last_body_fails(monkeypatch, where):
             Aq[0, i] = Aq[0, i] * 2
         return Aq, Ap, M
 
-    monkeypatch.setattr(W, "_jacobi_matrices", wrong)
-    W._jacobi_identities.cache_clear()
+    monkeypatch.setattr(S, "_jacobi_matrices", wrong)
+    S._jacobi_identities.cache_clear()
     try:
         assert not all(_brute_force_identities(4).values())
         for n in (4, 21):
-            ids = W._jacobi_identities(n)
+            ids = S._jacobi_identities(n)
             assert not all(ids.values()), (n, ids)
             assert ids["canonical"] is False
     finally:
         monkeypatch.undo()
-        W._jacobi_identities.cache_clear()
+        S._jacobi_identities.cache_clear()
 
 
 def test_certificate_of_many_bodies_returns():
     """The certificate is polynomial in the number of bodies (it grew ~4.5x a body and did
     not return at 11): 21 and 41 bodies proved here (timed in the closing note, not here)."""
-    W._jacobi_identities.cache_clear()
+    S._jacobi_identities.cache_clear()
     for n in (21, 41):
-        assert W._jacobi_identities(n) == {"canonical": True, "kinetic": True, "kepler": True}
+        assert S._jacobi_identities(n) == {"canonical": True, "kinetic": True, "kepler": True}
 
 
 def test_not_an_nbody_problem_is_refused():
@@ -254,7 +255,7 @@ def test_jacobi_map_is_the_certified_matrix():
 
     system, nbody, y0 = star_and_planets(1e-3, 3)
     m = np.array([1.0, 1e-3, 2e-3, 5e-4])
-    Aq, Ap, _ = W._jacobi_matrices(4, [sp.Rational(repr(float(v))) for v in m])
+    Aq, Ap, _ = S._jacobi_matrices(4, [sp.Rational(repr(float(v))) for v in m])
     Aq = np.array(Aq.evalf(30), dtype=float)
     Ap = np.array(Ap.evalf(30), dtype=float)
     rng = np.random.default_rng(1)
@@ -432,7 +433,7 @@ def test_a_perturbed_kick_loses_the_order(tiny):
     """Negative control: saba3 with one kick weight moved by 1e-3 (and another back: still
     consistent) is no longer of ε-order 6."""
     system, nbody, y0, ref = tiny
-    s = W.splitting("saba3")
+    s = S.splitting("saba3")
     kicks = list(s.kicks)
     kicks[1] += mp.mpf("1e-3")
     kicks[3] -= mp.mpf("1e-3")
@@ -585,9 +586,9 @@ def test_cli_run(capsys, tmp_path):
 def test_bench_rows(tmp_path):
     """bench --peers' Wisdom–Holman rows on a star with two planets (quick ladder), timed for the end
     state, their errors from a run keeping every step; none about a fixed centre."""
-    from methodgen import bench
-    from methodgen.build import build
-    from methodgen.scene import load_scene
+    from methodgen.app import bench
+    from methodgen.codegen.build import build
+    from methodgen.symbolic.scene import load_scene
 
     scene, y0 = star_scene(tmp_path)
     base = build(scene.system, "stormer-verlet", path=tmp_path / "sv.py")
@@ -618,7 +619,7 @@ def test_cli_verify(capsys, monkeypatch):
     code, out, err = cli_main(capsys, "verify", "outer-solar-system", "--method", "sbab4", "--order", "4")
     assert code == 2 and "--order does not apply" in one_line(err)
     # negative control: a splitting whose order condition fails is reported refuted (exit 1)
-    real = W.numerical_certificate
+    real = S.numerical_certificate
 
     def broken(s):
         c = real(s)
@@ -635,7 +636,7 @@ def test_compensated_summation_removes_the_roundoff_floor():
     negative control: plain sums end ≥ 3× farther off (their rounding accumulates over the 3077
     steps).  Chunks carry the compensations: a run in pieces with info is the same run bitwise."""
     pytest.importorskip("heyoka")
-    from methodgen import peers
+    from methodgen.app import peers
 
     sc = mg.load_scene("outer-solar-system")
     y0 = np.array(sc.y0)
@@ -658,7 +659,7 @@ def test_a_scene_of_splittings(capsys, tmp_path):
     """A scene file whose [run] method is a splitting: run and verify take it; methods lists them."""
     from helpers import cli_main, strict_json
 
-    from methodgen.scene import builtin_scene_dir
+    from methodgen.symbolic.scene import builtin_scene_dir
 
     text = (builtin_scene_dir() / "outer-solar-system.toml").read_text()
     text = text.replace('method = ["energy-momentum", "stormer-verlet"]', 'method = "sbab3"')
@@ -836,7 +837,7 @@ def test_comparable_masses_are_warned():
     with pytest.warns(RuntimeWarning, match="ε = 0.5"):
         W.wisdom_holman(system, "saba2", nbody=nbody)
     # the star listed last: the warning says which body to list first
-    from methodgen.bench import nbody_system
+    from methodgen.app.bench import nbody_system
 
     last = nbody_system(3, 1.0, [1e-3, 1e-3, 1.0])
     with pytest.warns(RuntimeWarning, match="Body 2 is the heaviest: list it first"):

@@ -1,5 +1,5 @@
 """The energy projections of the Wisdom–Holman splittings (``wisdom_holman(..., project=...)``,
-methodgen.kepler_flow.project): states onto the run's H and angular momentum by scaling and
+methodgen.runtime.kepler_flow.project): states onto the run's H and angular momentum by scaling and
 rotating the Jacobi momenta -- every returned state (``"energy-output"``, the run itself the
 splitting's) or every step, fed back (``"energy-standard"``).
 
@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import nbody as W
+from methodgen.runtime import nbody as W
+from methodgen.symbolic import nbody as S
 from methodgen.errors import InputError
 from test_wisdom_holman import error, reference, star_and_planets
 
@@ -69,7 +70,7 @@ def test_order_kept_and_control(mode):
     wh = W.wisdom_holman(system, "saba4", nbody=nbody, project=mode)
     e1, e2 = error(wh, y0, ref, 2.0, 8), error(wh, y0, ref, 2.0, 16)
     assert abs(math.log2(e1 / e2) - 4) < 0.3, (e1, e2)
-    s = W.splitting("saba4")
+    s = S.splitting("saba4")
     kicks = list(s.kicks)
     kicks[1] += mp.mpf("1e-3")
     kicks[3] -= mp.mpf("1e-3")
@@ -153,7 +154,7 @@ def test_the_solve_does_not_depend_on_the_unit_of_time():
     largest entry dropped the energy direction (λ_H = 0).  The scaled solve agrees with
     numpy's on it; control: a direction that moves nothing (zero diagonal) gets 0 and the
     others still solve."""
-    from methodgen import kepler_flow as kf
+    from methodgen.runtime import kepler_flow as kf
 
     m, r, v = 1.9e27, 7.8e11, 1.3e4
     q = np.array([r, 0.0, 0.1 * r])
@@ -180,8 +181,8 @@ def test_the_solve_does_not_depend_on_the_unit_of_time():
 def test_si_units_keep_the_energy():
     """The same star and planets as the tests above, in SI-like units (lengths ×1.5e11, time in
     seconds: G and the masses rescaled so the motion is the same): H kept to round-off."""
-    from methodgen.bench import nbody_system
-    from methodgen.scene import NBody
+    from methodgen.app.bench import nbody_system
+    from methodgen.symbolic.scene import NBody
 
     system, nbody, y0 = star_and_planets(1e-3)
     Lu, Tu, Mu = 1.5e11, 5.0e6, 2.0e30                 # units of length, time, mass
@@ -200,7 +201,7 @@ def test_non_finite_energy_is_a_non_finite_error_and_claims():
     """project() on a row with U = -inf (two bodies at one place) says "not finite" (status 2),
     never converged; and the projected splitting's verify claims drop symmetry and
     symplecticity (not claimed) and claim the energy."""
-    from methodgen import kepler_flow as kf
+    from methodgen.runtime import kepler_flow as kf
 
     q = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     p = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])

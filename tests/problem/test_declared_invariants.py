@@ -17,7 +17,7 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.derive import invariants
+from methodgen.symbolic.derive import invariants
 from methodgen.errors import InputError, SceneError
 
 USER = Path(__file__).resolve().parents[1] / "user_problems"
@@ -145,7 +145,7 @@ def test_discrete_gradients_claim_momentum_only_where_their_gradient_respects_it
     assert "P" not in ia.traits.preserved
     # negative control: force the claim; verify refutes it on Itoh–Abe's ∇̄H
     lying = dataclasses.replace(ia, traits=dataclasses.replace(ia.traits, preserved=ia.traits.preserved + ("P",)))
-    from methodgen.verify.invariants import invariant_items
+    from methodgen.symbolic.verify.invariants import invariant_items
     certs = dict(invariant_items(lying))
     assert certs["invariant:P"].status == "refuted"
 
@@ -189,7 +189,7 @@ def test_stormer_verlet_does_not_claim_a_non_bilinear_quadratic_invariant():
     sv = mg.discretize(system, "stormer-verlet")
     assert "E1" not in sv.traits.preserved
     lying = dataclasses.replace(sv, traits=dataclasses.replace(sv.traits, preserved=sv.traits.preserved + ("E1",)))
-    from methodgen.verify.invariants import invariant_items
+    from methodgen.symbolic.verify.invariants import invariant_items
     assert dict(invariant_items(lying))["invariant:E1"].status == "refuted"
 
 
@@ -199,7 +199,7 @@ def test_avf_does_not_claim_angular_momentum_it_does_not_keep():
     avf = mg.discretize(system, "avf")
     assert "L" not in avf.traits.preserved
     lying = dataclasses.replace(avf, traits=dataclasses.replace(avf.traits, preserved=avf.traits.preserved + ("L",)))
-    from methodgen.verify.invariants import invariant_items
+    from methodgen.symbolic.verify.invariants import invariant_items
     assert dict(invariant_items(lying))["invariant:L"].status == "refuted"
 
 
@@ -262,7 +262,7 @@ def test_scene_invariants_bad_input(tmp_path, line, message):
 def test_run_reports_declared_invariants(tmp_path, capsys):
     import json
 
-    from methodgen.cli import main
+    from methodgen.app.cli import main
     path = tmp_path / "toda.toml"
     path.write_text(SCENE.format(invariants='P = "p1 + p2 + p3"'))
     main(["run", str(path), "--json"])

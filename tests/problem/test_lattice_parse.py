@@ -7,7 +7,7 @@ import pytest
 import sympy as sp
 
 from methodgen.errors import InputError, ParseError
-from methodgen.lattice import Bound, Lattice, slot_symbol
+from methodgen.problem.lattice import Bound, Lattice, slot_symbol
 
 SG = ("Sum(p[i]**2/2, i, 1, N) + Sum((q[i % N + 1] - q[i])**2*N**2/(2*L**2), i, 1, N) "
       "+ Sum(1 - cos(q[i]), i, 1, N)")
@@ -28,7 +28,7 @@ def test_periodic_terms_are_templates_in_slot_symbols():
 def test_expansion_is_the_sum_written_out(n):
     """The templates summed over their ranges give the sum parsed with the number for N (the
     expanding parser of methodgen.parse): the same expression."""
-    from methodgen.parse import parse_expr
+    from methodgen.problem.parse import parse_expr
 
     lat = Lattice(FPU, params={"beta": 0.5})
     H, qs, ps = lat.expand(n)

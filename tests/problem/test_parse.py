@@ -7,7 +7,7 @@ import sympy as sp
 
 import methodgen as mg
 from methodgen.errors import InputError, ParseError
-from methodgen.parse import parse_expr
+from methodgen.problem.parse import parse_expr
 
 X, Y = sp.symbols("x y", real=True)
 SYMS = {"x": X, "y": Y}

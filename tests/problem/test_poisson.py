@@ -11,12 +11,12 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.derive import invariants, vector_field
-from methodgen.verify.exact import Domain, certify
-from methodgen.verify.invariants import invariant_preserved
-from methodgen.schemes.base import STEP
-from methodgen.verify.kahan import modified_energy_expr, modified_energy_structural
-from methodgen.verify.poisson import (casimir_certificate, jacobi_certificate, kahan_conditions,
+from methodgen.symbolic.derive import invariants, vector_field
+from methodgen.symbolic.verify.exact import Domain, certify
+from methodgen.symbolic.verify.invariants import invariant_preserved
+from methodgen.symbolic.schemes.base import STEP
+from methodgen.symbolic.verify.kahan import modified_energy_expr, modified_energy_structural
+from methodgen.symbolic.verify.poisson import (casimir_certificate, jacobi_certificate, kahan_conditions,
                                       skew_certificate, structure_symmetry)
 
 RB_H = "m1**2/(2*I1) + m2**2/(2*I2) + m3**2/(2*I3)"
@@ -319,7 +319,7 @@ def test_a_non_polynomial_casimir_is_declared_and_then_proved():
     """The Casimir search covers polynomials of degree ≤ 2 only: log u + log v + log w of the
     3-d Lotka–Volterra system is not found, and declared it is proved a first integral (about
     the exact flow).  Negative control: a declared log u + log v is refuted."""
-    from methodgen.verify.report import FLOW
+    from methodgen.symbolic.verify.report import FLOW
 
     kw = dict(y=["u", "v", "w"], S=[["0", "u*v", "-u*w"], ["-u*v", "0", "v*w"], ["u*w", "-v*w", "0"]])
     H = "u + v + w - log(u) - log(v) - log(w)"

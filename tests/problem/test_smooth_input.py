@@ -17,7 +17,7 @@ import sympy as sp
 
 import methodgen as mg
 from methodgen.errors import InputError, ParseError
-from methodgen.parse import check_smooth
+from methodgen.problem.parse import check_smooth
 
 q, p, x, y = sp.symbols("q p x y")  # plain symbols, as a user would write them
 

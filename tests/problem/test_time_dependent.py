@@ -14,11 +14,11 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen import cli
-from methodgen.derive import declared
+from methodgen.app import cli
+from methodgen.symbolic.derive import declared
 from methodgen.errors import InputError, MethodNotApplicable, ParseError, SceneError
-from methodgen.verify.report import PROVED, REFUTED
-from methodgen.verify.timetransform import time_transform_certificates
+from methodgen.symbolic.verify.report import PROVED, REFUTED
+from methodgen.symbolic.verify.timetransform import time_transform_certificates
 
 FORCED = "p**2/2 + w**2*x**2/2 - F*x*cos(W*t)"
 FORCED_PARAMS = {"w": 1.0, "F": 0.5, "W": 1.3}
@@ -350,7 +350,7 @@ def test_bad_scenes_are_one_line_errors(tmp_path, capsys, time, run, extra, H, f
 
 
 def test_a_sweep_refuses_a_time_dependent_scene(tmp_path):
-    from methodgen.sweep import SpecError, parse_spec
+    from methodgen.app.sweep import SpecError, parse_spec
 
     with pytest.raises(SpecError, match=r"time-dependent H \(\[system\] time\)"):
         parse_spec({"scene": str(_scene(tmp_path))})

@@ -17,8 +17,8 @@ import pytest
 
 import methodgen as mg
 from conftest import HH_T, HH_Y0
-from methodgen.compositions import Composition, composition
-from methodgen.emit import module_filename
+from methodgen.symbolic.compositions import Composition, composition
+from methodgen.codegen.emit import module_filename
 
 E = 0.6                                      # Kepler eccentricity (the bench problem's)
 KEPLER_Y0 = np.array([1 - E, 0.0, 0.0, 0.0, np.sqrt((1 + E) / (1 - E)), 0.0])

@@ -1,4 +1,4 @@
-"""Lock-step batches of explicit methods on the numba backend (methodgen.stepper.lockstep).
+"""Lock-step batches of explicit methods on the numba backend (methodgen.runtime.stepper.lockstep).
 
 A batch of at least ``nbabi.MIN_BATCH`` trajectories of an explicit method runs in
 blocks of ``_BLOCK_LANES`` lanes, stepped together through the module's block kernel
@@ -21,11 +21,12 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.emit import module_filename
+from methodgen.codegen.emit import module_filename
 
 pytest.importorskip("numba")
 
-from methodgen import abi, fused, llvmkernels, nbabi, stepper  # noqa: E402
+from methodgen.codegen import abi, llvmkernels  # noqa: E402
+from methodgen.runtime import fused, nbabi, stepper  # noqa: E402
 
 B = 300  # two full blocks of 128 and a remainder of 44
 # (label, order, composition): Störmer–Verlet, a composition of it, a splitting family
@@ -127,7 +128,7 @@ def test_lockstep_compiled_and_as_python_agree_bitwise(modules, logh):
 
 
 def _edited_lockstep(monkeypatch, line, replacement):
-    """:func:`methodgen.stepper.lockstep` with one line of its source replaced (a fault)."""
+    """:func:`methodgen.runtime.stepper.lockstep` with one line of its source replaced (a fault)."""
     src = textwrap.dedent(inspect.getsource(stepper.lockstep))
     assert src.count(line) == 1
     namespace = {}

@@ -1,4 +1,4 @@
-"""Events of ``mod.solve`` and Poincaré sections (methodgen.events), on both backends.
+"""Events of ``mod.solve`` and Poincaré sections (methodgen.runtime.events), on both backends.
 
 A crossing is located on the method's own map (the sub-step τ with g(Φ_τ(y_n)) = 0), so the
 located state keeps what the method keeps: energy-momentum's located states keep H to
@@ -174,7 +174,7 @@ def test_cli_section(tmp_path, capsys):
     a malformed section is a one-line error with exit 2 (no traceback)."""
     import json
 
-    from methodgen.cli import main
+    from methodgen.app.cli import main
 
     argv = ["run", "henon-heiles-2d", "--y0", "0,0.1,0.35,0.2", "--h", "0.05", "--steps", "2000",
             "--section", "q1 = 0, p1 > 0"]
@@ -193,7 +193,7 @@ def test_cli_section(tmp_path, capsys):
 
 def test_section_figure_is_returned():
     pytest.importorskip("matplotlib")
-    from methodgen.plots import section_figure
+    from methodgen.app.plots import section_figure
 
     pts = np.array([[0.0, 0.1, 0.3, 0.2], [0.0, -0.1, 0.2, 0.1]])
     fig = section_figure(pts, ["q1", "q2", "p1", "p2"], "q1 = 0, p1 > 0")

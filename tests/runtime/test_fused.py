@@ -1,4 +1,4 @@
-"""The stepper compiled with a module's kernels inlined (methodgen.stepper, methodgen.fused).
+"""The stepper compiled with a module's kernels inlined (methodgen.runtime.stepper, methodgen.runtime.fused).
 
 Compared with the same stepper run as Python (its reference, METHODGEN_STEPPER=python) it gives
 the same numbers bitwise, failures included: a failing step is recorded
@@ -25,7 +25,7 @@ APO = np.array([1 + E, 0.0, 0.0, 0.0, math.sqrt((1 - E) / (1 + E)), 0.0])
 
 def _counting(monkeypatch):
     """Count the runs of the stepper as Python (the reference the compiled one is compared to)."""
-    from methodgen import fused
+    from methodgen.runtime import fused
     calls = []
     real = fused.python_stepper
 
@@ -171,7 +171,7 @@ def test_an_undecided_resolution_bound_stops_and_resumes(monkeypatch):
     check: the stepper stops, its driver takes ρ from the eigenvalues, and the stepper resumes
     at that stage -- bitwise the Python stepper's run, which is never called.  Control: unit
     masses at h = 0.5, where the row sums decide, run in one drive."""
-    from methodgen import fused as fz
+    from methodgen.runtime import fused as fz
     drives = []
     real = fz._drive
 
@@ -246,7 +246,7 @@ def test_the_asked_spectral_radius_decides(monkeypatch):
     the run -- the error (its h·ω) is the Python stepper's.  Negative control: a driver that
     answers half the spectral radius lets the unresolved step pass (the error changes), so the
     answer is what the stepper used."""
-    from methodgen import fused as fz
+    from methodgen.runtime import fused as fz
     scene = mg.load_scene("henon-heiles-2d")
     mod = mg.build(scene.system, "energy-momentum", backend="numba")
     y0 = np.array(scene.y0, float)

@@ -10,9 +10,9 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.lattice import Lattice
-from methodgen.lattice_emit import build_lattice, lattice_signature, render
-from methodgen.lattice_scheme import certificates, discretize_lattice
+from methodgen.problem.lattice import Lattice
+from methodgen.codegen.lattice_emit import build_lattice, lattice_signature, render
+from methodgen.symbolic.lattice_scheme import certificates, discretize_lattice
 
 SG = ("Sum(p[i]**2/2, i, 1, N) + Sum((q[i % N + 1] - q[i])**2*N**2/(2*L**2), i, 1, N) "
       "+ Sum(1 - cos(q[i]), i, 1, N)")
@@ -239,7 +239,7 @@ def test_schrodinger_lattice_mass_and_energy(tmp_path):
     assert sm.invariant_errors["H"] > 1e-10 * abs(I0["H"])
 
 
-# --- the compiled backend: the same steps through methodgen.lattice_stepper ------------------------
+# --- the compiled backend: the same steps through methodgen.runtime.lattice_stepper ------------------------
 
 @pytest.fixture(scope="module")
 def sg_compiled(sg_lattice, tmp_path_factory):
@@ -268,7 +268,7 @@ def test_compiled_steps_are_the_numpy_modules(text, params, n, solver, tmp_path)
 
 def test_compiled_loop_is_its_python_source_bitwise(sg_compiled):
     """The step loop compiled and the same source run as Python: the same bits."""
-    from methodgen.lattice_driver import run_steps
+    from methodgen.runtime.lattice_driver import run_steps
 
     n = 6
     out = []
@@ -283,9 +283,9 @@ def test_compiled_loop_is_its_python_source_bitwise(sg_compiled):
 @pytest.mark.parametrize("n", [3, 4, 5, 9, 32])
 @pytest.mark.parametrize("periodic", [True, False])
 def test_bordered_block_elimination_agrees_with_a_dense_solve(sg, n, periodic):
-    """methodgen.lattice_stepper's factor/solve (as Python) against numpy's dense solve of the
+    """methodgen.runtime.lattice_stepper's factor/solve (as Python) against numpy's dense solve of the
     same Newton matrix; negative control: a wrong corner block is seen."""
-    from methodgen import lattice_stepper as ls
+    from methodgen.runtime import lattice_stepper as ls
 
     rng = np.random.default_rng(100 + n)
     h = 0.3
@@ -329,7 +329,7 @@ def test_midpoint_quadratic_invariants_are_decided_per_template():
     density (N never enters): the NLS mass is proved kept by the midpoint rule; Σ q² (negative
     control) and a discrete momentum (not an invariant of this lattice) are refuted; a lattice
     with boundaries is not decided (nothing claimed)."""
-    from methodgen.lattice_scheme import quadratic_invariant_certificates
+    from methodgen.symbolic.lattice_scheme import quadratic_invariant_certificates
 
     lat = Lattice(NLS, params={"L": 8.0}, invariants={
         "mass": "Sum(q[i]**2 + p[i]**2, i, 1, N)", "bad": "Sum(q[i]**2, i, 1, N)",

@@ -1,7 +1,7 @@
 """The local error estimate of the generated steppers (issue 13, item 1) and its advice (item 6).
 
 Every generated stepper compares each step with its embedded partner on the chord
-y0 -> y1 (see methodgen.lower.local_error_plan) and raises ResolutionError when the
+y0 -> y1 (see methodgen.codegen.lower.local_error_plan) and raises ResolutionError when the
 estimate exceeds MAX_LOCAL_ERROR times the step.  The regression: Kepler from
 apocentre at high eccentricity, one period, where a step straddling the pericentre
 used to return a wrong orbit with exact invariants and no exception.
@@ -17,7 +17,7 @@ import sympy as sp
 from scipy.integrate import solve_ivp
 
 import methodgen as mg
-from methodgen.derive import separable_split, vector_field
+from methodgen.symbolic.derive import separable_split, vector_field
 
 from conftest import SCENE_METHODS, marked, scene_y0
 
@@ -106,7 +106,7 @@ def test_the_estimate_is_what_fires(method, modules, kepler, kepler_refs, monkey
 
 
 def _oracle_rho(system, method, y0, y1, h):
-    """|E|/|Δy| of one step by the formulas of methodgen.lower.local_error_plan, from lambdify."""
+    """|E|/|Δy| of one step by the formulas of methodgen.codegen.lower.local_error_plan, from lambdify."""
     sub = {s: system.param_values[s.name] for s in system.params}
     f = sp.lambdify([list(system.y)], list(vector_field(system).xreplace(sub)), "numpy")
     f0, f1, fm = (np.array(f(v), dtype=float) for v in (y0, y1, (y0 + y1) / 2))

@@ -1,6 +1,6 @@
-"""The numba backend's runtime (methodgen.nbabi, methodgen.nbruntime).
+"""The numba backend's runtime (methodgen.runtime.nbabi, methodgen.runtime.nbruntime).
 
-A numba module compiles only its kernels and runs on the stepper (methodgen.stepper).
+A numba module compiles only its kernels and runs on the stepper (methodgen.runtime.stepper).
 These tests check that every step structure takes it, that it reads its per-stage
 coefficients from the module, and that a stale cached runtime is rebuilt, never loaded.
 """
@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen import emit
-from methodgen.emit import emit_source, module_filename
+from methodgen.codegen import emit
+from methodgen.codegen.emit import emit_source, module_filename
 
 pytest.importorskip("numba")
 
-from methodgen import nbabi, nbruntime  # noqa: E402
+from methodgen.runtime import nbabi, nbruntime  # noqa: E402
 
 
 def _module(tmp_path, scene_name, method, order=2, **options):
@@ -36,7 +36,7 @@ def _module(tmp_path, scene_name, method, order=2, **options):
 
 def test_every_step_structure_takes_the_stepper(kepler, hh):
     """Explicit, Newton-solved, linearly implicit and projected steps all run on the stepper
-    (methodgen.stepper through methodgen.nbabi.run); the module holds kernels only (no
+    (methodgen.runtime.stepper through methodgen.runtime.nbabi.run); the module holds kernels only (no
     compiled loop of its own)."""
     schemes = [mg.discretize(kepler, "energy-momentum"), mg.discretize(kepler, "stormer-verlet"),
                mg.discretize(mg.load_scene("henon-heiles").system, "kahan"),
@@ -140,7 +140,7 @@ def test_the_runtime_is_stamped_with_its_content_hash():
 
 _TINY = '''
 import os, sys
-from methodgen.nbcache import install_stamp_guard, source_digest
+from methodgen.codegen.nbcache import install_stamp_guard, source_digest
 P = os.path.abspath(__file__)
 install_stamp_guard(P, {stamp})
 import numba
@@ -209,8 +209,8 @@ def test_a_numba_module_runs_without_compiling_or_loading_a_numba_function(tmp_p
     mg.generate(mg.discretize(scene.system, "midpoint"), path, backend="numba")
     code = textwrap.dedent(f"""
         import sys, numpy as np
-        from methodgen import fused
-        from methodgen.emit import load_module
+        from methodgen.runtime import fused
+        from methodgen.codegen.emit import load_module
         m = load_module({str(path)!r})
         m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
         assert fused._LOOPS
@@ -299,7 +299,7 @@ def test_stage_systems_by_structure_run_on_the_shared_runtime(tmp_path, monkeypa
     iteration).  Now residual, Jacobian and 50 steps agree with the numpy module to
     round-off.  Control: without the stage system in the
     module's description (the straight-line kernels of ``ir.scalar``), the residual is wrong."""
-    from methodgen import lower
+    from methodgen.codegen import lower
 
     scene = mg.load_scene("simple-pendulum")
     scheme = mg.discretize(scene.system, "gauss")
@@ -336,7 +336,7 @@ def test_a_module_loaded_by_methodgen_can_be_imported_by_its_plain_name(tmp_path
     (tmp_path / "plainmod.py").write_text(_PLAIN)
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["PYTHONPATH"] = os.pathsep.join([str(tmp_path)] + sys.path)
-    load = ("from pathlib import Path; import methodgen.emit as e, {patch}; "
+    load = ("from pathlib import Path; import methodgen.codegen.emit as e, {patch}; "
             "p = Path({path!r}).resolve(); m = e._exec_source(p, p.read_bytes()); "
             "print(m.f(), sum(m.f.stats.cache_hits.values()))")
 
@@ -351,7 +351,7 @@ def test_a_module_loaded_by_methodgen_can_be_imported_by_its_plain_name(tmp_path
     assert plain.stdout.split() == ["4242"]
     # control: without the per-name cache entries the plain import loads the private one and fails
     shutil.rmtree(tmp_path / "__pycache__")
-    off = "methodgen.nbcache as c; c.install_stamp_guard = lambda *a, **k: None"
+    off = "methodgen.codegen.nbcache as c; c.install_stamp_guard = lambda *a, **k: None"
     assert run(load.format(patch=off, path=path)).stdout.split() == ["4242", "0"]
     plain = run("import plainmod; print(plainmod.f())")
     assert plain.returncode != 0 and "methodgen_generated" in plain.stderr

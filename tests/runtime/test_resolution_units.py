@@ -13,7 +13,7 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.derive import vector_field
+from methodgen.symbolic.derive import vector_field
 
 H = ("(m2*l2**2*p1**2 + (m1 + m2)*l1**2*p2**2 - 2*m2*l1*l2*p1*p2*cos(q1 - q2))"
      "/(2*m2*l1**2*l2**2*(m1 + m2*sin(q1 - q2)**2)) - (m1 + m2)*g*l1*cos(q1) - m2*g*l2*cos(q2)")

@@ -7,7 +7,7 @@ issue 16) leaves a tiny systematic energy drift, ~1e-21 per step for the harmoni
 oscillator: the compensation it carries is left out of the stages, and it leans the way
 the state moves.  Invisible for 10⁴ steps in one trajectory, it turns the √t law into
 t^0.6–0.8 over 10⁶ steps.  The generated kernels now evaluate every stage at the exact
-numerical state y + c (:mod:`methodgen.compensate`).  Here the drift is measured
+numerical state y + c (:mod:`methodgen.symbolic.compensate`).  Here the drift is measured
 directly as the ensemble mean of the energy error of the exact numerical states
 y + compensation (in extended precision); the negative controls generate the same method
 without compensated stage sums.
@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.scene import scene_names
-from methodgen.build import scene_module_path
-from methodgen.emit import load_module
+from methodgen.symbolic.scene import scene_names
+from methodgen.codegen.build import scene_module_path
+from methodgen.codegen.emit import load_module
 from conftest import marked
 
 pytestmark = pytest.mark.skipif(np.finfo(np.longdouble).nmant <= 52,
@@ -44,7 +44,7 @@ def _energy_error(module, Y, comp, H0):
 def _plain(system, method, path, monkeypatch, backend="numpy"):
     """The same method generated *without* compensated stage sums (the stepper before
     issue 16): every stage sum y + w·z is formed from the stored y, its compensation left out."""
-    import methodgen.lower as lower
+    import methodgen.codegen.lower as lower
 
     with monkeypatch.context() as mp:
         mp.setattr(lower, "compensate", lambda exprs, comp: list(exprs))
@@ -68,7 +68,7 @@ def _harmonic_phases(B=2000):
 
 def test_default_stepper_has_no_systematic_round_off_drift(tmp_path, monkeypatch):
     """Harmonic oscillator, midpoint rule, h = 0.01 (not a power of two), 2000 phases,
-    15000 steps.  With compensated stage sums (methodgen.compensate) the ensemble mean of
+    15000 steps.  With compensated stage sums (methodgen.symbolic.compensate) the ensemble mean of
     the energy error is within 3 standard errors of 0; the stepper without them drifts
     (the negative control: mean > 6 standard errors, ~1e-21 per step)."""
     scene, m = _module("harmonic", "midpoint")
@@ -151,7 +151,7 @@ def test_extended_refinement_needs_compensation_and_is_continued_in_chunks():
 
 
 def test_cli_extended(capsys):
-    from methodgen.cli import main
+    from methodgen.app.cli import main
     assert main(["run", "harmonic", "--steps", "200", "--extended"]) == 0
     assert main(["run", "harmonic", "--steps", "200", "--extended", "--backend", "numba"]) == 2
     assert "numpy backend" in capsys.readouterr().err

@@ -101,8 +101,8 @@ def test_run_save_every_writes_the_kept_rows(tmp_path, capsys):
     rows of one full run of the module."""
     import json
 
-    from methodgen import cli
-    from methodgen.runio import load_trajectory
+    from methodgen.app import cli
+    from methodgen.runtime.runio import load_trajectory
 
     out = tmp_path / "k.npz"
     code = cli.main(["run", "kepler", "--steps", "1000", "--save-every", "7", "--chunk", "100",

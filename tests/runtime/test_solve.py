@@ -105,7 +105,7 @@ def test_cli_json_carries_the_solution_names(capsys, kepler):
     same run; a failed run says ``success`` false with the failure's message."""
     import json
 
-    from methodgen.cli import main
+    from methodgen.app.cli import main
 
     assert main(["run", "kepler", "--steps", "50", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
@@ -178,7 +178,7 @@ def test_tqdm_steps_bar(em):
     pytest.importorskip("tqdm")
     import io
 
-    from methodgen.progress import tqdm_steps
+    from methodgen.codegen.progress import tqdm_steps
     out = io.StringIO()
     em.solve(Y0, (0.0, 1.0), 0.01, progress=tqdm_steps(file=out, mininterval=0))
     assert "100/100" in out.getvalue()

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.emit import load_module, module_filename
+from methodgen.codegen.emit import load_module, module_filename
 
 GENERATED = Path(__file__).resolve().parents[2] / "generated"
 

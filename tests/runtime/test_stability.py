@@ -15,8 +15,8 @@ import sympy as sp
 
 import methodgen as mg
 from conftest import ROOT
-from methodgen.emit import emit_source, write_atomic
-from methodgen.runio import load_trajectory
+from methodgen.codegen.emit import emit_source, write_atomic
+from methodgen.runtime.runio import load_trajectory
 
 DG = ["avf", "gonzalez", "itoh-abe", "energy-momentum"]
 

@@ -1,5 +1,5 @@
-"""The stepper (methodgen.stepper): one source, run two ways -- compiled with a module's
-kernels inlined (LLVM, methodgen.fused) and executed as plain Python -- bitwise the same.
+"""The stepper (methodgen.runtime.stepper): one source, run two ways -- compiled with a module's
+kernels inlined (LLVM, methodgen.runtime.fused) and executed as plain Python -- bitwise the same.
 
 The Python execution calls the same kernels (compiled), so what is compared is the stepper
 itself: stages, every Newton solver, the linearly implicit solve, compensated sums,
@@ -38,7 +38,7 @@ def _module(case):
         "hh-kahan": ("henon-heiles", "kahan", {}),
         "kepler-gauss2": ("kepler", "gauss", {"stages": 2}),
         "dp-rattle": ("double-pendulum", "rattle", {}),
-        # projected steps (methodgen.projection): symmetric onto H, a first-same-as-last
+        # projected steps (methodgen.symbolic.projection): symmetric onto H, a first-same-as-last
         # splitting, the standard projection onto four invariants
         "hh-proj": ("henon-heiles-2d", "stormer-verlet", {"project": "energy"}),
         "hh-bm-proj": ("henon-heiles-2d", "stormer-verlet", {"order": 4, "composition": "blanes-moan-rkn",
@@ -99,7 +99,7 @@ def test_negative_control_an_edited_stepper_is_caught(monkeypatch):
     import inspect
     import textwrap
 
-    from methodgen import stepper
+    from methodgen.runtime import stepper
     mod, y0, h = _module("kepler-sv4")
     compiled = _run(monkeypatch, mod, y0, h, 40, "compiled")
     src = textwrap.dedent(inspect.getsource(stepper.stepper))

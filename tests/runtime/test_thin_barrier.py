@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.problem import Hamiltonian
+from methodgen.problem.problem import Hamiltonian
 
 
 def _barrier():

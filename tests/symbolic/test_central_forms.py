@@ -14,8 +14,8 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-import methodgen.verify  # noqa: F401  (makes mg.verify callable)
-from methodgen.schemes.energy_momentum import _as_function_of_form, decompose
+import methodgen.symbolic.verify  # noqa: F401  (makes mg.verify callable)
+from methodgen.symbolic.schemes.energy_momentum import _as_function_of_form, decompose
 
 X, Y = sp.symbols("x y", real=True)
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 import sympy as sp
 
-from methodgen.compositions import (DEFAULT_FAMILY, FAMILIES, Composition, achieved_order, composition,
+from methodgen.symbolic.compositions import (DEFAULT_FAMILY, FAMILIES, Composition, achieved_order, composition,
                                     efficiency, order_defects, triple_jump_exact)
-from methodgen.verify.exact import reduce_to_zero
+from methodgen.symbolic.verify.exact import reduce_to_zero
 
 FAST = [(f, K) for f, orders in FAMILIES.items() for K in orders if not (f == "suzuki" and K >= 8)]
 

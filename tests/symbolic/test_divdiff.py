@@ -8,8 +8,8 @@ import pytest
 import sympy as sp
 
 from helpers import special_helpers
-from methodgen.divdiff import divided_difference
-from methodgen.special import to_elementary
+from methodgen.symbolic.divdiff import divided_difference
+from methodgen.problem.special import to_elementary
 
 s = sp.Symbol("s", positive=True)
 a, b = sp.symbols("a b", positive=True)
@@ -44,7 +44,7 @@ def test_log_identity():
 
 def _numeric(expr, vals):
     """Evaluate with the printer and the helpers that generated code uses."""
-    from methodgen.lower import VectorPrinter
+    from methodgen.codegen.lower import VectorPrinter
     fn = sp.lambdify((a, b), expr, modules=[special_helpers(), "numpy"], printer=VectorPrinter)
     return fn(*vals)
 

@@ -19,9 +19,10 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.bench import nbody_system
+from methodgen.app.bench import nbody_system
 from methodgen.errors import ParseError
-from methodgen.schemes import base, energy_momentum as em
+from methodgen.symbolic.schemes import base, energy_momentum as em
+from methodgen.symbolic import derive
 
 USER = Path(__file__).parents[1] / "user_problems"
 
@@ -49,7 +50,7 @@ def test_indexed_sum_is_the_expanded_hamiltonian():
 
 def test_nested_sums_over_pairs():
     syms = {f"x{i}": sp.Symbol(f"x{i}", real=True) for i in range(1, 5)}
-    from methodgen.parse import parse_expr
+    from methodgen.problem.parse import parse_expr
     e = parse_expr("Sum(Sum(1/(x[i] - x[j])**2, j, i + 1, 4), i, 1, 3)", syms)
     x = [syms[f"x{i}"] for i in range(1, 5)]
     assert e == sp.Add(*[1 / (x[i] - x[j]) ** 2 for i in range(4) for j in range(i + 1, 4)])
@@ -111,7 +112,7 @@ y0 = {[0.1 * i for i in range(2 * n)]}
 ])
 def test_bad_index_syntax_is_one_line(text, fragment):
     syms = {f"q{i}": sp.Symbol(f"q{i}", real=True) for i in range(1, 6)}
-    from methodgen.parse import parse_expr
+    from methodgen.problem.parse import parse_expr
     with pytest.raises(ParseError) as err:
         parse_expr(text, syms)
     msg = str(err.value)
@@ -123,7 +124,7 @@ def test_long_summand_times_many_terms_is_refused_before_expanding():
     380-character text) built ~10⁷ nodes (11 s; a 20 kB summand, half an hour).  It is refused, one line, before expanding; the
     same text with the node bound raised parses (control: the refusal is the bound's); a
     nested sum whose inner ranges grow with the outer index is bounded as well."""
-    from methodgen import parse
+    from methodgen.problem import parse
     syms = {f"q{i}": sp.Symbol(f"q{i}", real=True) for i in range(1, 11)}
     body = " + ".join(f"sin(q[i % 10 + 1]*{j})" for j in range(1, 21))
     with pytest.raises(ParseError) as err:
@@ -184,7 +185,7 @@ def test_planar_gravity_keeps_L_and_P_per_family():
     assert {"L", "P_x", "P_y"} <= set(scheme.traits.preserved)
     terms = em.decompose(system)
     fams = em.decompose_families(system)
-    w = [sp.diff(next(i.expr for i in mg.derive.first_integrals(system) if i.name == "L"), pk) for pk in system.p]
+    w = [sp.diff(next(i.expr for i in derive.first_integrals(system) if i.name == "L"), pk) for pk in system.p]
     assert em._forms_commute_by_families(w, list(system.q), fams) is True
     assert [i.name for i in em.kept_angular_momenta(system, terms, by_families=False)] == ["L"]
 
@@ -261,7 +262,7 @@ def test_mass_inverse_read_off_plain_terms_is_the_hessian():
     """Exact: M⁻¹ = ∂²T/∂p² read off T's plain terms equals SymPy's Hessian, with equal
     exponents of different coefficients added (a p1² + b p1²); a coefficient depending on
     the state refuses (None), as does a non-quadratic T."""
-    from methodgen.derive import _mass_inverse
+    from methodgen.symbolic.derive import _mass_inverse
     p1, p2, p3, a, b, x = sp.symbols("p1 p2 p3 a b x", real=True)
     p = [p1, p2, p3]
     for T in (p1 ** 2 / 2 + p1 * p2 + 3 * p2 ** 2 + p3 ** 2, a * p1 ** 2 + b * p1 ** 2 + p2 * p3,
@@ -274,7 +275,7 @@ def test_mass_inverse_read_off_plain_terms_is_the_hessian():
 def test_poisson_bracket_by_partials_is_the_diff_formula():
     """Exact: {F, H} from one pass over the terms and the cached (per-family) ∇H equals the
     textbook Σ ∂F/∂q ∂H/∂p - ∂F/∂p ∂H/∂q; {L, H} of a Toda ring is not 0 (refuted, control)."""
-    from methodgen.derive import poisson_bracket
+    from methodgen.symbolic.derive import poisson_bracket
     system = _ring(5, TODA_SUM.format(n=5))
     q, p = system.q, system.p
     for F in (sp.Add(*p), q[0] * p[1] - q[1] * p[0], q[2] ** 2 * p[3] + sp.exp(q[0]) * p[0]):
@@ -286,7 +287,7 @@ def test_poisson_bracket_by_partials_is_the_diff_formula():
 
 
 def test_radial_profile_numerical_rejection_keeps_radial_potentials():
-    from methodgen.derive import radial_profile
+    from methodgen.symbolic.derive import radial_profile
     kepler = mg.Hamiltonian("(px**2 + py**2 + pz**2)/2 - 1/sqrt(x**2 + y**2 + z**2)",
                             q=["x", "y", "z"], p=["px", "py", "pz"])
     assert radial_profile(kepler) is not None
@@ -302,7 +303,7 @@ def test_numerical_rejection_is_not_fooled_by_round_off():
     with large terms are not "clearly nonzero" -- negative control: at 30 digits alone their
     value exceeds the 1e-20 the screen used to trust -- while a true 1e-15 on top of them is
     still seen; and a skew S with such entries is accepted (it was refused as "not skew")."""
-    from methodgen.derive import _clearly_nonzero, sample_points
+    from methodgen.symbolic.derive import _clearly_nonzero, sample_points
 
     x, y, z = sp.symbols("x y z", real=True)
     traps = [sp.expand((x + y + z) ** 30) - (x + y + z) ** 30,

@@ -24,12 +24,12 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-import methodgen.verify  # noqa: F401  (makes mg.verify callable)
-from methodgen.derive import first_integrals, vector_field
-from methodgen.schemes.energy_momentum import decompose
-from methodgen.verify.discrete_gradients import dg_identity, kappa_midpoint_gradient
-from methodgen.verify.invariants import invariant_items
-from methodgen.verify.structural import identity_structural
+import methodgen.symbolic.verify  # noqa: F401  (makes mg.verify callable)
+from methodgen.symbolic.derive import first_integrals, vector_field
+from methodgen.symbolic.schemes.energy_momentum import decompose
+from methodgen.symbolic.verify.discrete_gradients import dg_identity, kappa_midpoint_gradient
+from methodgen.symbolic.verify.invariants import invariant_items
+from methodgen.symbolic.verify.structural import identity_structural
 
 TODA_H = "(p1**2 + p2**2 + p3**2)/2 + exp(q1 - q2) + exp(q2 - q3) + exp(q3 - q1)"
 TODA_Y0 = np.array([0.0, 0.5, -0.3, 0.8, -0.2, -0.6])

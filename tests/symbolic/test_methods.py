@@ -9,8 +9,8 @@ import sympy as sp
 from scipy.integrate import solve_ivp
 
 import methodgen as mg
-from methodgen.derive import vector_field
-from methodgen.special import to_elementary
+from methodgen.symbolic.derive import vector_field
+from methodgen.problem.special import to_elementary
 from test_physics import observed_order
 
 

@@ -2,7 +2,7 @@
 
 It was found for a Toda ring of N = 10 but not N = 200: detection was skipped above
 ``DETECT_MAX_DIM = 60`` degrees of freedom.  Now the exact test is family by family
-(:func:`methodgen.derive._commutes_by_families`) and the size limit applies only to systems
+(:func:`methodgen.symbolic.derive._commutes_by_families`) and the size limit applies only to systems
 without families.  Negative controls: an external field breaks translation invariance
 (no P), and a Hamiltonian without families above the limit is still not searched.
 """
@@ -14,7 +14,7 @@ import time
 import sympy as sp
 
 import methodgen as mg
-from methodgen import derive
+from methodgen.symbolic import derive
 
 
 def _toda_ring(n: int, field: str = "") -> mg.Hamiltonian:
@@ -146,7 +146,7 @@ def test_bilinear_invariants_quick_rejection():
     """bilinear_invariants rejects an invariant with a squared variable before building its Poly
     (H of an FPU chain of 64: half of the derivation went there); what it returns is unchanged:
     Kepler's angular momenta are bilinear, H and the Toda ring's P are not (P is linear)."""
-    from methodgen.schemes.base import _second_power, bilinear_invariants
+    from methodgen.symbolic.schemes.base import _second_power, bilinear_invariants
 
     kepler = mg.load_scene("kepler").system
     names = bilinear_invariants(kepler)

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from methodgen.errors import InputError
-from methodgen.schemes.quadrature import MAX_NODES, gauss_legendre, gauss_legendre_f64
-from methodgen.verify.quadrature import TOLERANCE, rule_certificate, rule_deviation
-from methodgen.verify.report import NUMERICAL, REFUTED
+from methodgen.symbolic.schemes.quadrature import MAX_NODES, gauss_legendre, gauss_legendre_f64
+from methodgen.symbolic.verify.quadrature import TOLERANCE, rule_certificate, rule_deviation
+from methodgen.symbolic.verify.report import NUMERICAL, REFUTED
 
 FAST = list(range(1, 33)) + [48, 63, 64]
 
@@ -102,7 +102,7 @@ def test_avf_quadrature_uses_a_certified_rule():
     import dataclasses
 
     import methodgen as mg
-    from methodgen.verify.discrete_gradients import dg_items
+    from methodgen.symbolic.verify.discrete_gradients import dg_items
 
     kepler = mg.load_scene("kepler").system
     sc = mg.discretize(kepler, "avf")

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.schemes import energy_momentum as em
-from methodgen.verify.report import FLOW, METHOD
+from methodgen.symbolic.schemes import energy_momentum as em
+from methodgen.symbolic.verify.report import FLOW, METHOD
 
 P = "(px**2 + py**2 + pz**2)/2"
 R2 = "(x**2 + y**2 + z**2)"
@@ -99,7 +99,7 @@ def test_angular_momentum_kept_in_a_run():
 def test_report_lists_flow_facts_apart_from_the_method():
     """{L, H} = 0 is a fact of the ODE: marked as such and rendered under its own heading,
     after every certificate of the method's own."""
-    from methodgen.verify.report import FLOW_HEADING
+    from methodgen.symbolic.verify.report import FLOW_HEADING
 
     report = mg.verify(mg.discretize(_system(RADIAL["Kepler plus harmonic"]), "energy-momentum"))
     flow = [c for c in report.certificates if c.subject == FLOW]

@@ -19,10 +19,10 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-import methodgen.verify  # noqa: F401  (makes mg.verify callable)
+import methodgen.symbolic.verify  # noqa: F401  (makes mg.verify callable)
 from helpers import special_helpers
-from methodgen.special import fold_removable_quotients, sinc_dd, sinc_u
-from methodgen.verify.helpers import _certificate, helper_certificate
+from methodgen.problem.special import fold_removable_quotients, sinc_dd, sinc_u
+from methodgen.symbolic.verify.helpers import _certificate, helper_certificate
 
 EPS = np.finfo(float).eps
 BELOW2, ABOVE2 = float(np.nextafter(2.0, 0.0)), float(np.nextafter(2.0, 3.0))
@@ -154,7 +154,7 @@ def test_energy_kept_to_round_off_across_the_switches(method, tmp_path):
 def test_unfolded_quotient_fails_there(tmp_path, monkeypatch):
     """Negative control: with the folding disabled (H keeps sin(q)/q), the run from q = 1e-8
     does not converge and q = 0 is refused (H is NaN)."""
-    import methodgen.problem as problem
+    import methodgen.problem.problem as problem
     monkeypatch.setattr(problem, "fold_removable_quotients", lambda e: e)
     system = mg.Hamiltonian("p**2/2 + sin(q)/q", q=["q"], p=["p"], name="sincq_raw")
     assert not system.H.has(sinc_u)
@@ -187,7 +187,7 @@ def _pair_system(name, invariants):
 def test_declared_invariant_written_like_H_is_proved():
     """Exact: E2 written as H (sin(u)/u) is folded like H, so {E2, H} = 0 cancels symbol for
     symbol; monitored, it is finite at q1 = q2 (was NaN)."""
-    from methodgen.derive import declared
+    from methodgen.symbolic.derive import declared
     system = _pair_system("pair_e2", {"E2": "p1**2/2 + p2**2/2 + sin(q1 - q2)/(q1 - q2)"})
     assert system.declared_invariants[0].expr == system.H
     (e2,) = declared(system)
@@ -197,7 +197,7 @@ def test_declared_invariant_written_like_H_is_proved():
 def test_declared_invariant_monitored_at_the_removable_point(tmp_path):
     """Numerical: from q = 0 the monitor E2 (= H) is finite and constant to round-off.
     Negative control: with the folding disabled for E2 only, the monitor is NaN at q = 0."""
-    import methodgen.problem as problem
+    import methodgen.problem.problem as problem
     src = "p**2/2 + sin(q)/q"
     system = mg.Hamiltonian(src, q=["q"], p=["p"], name="sinc_e2", invariants={"E2": src})
     mod = mg.build(system, "energy-momentum", tmp_path / "e2.py")
@@ -223,8 +223,8 @@ def test_sinc_u_meets_its_elementary_form_in_a_bracket(monkeypatch):
     """Exact: an invariant whose sin(u)/u the fold cannot see (sin(q)(q+1)/(q²+q)) against the
     folded H: {E2, H} reduces on the elementary form (dsinc_u against cos(q)/q - sin(q)/q²).
     Negative control: without the elementary form (to_elementary the identity) it is not shown."""
-    import methodgen.special as special
-    from methodgen.derive import declared
+    import methodgen.problem.special as special
+    from methodgen.symbolic.derive import declared
 
     def system(name):
         return mg.Hamiltonian("p**2/2 + sin(q)/q", q=["q"], p=["p"], name=name,
@@ -241,7 +241,7 @@ def test_sinc_u_meets_its_elementary_form_in_a_bracket(monkeypatch):
 def test_poisson_system_from_the_removable_point(tmp_path, monkeypatch):
     """Numerical: PoissonSystem("w**2/2 + sin(x)/x") runs from x = 0 (was refused: "H is NaN"),
     H constant to round-off.  Negative control: with its folding disabled it is refused."""
-    import methodgen.poisson as poisson
+    import methodgen.problem.poisson as poisson
 
     def make(name):
         return mg.PoissonSystem("w**2/2 + sin(x)/x", y=["x", "w"], S=[[0, 1], [-1, 0]], name=name)
@@ -283,7 +283,7 @@ def test_fold_repeats_and_takes_powers():
 def test_internal_name_does_not_leak():
     """str(scheme), the verify title and the LaTeX reprs show the user's text, not sinc_u.
     Negative control: str(H), what they showed, has it."""
-    from methodgen.verify import _title
+    from methodgen.symbolic.verify import _title
     system = mg.Hamiltonian("p**2/2 + sin(q)/q", q=["q"], p=["p"])
     scheme = mg.discretize(system, "midpoint")
     assert "sinc_u" in str(system.H)
@@ -299,7 +299,7 @@ def test_sinc_certificate_never_proved_through_the_fallback(monkeypatch):
     """The series branch is a truncation: even when the first reduction fails and certify's
     own reduction proves the identity branch, the verdict is numerical.  Negative control of
     the old code path: certify itself does return 'proved' on that F."""
-    helpers = sys.modules["methodgen.verify.helpers"]
+    helpers = sys.modules["methodgen.symbolic.verify.helpers"]
     monkeypatch.setattr(helpers, "reduce_to_zero", lambda *a, **k: None)
     _certificate.cache_clear()
     try:

@@ -13,9 +13,9 @@ import sympy as sp
 
 import methodgen as mg
 from conftest import HEAVY_SCENES
-from methodgen.special import atan_dd, safe_div, to_elementary
-from methodgen.verify.common import at, y1_symbols
-from methodgen.verify.exact import Domain, certify, guard_cases, reduce_to_zero
+from methodgen.problem.special import atan_dd, safe_div, to_elementary
+from methodgen.symbolic.verify.common import at, y1_symbols
+from methodgen.symbolic.verify.exact import Domain, certify, guard_cases, reduce_to_zero
 
 USER = Path(__file__).resolve().parents[1] / "user_problems"
 ENERGY = ("energy-momentum", "avf", "gonzalez", "itoh-abe")
@@ -217,7 +217,7 @@ def test_structural_proof_refuses_a_wrong_component():
     wrong = scheme.discrete_gradient.copy()
     wrong[0] = wrong[0] + (q1 - scheme.system.q[0]) ** 2
     bad = replace(scheme, discrete_gradient=wrong)
-    from methodgen.verify.structural import identity_structural
+    from methodgen.symbolic.verify.structural import identity_structural
     assert identity_structural(bad, "c", "", sp.S.One) is None
     assert _identity(mg.verify(bad)).status == "refuted"
 
@@ -226,7 +226,7 @@ def test_gonzalez_form_mismatch_falls_back():
     """Negative control: a recorded numerator that is not the scheme's → the form check fails."""
     from dataclasses import replace
 
-    from methodgen.verify.structural import identity_structural
+    from methodgen.symbolic.verify.structural import identity_structural
     sc = mg.load_scene("simple-pendulum")
     scheme = mg.discretize(sc.system, "gonzalez")
     st = dict(scheme.structure)

@@ -5,7 +5,7 @@ H = Σ p_i²/2 + U(q), and every discrete-gradient method that applies, the
 scheme's own ∇̄H (``scheme.discrete_gradient``) is evaluated at 50 digits **as
 the generated code evaluates it** — a ``Piecewise`` on the branch it takes at
 that point (a truncated series branch near the diagonal is used there, and must
-be exact too), ``safe_div(n, 0)`` as 0, each helper of :mod:`methodgen.special`
+be exact too), ``safe_div(n, 0)`` as 0, each helper of :mod:`methodgen.problem.special`
 by the formula its generated helper computes (``stable_form``, the ``atan``
 addition-formula branch, ``sinh(x)/x`` …) — and the discrete-gradient identity
 
@@ -36,10 +36,10 @@ from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 
 import methodgen as mg
-from methodgen import special
+from methodgen.problem import special
 from methodgen.errors import InputError, MethodNotApplicable
-from methodgen.verify.common import y1_symbols
-from methodgen.verify.discrete_gradients import dg_identity
+from methodgen.symbolic.verify.common import y1_symbols
+from methodgen.symbolic.verify.discrete_gradients import dg_identity
 
 METHODS = ["energy-momentum", "avf", "gonzalez", "itoh-abe"]
 GAPS = [sp.Rational(1, 10), sp.Rational(1, 10**3), sp.Rational(1, 10**6), sp.Rational(1, 10**9),

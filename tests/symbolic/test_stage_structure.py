@@ -1,7 +1,7 @@
 """Issue 25, item 1: the stage systems of Gauss and energy collocation by structure.
 
 The modules derive f = J∇H and its Jacobian f' once and assemble the s-stage residual and
-Newton matrix with loops over the stages (:mod:`methodgen.stages`).  Checked here: the
+Newton matrix with loops over the stages (:mod:`methodgen.symbolic.stages`).  Checked here: the
 structured modules agree with the expanded ones (``expanded=True``, the former route) to
 round-off, kernel by kernel and along trajectories; the generated source grows linearly in
 s (the expanded one quadratically: negative control); a perturbed table is seen (negative
@@ -17,8 +17,8 @@ import sympy as sp
 
 import methodgen as mg
 from conftest import HH_Y0
-from methodgen.derive import vector_field
-from methodgen.emit import emit_source, load_module, write_module
+from methodgen.symbolic.derive import vector_field
+from methodgen.codegen.emit import emit_source, load_module, write_module
 
 KEPLER_Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
 
@@ -140,7 +140,7 @@ def test_source_grows_linearly_in_stages(backend):
 def test_no_expanded_jacobian_is_derived(monkeypatch, backend):
     """The lowering of a stage method never builds the scheme's (s·n)² symbolic Jacobian, and
     the numba module (shared runtime) loops over the stages like the numpy one."""
-    from methodgen.schemes.base import Scheme
+    from methodgen.symbolic.schemes.base import Scheme
 
     scheme = mg.discretize(mg.load_scene("kepler").system, "gauss", stages=3)
     touched = []
@@ -184,7 +184,7 @@ def test_field_derivative_is_exact(case):
     test_field_derivative_is_an_identity), and the
     structural nonzeros it emits cover every nonzero of f'.  Negative control: one entry
     of the program negated is seen."""
-    from methodgen.stages import field_derivative
+    from methodgen.symbolic.stages import field_derivative
 
     system = CASES[case][0]()
     f = vector_field(system)
@@ -217,7 +217,7 @@ def test_field_derivative_is_an_identity(case):
     symbol replaced by its right-hand side) minus SymPy's Jacobian expands to 0 in the state
     and the parameters, entry by entry, and f' is 0 off the pattern.  Negative control: an
     entry with one parameter or state symbol perturbed does not expand to 0."""
-    from methodgen.stages import field_derivative
+    from methodgen.symbolic.stages import field_derivative
 
     system = PARAM_SYSTEM if case == "params" else CASES[case][0]()
     f = vector_field(system)
@@ -243,8 +243,8 @@ def test_module_tables_are_the_certified_ones(modules):
     """The loops read exactly the float64 tables that verify certifies (the scheme's
     ``structure['tables']`` for energy collocation, the rounded A for Gauss).  Control: the
     entry-by-entry rounded tables (``consistent=False``) are not the module's."""
-    from methodgen.schemes.energy_collocation import build
-    from methodgen.schemes.gauss import coefficients
+    from methodgen.symbolic.schemes.energy_collocation import build
+    from methodgen.symbolic.schemes.gauss import coefficients
 
     system = CASES["henon-heiles"][0]()
     mod = modules("henon-heiles", "energy-collocation", 3, False)

@@ -10,10 +10,11 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-from methodgen.schemes.base import STEP
-from methodgen.verify import kahan as K
-from methodgen.verify.constrained import field_zero, velocity_constraint, velocity_structural
-from methodgen.verify.maps import splitting_symplectic, symplectic_certificate
+from methodgen.symbolic.schemes.base import STEP
+from methodgen.symbolic import derive
+from methodgen.symbolic.verify import kahan as K
+from methodgen.symbolic.verify.constrained import field_zero, velocity_constraint, velocity_structural
+from methodgen.symbolic.verify.maps import splitting_symplectic, symplectic_certificate
 
 USER = Path(__file__).resolve().parents[1] / "user_problems"
 HH2 = mg.Hamiltonian("(px**2 + py**2)/2 + (x**2 + y**2)/2 + x**2*y - y**3/3",
@@ -61,7 +62,7 @@ def test_kahan_lemma_fails_for_another_linearly_implicit_scheme():
     # The θ = 1/3 map does not keep H̃ (exact rational point, 1 DOF): the claim was worth checking.
     s = CUBIC1
     y = sp.Matrix(s.y)
-    f = mg.derive.vector_field(s)
+    f = derive.vector_field(s)
     A = sp.eye(2) - third * STEP * f.jacobian(y)
     y1 = y + STEP * A.LUsolve(f)
     Ht = K.modified_energy_expr(s)
@@ -168,7 +169,7 @@ def test_formerly_slow_user_problems_are_decided(problem, method):
 def test_avf_exact_for_functions_of_affine_forms():
     """Toda's exp(q1 - q2), a pendulum pair's cos(q1 - q2), Calogero's 1/(q1 - q2)**2: exact
     divided differences, H claimed and proved — no quadrature."""
-    from methodgen.verify.discrete_gradients import dg_identity
+    from methodgen.symbolic.verify.discrete_gradients import dg_identity
     for system in (CALOGERO, mg.Hamiltonian("(p1**2 + p2**2)/2 + exp(q1 - q2) - k*cos(q1 - q2)*(1 + q1)",
                                             q=["q1", "q2"], p=["p1", "p2"], params={"k": 1.0})):
         scheme = mg.discretize(system, "avf")
@@ -184,7 +185,7 @@ def test_avf_exact_for_functions_of_affine_forms():
 
 
 def test_linear_form_detection_and_its_limits():
-    from methodgen.schemes.discrete_gradients import additive_terms, linear_form_term
+    from methodgen.symbolic.schemes.discrete_gradients import additive_terms, linear_form_term
     q1, q2, q3, g = sp.symbols("q1 q2 q3 g")
     ys = (q1, q2, q3)
     terms = additive_terms(g**2 * (1 / (q1 - q2)**2 + 1 / (q2 - q3)**2))
@@ -200,13 +201,13 @@ def test_linear_form_detection_and_its_limits():
 # --- midpoint: Cayley transform -----------------------------------------------------------
 
 def test_midpoint_symplectic_structurally_on_nonlinear_h():
-    from methodgen.verify.maps import midpoint_symplectic
+    from methodgen.symbolic.verify.maps import midpoint_symplectic
     scheme = mg.discretize(CALOGERO, "midpoint")
     cert = symplectic_certificate(scheme)
     assert cert.status == "proved" and cert.details["structural"] and "Cayley" in cert.claim
     # Negative control: a gradient not taken at the midpoint is not this structure.
     y0, y1 = CALOGERO.y, scheme.y1
-    at_y0 = mg.derive.gradient(CALOGERO)
+    at_y0 = derive.gradient(CALOGERO)
     assert midpoint_symplectic(replace(scheme, discrete_gradient=at_y0), "x") is None
     # and the Cayley lemma needs a symmetric block: with a generic (non-symmetric) S it fails.
     S = sp.Matrix(2, 2, sp.symbols("a b c d"))

@@ -10,12 +10,12 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-import methodgen.verify  # noqa: F401  (makes mg.verify callable)
-from methodgen.verify.conjugacy import conjugacy_certificate
-from methodgen.verify.discrete_gradients import dg_identity, kappa_midpoint_gradient
-from methodgen.verify.invariants import angular_momentum_generic
-from methodgen.verify.kahan import forms_agree_generic, modified_energy
-from methodgen.verify.maps import symplectic_certificate
+import methodgen.symbolic.verify  # noqa: F401  (makes mg.verify callable)
+from methodgen.symbolic.verify.conjugacy import conjugacy_certificate
+from methodgen.symbolic.verify.discrete_gradients import dg_identity, kappa_midpoint_gradient
+from methodgen.symbolic.verify.invariants import angular_momentum_generic
+from methodgen.symbolic.verify.kahan import forms_agree_generic, modified_energy
+from methodgen.symbolic.verify.maps import symplectic_certificate
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +148,7 @@ def test_wrong_modified_energy_refuted():
 
 
 def test_report_ok_false_when_refuted(kepler):
-    from methodgen.verify import Report
+    from methodgen.symbolic.verify import Report
     cert = dg_identity(kepler, kappa_midpoint_gradient(kepler, kappa=1), "κ ≡ 1")
     rep = Report("negative control", [cert])
     assert not rep.ok
@@ -191,7 +191,7 @@ def test_cli_errors():
 
 _TEXT_OF_A_LONG_SUM = """
 import sympy as sp
-from methodgen.verify.exact import expression_text
+from methodgen.symbolic.verify.exact import expression_text
 x = sp.symbols("x0:120", real=True)
 e = sp.Add(*[sp.exp(x[i] - x[i + 1]) * (x[i + 1] - x[i]) for i in range(119)])
 print(expression_text(e))
@@ -206,7 +206,7 @@ def test_long_expressions_are_printed_fast_and_deterministically():
 
     import sympy as sp
 
-    from methodgen.verify.exact import expression_text
+    from methodgen.symbolic.verify.exact import expression_text
 
     texts = {subprocess.run([sys.executable, "-c", _TEXT_OF_A_LONG_SUM], capture_output=True, text=True, check=True,
                             env={**__import__("os").environ, "PYTHONHASHSEED": seed}).stdout

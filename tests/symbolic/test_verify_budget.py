@@ -11,13 +11,13 @@ import time
 import pytest
 
 import methodgen as mg
-import methodgen.verify  # noqa: F401  (loads the package)
-from methodgen.cli import main as cli_main
-from methodgen.verify import UNDECIDED, Certificate, Report
-from methodgen.verify.budget import BudgetExceeded, budget, budget_supported
-from methodgen.verify.report import STATUSES
+import methodgen.symbolic.verify  # noqa: F401  (loads the package)
+from methodgen.app.cli import main as cli_main
+from methodgen.symbolic.verify import UNDECIDED, Certificate, Report
+from methodgen.symbolic.verify.budget import BudgetExceeded, budget, budget_supported
+from methodgen.symbolic.verify.report import STATUSES
 
-V = sys.modules["methodgen.verify"]          # the package (``mg.verify`` is the function)
+V = sys.modules["methodgen.symbolic.verify"]          # the package (``mg.verify`` is the function)
 
 needs_alarm = pytest.mark.skipif(not budget_supported(), reason="SIGALRM budget needs POSIX main thread")
 

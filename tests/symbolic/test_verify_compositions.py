@@ -10,13 +10,13 @@ import pytest
 import sympy as sp
 
 import methodgen as mg
-import methodgen.verify  # noqa: F401  (makes mg.verify callable)
-from methodgen.compositions import Composition, composition
-from methodgen.scene import load_scene
-from methodgen.verify.compositions import (BaseResults, exactly_palindromic, float_coefficients_certificate,
+import methodgen.symbolic.verify  # noqa: F401  (makes mg.verify callable)
+from methodgen.symbolic.compositions import Composition, composition
+from methodgen.symbolic.scene import load_scene
+from methodgen.symbolic.verify.compositions import (BaseResults, exactly_palindromic, float_coefficients_certificate,
                                            holds_for_every_real_h, inherited_certificates, order_certificate,
                                            recursion_levels, compose_levels, symmetry_certificate)
-from methodgen.verify.report import Certificate
+from methodgen.symbolic.verify.report import Certificate
 
 #: (scene, method, order, family) and what the composition's derived claims must be.
 CASES = {

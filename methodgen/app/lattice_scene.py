@@ -1,0 +1,241 @@
+"""Lattice scene files: a lattice of symbolic size, its initial state as formulas, and a run.
+
+Format (TOML; the built-in ones are in ``methodgen/symbolic/scenes/lattice``)::
+
+    name = "sine-gordon"
+    description = "..."
+    [lattice]
+    H = "Sum(p[i]**2/2, i, 1, N) + Sum((q[i % N + 1] - q[i])**2*N**2/(2*L**2), i, 1, N) + ..."
+    q = "q"                       # optional field names (default q, p) and size name (N)
+    p = "p"
+    size = "N"
+    [params]
+    L = 6.283185307179586
+    [invariants]                  # optional: monitored sums of site terms
+    mass = "Sum(q[i]**2 + p[i]**2, i, 1, N)"
+    [initial]                     # each field at site i = 1 … N: a formula in i, N and the parameters
+    q = "2*sin(2*pi*(i - 1)/N)"
+    p = "0"
+    [run]
+    method = "avf"                # or a list; avf, midpoint
+    N = 256                       # the size (--param N=4096 on the command line)
+    h = 0.01
+    steps = 1000
+
+The file is data: parsed with ``tomllib``, checked key by key, its formulas parsed by the
+whitelist parser (:func:`methodgen.problem.parse.parse_expr`) and evaluated from the parsed tree.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+from ..errors import InputError, SceneError
+
+__all__ = ["LatticeScene", "is_lattice_scene", "load_lattice_scene", "lattice_scene_names", "run_lattice_scene"]
+
+_TOP = {"name": str, "description": str, "lattice": dict, "params": dict, "invariants": dict, "initial": dict,
+        "run": dict}
+_LATTICE = {"H": str, "q": str, "p": str, "size": str}
+_RUN = {"method": (str, list), "N": int, "h": (int, float), "steps": int}
+
+
+def lattice_scene_dir() -> Path:
+    from ..symbolic.scene import builtin_scene_dir
+
+    return builtin_scene_dir() / "lattice"
+
+
+def lattice_scene_names() -> list[str]:
+    """Names of the built-in lattice scenes, sorted."""
+    return sorted(p.stem for p in lattice_scene_dir().glob("*.toml"))
+
+
+def _path_of(name_or_path) -> Path | None:
+    p = Path(name_or_path)
+    if p.suffix == ".toml" and p.is_file():
+        return p
+    if str(name_or_path) in lattice_scene_names():
+        return lattice_scene_dir() / f"{name_or_path}.toml"
+    return None
+
+
+def is_lattice_scene(name_or_path) -> bool:
+    """True for a built-in lattice scene's name or a TOML file with a ``[lattice]`` table."""
+    p = _path_of(name_or_path)
+    if p is None:
+        return False
+    try:
+        with open(p, "rb") as fh:
+            return "lattice" in tomllib.load(fh)
+    except (OSError, tomllib.TOMLDecodeError):
+        return False      # load_scene reports what is wrong with the file
+
+
+def _check(table: dict, allowed: dict, where: str) -> None:
+    for k, v in table.items():
+        if k not in allowed:
+            raise SceneError(f"{where}: unknown key {k!r}; valid keys are {', '.join(allowed)}")
+        if not isinstance(v, allowed[k]) or isinstance(v, bool):
+            kinds = allowed[k] if isinstance(allowed[k], tuple) else (allowed[k],)
+            raise SceneError(f"{where}: {k!r} must be {' or '.join(t.__name__ for t in kinds)}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class LatticeScene:
+    """A parsed lattice scene (see the module docstring)."""
+
+    name: str
+    description: str
+    lattice: object
+    initial: dict
+    methods: tuple[str, ...]
+    size: int
+    h: float
+    steps: int
+    source: str
+
+    def y0(self, n: int, params: dict | None = None) -> np.ndarray:
+        """The initial state at size ``n``: ``(q[1..n], p[1..n])`` from the scene's formulas."""
+        import sympy as sp
+
+        from ..problem.parse import parse_expr
+
+        lat = self.lattice
+        lat.check_size(n)
+        values = {**lat.params, **(params or {})}
+        i = sp.Symbol("i", real=True)
+        N = sp.Symbol(lat.size.name, real=True)
+        symbols = {"i": i, lat.size.name: N, **{k: sp.Symbol(k, real=True) for k in values}}
+        out = []
+        for field in lat.fields:
+            expr = parse_expr(self.initial.get(field, "0"), symbols, what=f"[initial] {field}")
+            expr = expr.xreplace({symbols[k]: sp.Float(v) for k, v in values.items()}).xreplace({N: n})
+            f = sp.lambdify([i], expr, modules="numpy")   # printed from the parsed tree, not the text
+            out.append(np.broadcast_to(np.asarray(f(np.arange(1, n + 1, dtype=float)), dtype=float), (n,)))
+        y = np.concatenate(out)
+        if not np.all(np.isfinite(y)):
+            raise InputError(f"the initial state of {self.name!r} at N = {n} is not finite")
+        return y
+
+
+def load_lattice_scene(name_or_path) -> LatticeScene:
+    """Read and check a lattice scene (a built-in name or a path).
+
+    Raises
+    ------
+    SceneError
+        Unknown or mistyped keys, a missing table, an unknown method, bad formulas.
+    """
+    from ..problem.lattice import Lattice
+    from ..symbolic.lattice_scheme import LATTICE_METHODS
+
+    p = _path_of(name_or_path)
+    if p is None:
+        raise SceneError(f"no lattice scene {name_or_path!r}; built-in: {', '.join(lattice_scene_names())}")
+    try:
+        with open(p, "rb") as fh:
+            data = tomllib.load(fh)
+    except OSError as exc:
+        raise SceneError(f"cannot read {p}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{p}: not valid TOML: {exc}") from None
+    where = str(p)
+    _check(data, _TOP, where)
+    for t in ("lattice", "run"):
+        if t not in data:
+            raise SceneError(f"{where}: the [{t}] table is missing")
+    lt, run = data["lattice"], data["run"]
+    _check(lt, _LATTICE, f"{where} [lattice]")
+    _check(run, _RUN, f"{where} [run]")
+    if "H" not in lt:
+        raise SceneError(f"{where} [lattice]: H is missing")
+    for k in ("N", "h", "steps"):
+        if k not in run:
+            raise SceneError(f"{where} [run]: {k} is missing")
+    params = data.get("params", {})
+    for k, v in params.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise SceneError(f"{where} [params]: {k!r} must be a number, got {v!r}")
+    invariants = data.get("invariants", {})
+    initial = data.get("initial", {})
+    for table, name in ((invariants, "invariants"), (initial, "initial")):
+        for k, v in table.items():
+            if not isinstance(v, str):
+                raise SceneError(f"{where} [{name}]: {k!r} must be a formula (text), got {v!r}")
+    name = data.get("name", p.stem)
+    try:
+        lat = Lattice(lt["H"], lt.get("q", "q"), lt.get("p", "p"), size=lt.get("size", "N"), params=params,
+                      name=name, invariants=invariants)
+    except InputError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+    unknown = set(initial) - set(lat.fields)
+    if unknown:
+        raise SceneError(f"{where} [initial]: {', '.join(sorted(unknown))} is not a field; the fields are "
+                         f"{', '.join(lat.fields)}")
+    methods = run["method"] if isinstance(run.get("method", "avf"), list) else [run.get("method", "avf")]
+    for m in methods:
+        if m not in LATTICE_METHODS:
+            raise SceneError(f"{where} [run]: method {m!r} is not available for a lattice; available: "
+                             f"{', '.join(LATTICE_METHODS)}")
+    if run["steps"] < 1 or not (math.isfinite(run["h"]) and run["h"] > 0):
+        raise SceneError(f"{where} [run]: steps must be ≥ 1 and h > 0")
+    try:
+        lat.check_size(run["N"])
+    except InputError as exc:
+        raise SceneError(f"{where} [run]: {exc}") from None
+    scene = LatticeScene(name, data.get("description", ""), lat, initial, tuple(methods), run["N"],
+                         float(run["h"]), run["steps"], where)
+    try:
+        scene.y0(lat.nmin)        # the formulas parse (whitelist) and evaluate
+    except InputError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+    return scene
+
+
+def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None,
+                      t_final=None, solver="newton", check_resolution=True, backend="numpy", progress=None) -> dict:
+    """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
+
+    ``size``: N for this run (default the scene's); ``params``: parameter values for this run;
+    ``backend``: "numpy" or "compiled" (:func:`methodgen.codegen.lattice_emit.build_lattice`).
+    """
+    from ..codegen.lattice_emit import build_lattice
+
+    scene = load_lattice_scene(name_or_path)
+    method = method or scene.methods[0]
+    n = scene.size if size is None else size
+    scene.lattice.check_size(n)
+    h = scene.h if h is None else float(h)
+    steps = scene.steps if steps is None else int(steps)
+    if t_final is not None:
+        steps = max(1, math.ceil(t_final / h - 1e-12))
+        h = t_final / steps
+    t0 = time.perf_counter()
+    module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
+    build_seconds = time.perf_counter() - t0
+    y0 = scene.y0(n, params)
+    every = max(1, steps // 1000)     # the invariant errors over ≤ ~1000 rows
+    t0 = time.perf_counter()
+    info: dict = {}
+    rows = module.integrate(y0, h, steps, params, save_every=every, info=info, solver=solver,
+                            check_resolution=check_resolution)
+    seconds = time.perf_counter() - t0
+    values = [module.invariants(r, params) for r in rows]
+    inv = {k: {"initial": values[0][k], "final": values[-1][k],
+               "max_abs_error": max(abs(v[k] - values[0][k]) for v in values)} for k in module.INVARIANT_NAMES}
+    return dict(scene=scene.name, method=method, backend=backend, N=n, h=h, steps=steps, t_final=h * steps, success=True,
+                build_seconds=build_seconds, seconds=seconds, seconds_per_step=seconds / steps,
+                newton_iterations_mean=float(np.mean(info["newton_iterations"])), invariants=inv,
+                traits=dict(module.TRAITS), y_final=rows[-1].tolist())

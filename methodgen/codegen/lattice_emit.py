@@ -1,0 +1,252 @@
+"""A lattice method as one numpy module for every size N: printing, writing, loading.
+
+:func:`render` prints a :class:`methodgen.symbolic.lattice_scheme.LatticeScheme` through
+``templates/lattice_module.py.j2``: per site term, its energy and its discrete-gradient pieces
+(with their derivatives) as vectorised numpy over the term's sites, CSE'd; the index tables of a
+size are built by the module at run time.  Nothing in the text depends on N, so the module is
+derived, printed and imported once, in the time one template costs.  :func:`build_lattice` is
+the cached entry point (the module cache and its trust checks of :mod:`methodgen.codegen.store` and
+:mod:`methodgen.codegen.emit`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from pathlib import Path
+
+import sympy as sp
+
+from .._version import __version__
+from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, template_dir,
+                   file_status, generator_hash, load_module, template_hash, warn_regenerating)
+from ..errors import InputError
+from ..problem.lattice import Lattice
+from ..symbolic.lattice_scheme import LATTICE_METHODS, LatticeScheme, discretize_lattice
+from .lower import _HELPER_CALL, ScalarPrinter, VectorPrinter, _helper_closure
+from .progress import phase
+from ..problem.special import SPECIAL_FUNCTIONS
+from .store import cache_dir, check_cache_folder, write_module
+
+__all__ = ["render", "lattice_signature", "build_lattice"]
+
+TEMPLATE = "lattice_module.py.j2"
+
+
+def _sources_hash() -> str:
+    """SHA-256 of the lattice path's own sources (kept out of :func:`methodgen.codegen.emit.generator_hash`
+    and ``template_hash``, so that a change here does not make every other module stale)."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for path in (root / "problem" / "lattice.py", root / "symbolic" / "lattice_scheme.py",
+                 root / "codegen" / "lattice_emit.py", root / "runtime" / "lattice_stepper.py",
+                 root / "runtime" / "lattice_driver.py",
+                 template_dir() / TEMPLATE):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def lattice_signature(lattice: Lattice, method: str, backend: str = "numpy") -> str:
+    """Hash of everything the module depends on: the text, names, defaults and method, the
+    versions, the printers and helpers it shares with other modules, and its own sources."""
+    parts = [lattice.text, repr(sorted(lattice.invariant_texts.items())), lattice.q_name, lattice.p_name, lattice.size.name, lattice.name,
+             repr(sorted(lattice.params.items())), method, __version__, sp.__version__,
+             template_hash("numpy"), generator_hash(), _sources_hash()] + ([] if backend == "numpy" else [backend])
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def _cse_lines(exprs, printer, prefix: str) -> tuple[list[str], list[str]]:
+    """CSE ``exprs``: (assignment lines, the printed outputs)."""
+    syms = sp.numbered_symbols(prefix)
+    temps, outs = sp.cse(list(exprs), symbols=syms, optimizations="basic")
+    lines = [f"{printer.doprint(s)} = {printer.doprint(e)}" for s, e in temps]
+    return lines, [printer.doprint(e) for e in outs]
+
+
+def _gathers(symbols, names, source: str, fields) -> list[str]:
+    out = []
+    for s, (f, o) in zip(symbols, names):
+        out.append(f"{s.name} = {source}[{fields.index(f)}, ix[{o}]]")
+    return out
+
+
+def _bind(exprs, lattice: Lattice) -> list[str]:
+    """Lines binding the parameters and the size the expressions use."""
+    used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
+    lines = [f"{s.name} = p[{k}]" for k, s in enumerate(lattice.param_symbols) if s in used]
+    if lattice.size in used:
+        lines.append(f"{lattice.size.name} = float(n)")
+    return lines
+
+
+def _tuple(items) -> str:
+    return "(" + ", ".join(items) + ("," if len(items) == 1 else "") + ")"
+
+
+def _bound_text(b) -> str:
+    """A range bound as 0-based Python text in ``n``."""
+    return f"n + {b.c - 1}" if b.from_end else str(b.c - 1)
+
+
+def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
+    """``_grad_sites(Y0, W, n, p, jac)``: ∇̄H(y0, z) into W[0:2] (z the rows W[14:16]) and, with
+    ``jac``, its derivative's block diagonals into W[2:14] (row 2 + 4 r + 2 f + g: site j to
+    j + r - 1, entry (f, g)), a
+    loop over the sites of each term -- the scalar form of the module's vectorised kernels, in
+    the subset :mod:`methodgen.codegen.llvmkernels` translates (:mod:`methodgen.runtime.lattice_stepper` inlines
+    it).  Sites are (i + o + n) % n: non-negative operands, so C's and Python's % agree."""
+    lat = scheme.lattice
+    printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+    lines = ["def _grad_sites(Y0, W, n, p, jac):"]
+    body = []
+    allx = [e for tp in scheme.terms for e in list(tp.pieces) + [x for row in tp.jac for x in row]]
+    body += _bind(allx, lat)
+    body = [ln.replace("float(n)", "n * 1.0") for ln in body]
+    for k, tp in enumerate(scheme.terms):
+        t = tp.term
+        body.append(f"# {_docsafe(t.source)}")
+        body.append(f"for i in range({_bound_text(t.lo)}, {_bound_text(t.hi)} + 1):")
+        inner = []
+        for o in sorted({o for _, o in t.slots}):
+            inner.append(f"i{_otag(o)} = i" if o == 0 else f"i{_otag(o)} = (i + {o + 0} + n) % n")
+        for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
+            inner.append(f"{s0.name} = Y0[{fields.index(f)}, i{_otag(o)}]")
+            inner.append(f"{s1.name} = W[{14 + fields.index(f)}, i{_otag(o)}]")
+        kk = len(tp.pieces)
+        flat_jac = [e for row in tp.jac for e in row]
+        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
+        scatter_g = lambda outs: [f"W[{fields.index(f)}, i{_otag(o)}] += {outs[a]}"  # noqa: E731
+                                  for a, (f, o) in enumerate(t.slots)]
+        inner.append("if jac != 0:")
+        inner += ["    " + ln for ln in j_pre + scatter_g(j_out[:kk])]
+        for a, (f, o) in enumerate(t.slots):
+            for b, (g, o2) in enumerate(t.slots):
+                row = 2 + 4 * (o2 - o + 1) + 2 * fields.index(f) + fields.index(g)
+                inner.append(f"    W[{row}, i{_otag(o)}] += {j_out[kk + a * kk + b]}")
+        inner.append("else:")
+        inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
+        body += ["    " + ln for ln in inner]
+    return lines + ["    " + ln for ln in body]
+
+
+def _otag(o: int) -> str:
+    return "0" if o == 0 else (f"p{o}" if o > 0 else f"m{-o}")
+
+
+def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
+    """The module's source text (deterministic: the same scheme gives the same bytes).
+
+    ``backend="compiled"`` adds the scalar kernel (:func:`_scalar_kernel`) and runs the steps on
+    :mod:`methodgen.runtime.lattice_stepper` compiled through LLVM (the module then imports methodgen)."""
+    lat = scheme.lattice
+    printer = VectorPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+    def values(t, z0):
+        pre, (value,) = _cse_lines([t.template], printer, "_e")
+        return (_bind([t.template], lat) + _gathers(z0, t.slots, "Y", fields) + pre
+                + [f"return numpy.broadcast_to({value}, ix[{t.slots[0][1]}].shape)"])
+
+    def entry(t):
+        return {"source": _docsafe(t.source), "lo": (t.lo.from_end, t.lo.c), "hi": (t.hi.from_end, t.hi.c),
+                "offsets": sorted({o for _, o in t.slots})}
+
+    terms = []
+    for tp in scheme.terms:
+        t = tp.term
+        flat_jac = [e for row in tp.jac for e in row]
+        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
+        k = len(tp.pieces)
+        jac_rows = [_tuple(j_out[k + a * k:k + (a + 1) * k]) for a in range(k)]
+        piece_lines = (_bind(list(tp.pieces) + flat_jac, lat)
+                       + _gathers(tp.z0, t.slots, "Y0", fields) + _gathers(tp.z1, t.slots, "Z", fields)
+                       + ["if not jac:"] + ["    " + ln for ln in g_pre] + [f"    return {_tuple(g_out)}, None"]
+                       + j_pre + [f"return {_tuple(j_out[:k])}, {_tuple(jac_rows)}"])
+        terms.append({**entry(t), "slots": [(fields.index(f), o) for f, o in t.slots],
+                      "slot_names": [s.name for s in tp.z0],
+                      "energy_lines": values(t, tp.z0), "piece_lines": piece_lines})
+    quantities = [("H", list(range(len(terms))))]
+    extra = []
+    for name, its_terms in lat.invariants.items():
+        first = len(terms) + len(extra)
+        for t in its_terms:
+            extra.append({**entry(t), "energy_lines": values(t, t.symbols()), "piece_lines": []})
+        quantities.append((name, list(range(first, first + len(its_terms)))))
+    scalar = _scalar_kernel(scheme) if backend == "compiled" else []
+    code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t["piece_lines"]] + scalar)
+    known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
+    helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
+    env = _environment()
+    special = env.get_template("_special.py.j2").render(ir=type("HelperSet", (), {"helpers": helpers}))
+    if helpers:
+        special = "\n\n" + special.strip("\n") + "\n"
+    defaults = "{" + ", ".join(f"{k!r}: {v!r}" for k, v in lat.params.items()) + "}"
+    traits = scheme.traits
+    description = (f"{LATTICE_METHODS[scheme.method]}; "
+                   + ("keeps H exactly up to round-off." if traits["energy_preserving"] else
+                      "H is not kept exactly (bounded for a symplectic method)."))
+    if scheme.notes:
+        description += "\n" + "\n".join(scheme.notes)
+    header = [f"Generated by methodgen {__version__} from templates/{TEMPLATE} -- do not edit.",
+              f"system: {lat.name}; method: {scheme.method} (lattice, any N); backend: {backend}",
+              f"H = {_docsafe(lat.text)}",
+              f"methodgen {__version__}; sympy {sp.__version__}; templates sha256 {template_hash('numpy')[:16]}",
+              HEADER_SIGNATURE[2:] + sig]
+    text = env.get_template(TEMPLATE).render(
+        header=header, method=scheme.method, name=lat.name, source=_docsafe(lat.text), description=description,
+        q=lat.q_name, p=lat.p_name, size=lat.size.name, nmin=lat.nmin, param_names=list(lat.params),
+        defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special, extra=extra,
+        quantities=quantities, quantity_names=[q for q, _ in quantities], backend=backend, scalar=scalar)
+    text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
+    return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
+
+
+BACKENDS = ("numpy", "compiled")
+
+
+def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, backend: str = "numpy", progress=None):
+    """The generated module of ``method`` for ``lattice``: one module for every N.
+
+    Derived, printed and written once (to ``path``, default the per-user cache under a name with
+    the signature); a current file is imported without deriving.
+
+    Parameters
+    ----------
+    lattice : Lattice
+    method : {"avf", "midpoint"}
+    path : path-like, optional
+    backend : {"numpy", "compiled"}
+        "numpy": vectorised numpy, the module imports numpy only.  "compiled": the steps run on
+        :mod:`methodgen.runtime.lattice_stepper` compiled through LLVM (needs llvmlite; the module
+        imports methodgen); the same results to round-off.
+    progress : callable, optional
+        ``progress(phase, elapsed, done)`` for derive, render, write and load.
+
+    Returns
+    -------
+    module
+    """
+    if method not in LATTICE_METHODS:
+        discretize_lattice(lattice, method)     # raises with the list of methods
+    if backend not in BACKENDS:
+        raise InputError(f"unknown backend {backend!r} for a lattice; backends are {', '.join(BACKENDS)}")
+    sig = lattice_signature(lattice, method, backend)
+    if path is None:
+        suffix = "" if backend == "numpy" else f"_{backend}"
+        path = cache_dir() / f"{lattice.name}_{method}_lattice{suffix}_{sig[:12]}.py".replace("-", "_")
+    path = Path(path)
+    check_cache_folder(path)
+    status = file_status(path, sig)
+    if status != "ok":
+        if status == "untrusted":
+            warn_regenerating(path, status)
+        with phase("derive", progress):
+            scheme = discretize_lattice(lattice, method)
+        with phase("render", progress):
+            text = render(scheme, sig, backend)
+        with phase("write", progress):
+            write_module(path, text)
+    with phase("load", progress):
+        return load_module(path, expected_signature=sig)

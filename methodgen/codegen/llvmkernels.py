@@ -1,0 +1,1157 @@
+"""A numba module's kernels compiled to machine code through LLVM IR (llvmlite), not numba.
+
+numba spends seconds typing and lowering a kernel of a few hundred statements (the outer
+solar system's energy-momentum Newton matrix: 3.4 s of a 9.5 s first use; most of it is
+numba's type inference trying overloads per operation, not LLVM).  The kernels of a numba
+module are float arithmetic on arrays of known shape, so this module writes their LLVM IR
+directly from the kernel's Python source -- as heyoka does from its expression graph -- and
+compiles it with LLVM in milliseconds.  The result is an :class:`LLVMKernel`: machine code
+with the signature of numba's C-ABI wrapper for the same kernel type, so the shared runtime
+calls it exactly as it calls a numba kernel (numba's wrapper-address protocol), and the
+fused loop (:mod:`methodgen.runtime.fused`) inlines its source.  Signatures are
+:mod:`methodgen.codegen.ktypes` (numba's accepted too); this module does not import numba unless a
+kernel falls back to it.
+
+What is translated: assignments (scalar names live in stack slots that LLVM promotes to
+registers, so a value may be carried across iterations or branches), stores and ``+=``,
+``-=`` … to array elements, ``for`` over ``range`` with bounds known at translation time
+(a loop in the machine code) and over constant tuples (unrolled: a sum kept in its printed
+order), ``while``, ``break``, ``continue``, ``if``/``else`` on run-time or translation-time
+conditions, ``return``; views of
+the arguments (``X[a:b]``, rows ``A[i]``), stack buffers (``numba.carray(_rt.stack_buffer(n),
+shape)``) and ``numpy.zeros``; the module's constant tables (numpy arrays of indices or
+weights) and integer constants; calls of the module's scalar helpers (translated once,
+inlined by LLVM) and of its array kernels (inlined here); the arithmetic, comparisons and
+the math functions below.  Anything else (``for … else``, ``%`` of floats, an unknown function)
+raises :class:`Unsupported`, and :func:`kernel` then compiles the kernel with numba as
+before.  ``METHODGEN_KERNELS=numba`` forces numba for every kernel (the control the tests use).
+
+Same arithmetic, same bits: every operation is the one numba emits for the same source
+without fastmath (IEEE add, sub, mul, div and negation; ``x**n`` for a constant integer n
+by repeated squaring from 1.0, then ``1.0/…`` for negative n, as
+``numba.cpython.numbers.static_power_impl``; other powers through ``llvm.pow``; ordered
+comparisons but ``!=``; ``max``/``min`` as numba's ``do_minmax``; ``math.sqrt``,
+``math.sin`` … through the same intrinsics or libm functions).  LLVM optimises without
+fast-math flags, so it does not reassociate.  One difference: ``x**-n`` at x = 0 is inf
+here (the modules' error model); numba's raises ``ZeroDivisionError`` inside the kernel.
+
+The kernels' source is the text the generated module was executed from (recorded by
+methodgen's loader: :mod:`methodgen.codegen.kernelsource`), parsed with :mod:`ast` -- generated
+code, never user text.
+"""
+
+from __future__ import annotations
+
+import ast
+import ctypes
+import ctypes.util
+import os
+import threading
+
+import llvmlite.binding as llvm
+import numpy as np
+from llvmlite import ir
+from . import kernelsource as _ks
+from . import ktypes as _t
+from . import llvmcache as _objcache
+from . import nbcache as _nbcache
+
+__all__ = ["kernel", "compile_kernel", "assembly", "Unsupported", "LLVMKernel", "enabled", "packed_structs"]
+
+
+class Unsupported(Exception):
+    """The kernel's source uses something this translator does not know."""
+
+
+def enabled() -> bool:
+    """Whether straight-line kernels take this route (``METHODGEN_KERNELS`` is not ``numba``)."""
+    return os.environ.get("METHODGEN_KERNELS", "llvm").strip().lower() != "numba"
+
+
+# --- LLVM set-up (once per process) ---------------------------------------------------
+
+_DBL = ir.DoubleType()
+_I64 = ir.IntType(64)
+_PTR = ir.PointerType(ir.IntType(8))
+_DPTR = ir.PointerType(_DBL)
+_STATE: dict = {}
+_LOCK = threading.RLock()
+
+
+def _target_machine():
+    """A new target machine for the host (the pass builder's; the engine owns its own)."""
+    if "triple" not in _STATE:
+        llvm.initialize_native_target()
+        llvm.initialize_native_asmprinter()
+        libm = ctypes.util.find_library("m")
+        if libm:
+            llvm.load_library_permanently(libm)   # tan, asin, … resolved at link time
+        _STATE["triple"] = llvm.get_process_triple()
+        _STATE["cpu"] = llvm.get_host_cpu_name()
+        _STATE["features"] = llvm.get_host_cpu_features().flatten()
+    target = llvm.Target.from_triple(_STATE["triple"])
+    return target.create_target_machine(cpu=_STATE["cpu"], features=_STATE["features"], opt=2,
+                                        codemodel="jitdefault")
+
+
+def _engine():
+    """The process's one execution engine: every kernel's module is added to it and lives
+    as long as the process (an engine owns its target machine and modules; freeing it under
+    a kernel still in use would free that kernel's code)."""
+    eng = _STATE.get("engine")
+    if eng is None:
+        tm = _target_machine()
+        eng = _STATE["engine"] = llvm.create_mcjit_compiler(llvm.parse_assembly(""), tm)
+        _STATE["count"] = 0
+    return eng
+
+
+def _array_type(ndim: int) -> ir.LiteralStructType:
+    # numba's value type of array(float64, ndim, 'C'): meminfo, parent, nitems, itemsize,
+    # data, shape, strides (passed by value to its C-ABI wrappers)
+    return ir.LiteralStructType([_PTR, _PTR, _I64, _I64, _DPTR, ir.ArrayType(_I64, ndim),
+                                 ir.ArrayType(_I64, ndim)])
+
+
+def _llvm_type(nbtype):
+    if isinstance(nbtype, _t.Array):
+        if nbtype.dtype != _t.float64 or nbtype.layout != "C":
+            raise Unsupported(f"array argument {nbtype}")
+        return _array_type(nbtype.ndim)
+    if nbtype == _t.float64:
+        return _DBL
+    if nbtype == _t.int64:
+        return _I64
+    raise Unsupported(f"argument type {nbtype}")
+
+
+# --- translation ----------------------------------------------------------------------
+
+#: math functions of one argument: LLVM intrinsic (as numba's mathimpl) or libm symbol
+_UNARY = {"sqrt": ("intr", "llvm.sqrt"), "fabs": ("intr", "llvm.fabs"), "exp": ("intr", "llvm.exp"),
+          "log": ("intr", "llvm.log"), "log10": ("intr", "llvm.log10"), "sin": ("intr", "llvm.sin"),
+          "cos": ("intr", "llvm.cos"), "tan": ("extern", "tan"), "asin": ("extern", "asin"),
+          "acos": ("extern", "acos"), "atan": ("extern", "atan"), "sinh": ("extern", "sinh"),
+          "cosh": ("extern", "cosh"), "tanh": ("extern", "tanh"), "asinh": ("extern", "asinh"),
+          "acosh": ("extern", "acosh"), "atanh": ("extern", "atanh"), "log1p": ("extern", "log1p"),
+          "expm1": ("extern", "expm1"), "erf": ("extern", "erf"), "erfc": ("extern", "erfc")}
+#: math functions of two arguments
+_BINARY = {"atan2": ("extern", "atan2"), "copysign": ("intr", "llvm.copysign")}
+
+
+class _Function:
+    """The state of one LLVM function being written: its builder and entry block, and the
+    slots of its scalar names (allocas, which LLVM's mem2reg turns into registers)."""
+
+    def __init__(self, fn):
+        self.fn = fn
+        self.entry = fn.append_basic_block("entry")
+        self.builder = ir.IRBuilder(self.entry)
+        self.alloca_at = None           # the last alloca in the entry block
+
+    def alloca(self, ty, size=None, name=""):
+        """A stack slot in the entry block (after the slots made before it, so that every
+        slot dominates its uses, and LLVM's mem2reg promotes the scalar ones)."""
+        b = self.builder
+        with b.goto_block(self.entry):
+            if self.alloca_at is None:
+                b.position_at_start(self.entry)
+            else:
+                b.position_after(self.alloca_at)
+            a = b.alloca(ty, size=size, name=name)
+        self.alloca_at = a
+        return a
+
+
+class _Scope:
+    """Names visible in the body being translated (a kernel, or a kernel inlined into it)."""
+
+    def __init__(self, func: _Function, globals_: dict):
+        self.func = func
+        self.globals = globals_
+        self.slots: dict = {}           # scalar name -> (kind "f" | "i", alloca)
+        self.arrays: dict = {}          # name -> (data pointer, [extent values]) of a float view
+        self.consts: dict = {}          # name -> int known at translation time
+        self.fconsts: dict = {}         # name -> float known at translation time (unrolled tuple)
+
+
+_CMP = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=", ast.Eq: "==", ast.NotEq: "!="}
+
+
+class _Translator:
+    """One kernel (an ``ast.FunctionDef``) into an LLVM function of ``module``: straight-line
+    arithmetic, loops over ``range`` with constant bounds (and over constant tuples, unrolled),
+    branches, scalar variables of any flow (stack slots), array views, the module's constant
+    tables, and calls of the module's helpers (scalar ones as functions, array kernels inlined)."""
+
+    _CONST_OPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+                  ast.RShift: lambda a, b: a >> b, ast.LShift: lambda a, b: a << b,
+                  ast.BitAnd: lambda a, b: a & b, ast.BitOr: lambda a, b: a | b,
+                  ast.FloorDiv: lambda a, b: a // b, ast.Mod: lambda a, b: a % b}
+
+    def __init__(self, module: ir.Module, fdef: ast.FunctionDef, sig, name: str, globals_: dict):
+        self.module = module
+        self.globals = globals_
+        self.tables: dict = {}
+        self.helpers: dict = {}
+        self.inline_depth = 0
+        self.loops: list = []           # (continue target, break target) of the enclosing loops
+        argnames = [a.arg for a in fdef.args.args]
+        if len(argnames) != len(sig.args):
+            raise Unsupported("argument count differs from the signature")
+        void = sig.return_type == _t.none
+        if not void and sig.return_type != _t.float64:
+            raise Unsupported(f"return type {sig.return_type}")
+        fnty = ir.FunctionType(_PTR if void else _DBL, [_llvm_type(t) for t in sig.args])
+        fn = ir.Function(module, fnty, name=name)
+        self.name = name
+        self.ret = "void" if void else "f"
+        self.f = _Function(fn)
+        self.scope = _Scope(self.f, globals_)
+        self.loop_assigned = self._assigned_in_loops(fdef.body)
+        for a, t, v in zip(argnames, sig.args, fn.args):
+            if isinstance(t, _t.Array):
+                b = self.b
+                data = b.extract_value(v, 4)
+                shape = [b.extract_value(v, (5, i)) for i in range(t.ndim)]
+                self.scope.arrays[a] = (data, shape)
+            elif t == _t.float64:
+                self.store_name(a, v, "f")
+            else:
+                self.store_name(a, v, "i")
+        self.body = fdef.body
+
+    @property
+    def b(self):
+        return self.f.builder
+
+    @staticmethod
+    def _assigned_in_loops(body) -> set:
+        """Names assigned anywhere inside a ``for … in range`` loop (never translation-time
+        constants: their value changes from one iteration to the next)."""
+        out = set()
+        for node in ast.walk(ast.Module(body=list(body), type_ignores=[])):
+            if isinstance(node, ast.While) or (isinstance(node, ast.For)
+                                               and not isinstance(node.iter, (ast.Tuple, ast.Name))):
+                out |= _Translator._assigned_names([node])
+        return out
+
+    @staticmethod
+    def _assigned_names(stmts) -> set:
+        """Names assigned anywhere in ``stmts``."""
+        out = set()
+        for node in ast.walk(ast.Module(body=list(stmts), type_ignores=[])):
+            if isinstance(node, (ast.Assign, ast.AugAssign)):
+                for t in (node.targets if isinstance(node, ast.Assign) else [node.target]):
+                    if isinstance(t, ast.Name):
+                        out.add(t.id)
+            elif isinstance(node, ast.For) and isinstance(node.target, ast.Name):
+                out.add(node.target.id)
+        return out
+
+    # --- names --------------------------------------------------------------------------
+    def slot(self, name, kind):
+        sc = self.scope
+        got = sc.slots.get(name)
+        if got is not None:
+            if got[0] != kind:
+                raise Unsupported(f"{name} holds both an integer and a float")
+            return got[1]
+        a = self.f.alloca(_DBL if kind == "f" else _I64, name=name)
+        sc.slots[name] = (kind, a)
+        return a
+
+    def store_name(self, name, value, kind):
+        sc = self.scope
+        if name in sc.arrays:
+            raise Unsupported(f"{name} rebound")
+        sc.consts.pop(name, None)
+        sc.fconsts.pop(name, None)
+        self.b.store(value, self.slot(name, kind))
+
+    # --- statements ---------------------------------------------------------------------
+    def run(self):
+        self.block(self.body)
+        if not self.b.block.is_terminated:
+            if self.ret != "void":
+                raise Unsupported("no return value")
+            self.b.ret(ir.Constant(_PTR, None))
+
+    def block(self, stmts):
+        for st in stmts:
+            if self.b.block.is_terminated:
+                return                        # after a return: not executed
+            self.statement(st)
+
+    def statement(self, st):
+        b = self.b
+        sc = self.scope
+        if isinstance(st, ast.Expr) and isinstance(st.value, ast.Constant):
+            return                                   # a docstring or a bare constant
+        if isinstance(st, ast.Pass):
+            return
+        if isinstance(st, ast.Expr) and isinstance(st.value, ast.Call):
+            self.call_inline(st.value)
+            return
+        if isinstance(st, ast.Assign) and len(st.targets) == 1:
+            tgt = st.targets[0]
+            if isinstance(tgt, ast.Name) and self.view(tgt.id, st.value):
+                return
+            if isinstance(tgt, ast.Subscript) and self.is_full_slice(tgt.slice):
+                if not (isinstance(st.value, ast.Constant) and st.value.value == 0.0):
+                    raise Unsupported("slice assignment of a non-zero")
+                self.zero(tgt.value)
+                return
+            if isinstance(tgt, ast.Name):
+                c = self.const_eval(st.value)
+                if (c is not None and tgt.id not in self.loop_assigned and self.inline_depth == 0
+                        and tgt.id not in sc.slots):
+                    sc.consts[tgt.id] = c
+                    return
+                kind, val = self.any_expr(st.value)
+                self.store_name(tgt.id, val, kind)
+                return
+            if isinstance(tgt, ast.Subscript):
+                b.store(self.expr(st.value), self.address(tgt))
+                return
+            raise Unsupported("assignment target")
+        if isinstance(st, ast.AugAssign) and type(st.op) in (ast.Add, ast.Sub, ast.Mult, ast.Div):
+            op = {ast.Add: b.fadd, ast.Sub: b.fsub, ast.Mult: b.fmul, ast.Div: b.fdiv}[type(st.op)]
+            if isinstance(st.target, ast.Subscript):
+                addr = self.address(st.target)
+                b.store(op(b.load(addr), self.expr(st.value)), addr)
+                return
+            if isinstance(st.target, ast.Name) and st.target.id in sc.slots and sc.slots[st.target.id][0] == "f":
+                a = sc.slots[st.target.id][1]
+                b.store(op(b.load(a), self.expr(st.value)), a)
+                return
+            if (isinstance(st.target, ast.Name) and st.target.id in sc.slots and sc.slots[st.target.id][0] == "i"
+                    and type(st.op) in (ast.Add, ast.Sub, ast.Mult)):
+                a = sc.slots[st.target.id][1]
+                iop = {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(st.op)]
+                b.store(iop(b.load(a), self.int_expr(st.value)), a)
+                return
+            raise Unsupported("augmented assignment")
+        if isinstance(st, ast.For):
+            if isinstance(st.iter, (ast.Tuple, ast.Name)):
+                self.unrolled(st)
+            else:
+                self.loop(st)
+            return
+        if isinstance(st, ast.While):
+            self.while_loop(st)
+            return
+        if isinstance(st, (ast.Break, ast.Continue)):
+            if not self.loops:
+                raise Unsupported(f"{type(st).__name__.lower()} outside a loop")
+            cont, brk = self.loops[-1]
+            b.branch(brk if isinstance(st, ast.Break) else cont)
+            return
+        if isinstance(st, ast.If):
+            c = self.const_eval(st.test)
+            if c is not None:
+                self.block(st.body if c else st.orelse)
+                return
+            # a name folded to a constant and assigned in a branch lives in its slot from here
+            # on, holding the constant on the paths that do not assign it
+            for name in sorted(self._assigned_names(st.body + st.orelse)):
+                if name in sc.consts:
+                    b.store(ir.Constant(_I64, sc.consts.pop(name)), self.slot(name, "i"))
+                elif name in sc.fconsts:
+                    b.store(ir.Constant(_DBL, sc.fconsts.pop(name)), self.slot(name, "f"))
+            cond = self.bool_expr(st.test)
+            then = self.f.fn.append_basic_block("then")
+            other = self.f.fn.append_basic_block("else")
+            merge = self.f.fn.append_basic_block("endif")
+            b.cbranch(cond, then, other)
+            reached = False
+            for blk, body in ((then, st.body), (other, st.orelse)):
+                b.position_at_end(blk)
+                self.block(body)
+                if not b.block.is_terminated:
+                    b.branch(merge)
+                    reached = True
+            b.position_at_end(merge)
+            if not reached:                  # both branches returned
+                b.unreachable()
+            return
+        if isinstance(st, ast.Return):
+            if self.inline_depth:
+                raise Unsupported("return from an inlined kernel")
+            if self.ret == "void":
+                if st.value is not None:
+                    raise Unsupported("a value returned from a void kernel")
+                b.ret(ir.Constant(_PTR, None))
+            else:
+                b.ret(self.expr(st.value))
+            return
+        raise Unsupported(type(st).__name__)
+
+    # --- arrays ---------------------------------------------------------------------------
+    def address(self, sub: ast.Subscript):
+        if not isinstance(sub.value, ast.Name) or sub.value.id not in self.scope.arrays:
+            raise Unsupported("subscript of a non-array")
+        data, shape = self.scope.arrays[sub.value.id]
+        idx = sub.slice
+        parts = idx.elts if isinstance(idx, ast.Tuple) else [idx]
+        if len(parts) != len(shape):
+            raise Unsupported("index rank")
+        return self.element(data, shape, [self.int_expr(p) for p in parts])
+
+    def element(self, data, shape, ints):
+        b = self.b
+        # C order: ((i0 * n1) + i1) * n2 + ...  (the extents are run-time values)
+        flat = ints[0]
+        for n, i in zip(shape[1:], ints[1:]):
+            flat = b.add(b.mul(flat, n), i)
+        return b.gep(data, [flat])
+
+    def array_arg(self, node):
+        """An array argument of an inlined call: a name or a row ``A[i]`` of a 2-D view."""
+        sc = self.scope
+        if isinstance(node, ast.Name) and node.id in sc.arrays:
+            return sc.arrays[node.id]
+        if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in sc.arrays
+                and not isinstance(node.slice, (ast.Tuple, ast.Slice))):
+            data, shape = sc.arrays[node.value.id]
+            if len(shape) != 2:
+                return None                   # an element, not a view
+            row = self.b.mul(self.int_expr(node.slice), shape[1])
+            return self.b.gep(data, [row]), [shape[1]]
+        return None
+
+    def int_expr(self, node):
+        """An integer: a constant, a loop index or integer variable, a sum or product of those,
+        or an entry of one of the module's constant integer tables."""
+        b = self.b
+        c = self.const_eval(node)
+        if c is not None:
+            return ir.Constant(_I64, c)
+        sc = self.scope
+        if isinstance(node, ast.Name) and node.id in sc.slots and sc.slots[node.id][0] == "i":
+            return b.load(sc.slots[node.id][1])
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            return b.sub(ir.Constant(_I64, 0), self.int_expr(node.operand))
+        if isinstance(node, ast.BinOp) and type(node.op) in (ast.Add, ast.Sub, ast.Mult):
+            x, y = self.int_expr(node.left), self.int_expr(node.right)
+            return {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(node.op)](x, y)
+        if isinstance(node, ast.BinOp) and type(node.op) in (ast.Mod, ast.FloorDiv):
+            # Python's floor semantics: C's truncated remainder, moved into the divisor's sign
+            # (a zero divisor is the caller's to exclude, as LLVM leaves it undefined)
+            x, y = self.int_expr(node.left), self.int_expr(node.right)
+            zero = ir.Constant(_I64, 0)
+            r = b.srem(x, y)
+            fix = b.and_(b.icmp_signed("!=", r, zero),
+                         b.icmp_signed("!=", b.icmp_signed("<", r, zero), b.icmp_signed("<", y, zero)))
+            if isinstance(node.op, ast.Mod):
+                return b.select(fix, b.add(r, y), r)
+            q = b.sdiv(x, y)
+            return b.select(fix, b.sub(q, ir.Constant(_I64, 1)), q)
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "int"
+                and len(node.args) == 1 and not node.keywords):
+            # a float holding an integer (a row permutation kept in a float64 array)
+            return b.fptosi(self.expr(node.args[0]), _I64)
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("min", "max")
+                and len(node.args) >= 2 and not node.keywords):
+            # integer min / max, left to right as numba's do_minmax
+            acc = self.int_expr(node.args[0])
+            for a in node.args[1:]:
+                v = self.int_expr(a)
+                acc = b.select(b.icmp_signed("<" if node.func.id == "min" else ">", v, acc), v, acc)
+            return acc
+        if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
+            if node.value.id in sc.arrays:
+                raise Unsupported("a float element as an index")
+            gv, shape, kind = self.table(node.value.id)
+            if kind != "i":
+                raise Unsupported("float table as an index")
+            return b.load(self.table_address(gv, shape, node.slice))
+        raise Unsupported(f"index expression {ast.unparse(node)!r}")
+
+    def table_address(self, gv, shape, idx):
+        b = self.b
+        parts = idx.elts if isinstance(idx, ast.Tuple) else [idx]
+        if len(parts) != len(shape):
+            raise Unsupported("table index rank")
+        flat = self.int_expr(parts[0])
+        for n, p in zip(shape[1:], parts[1:]):
+            flat = b.add(b.mul(flat, ir.Constant(_I64, n)), self.int_expr(p))
+        return b.gep(gv, [ir.Constant(_I64, 0), flat])
+
+    def table(self, name):
+        """A module-level numpy array (index tables, quadrature weights) as an LLVM constant."""
+        got = self.tables.get(name)
+        if got is None:
+            import numpy
+            arr = self.scope.globals.get(name)
+            if not isinstance(arr, numpy.ndarray) or arr.size == 0 or arr.dtype.kind not in "iuf":
+                raise Unsupported(f"{name} is not a constant table")
+            if arr.dtype.kind == "f":
+                if arr.dtype != numpy.float64:
+                    raise Unsupported(f"{name}: {arr.dtype}")
+                kind, ety, flat = "f", _DBL, [float(v) for v in arr.ravel()]
+            else:
+                kind, ety, flat = "i", _I64, [int(v) for v in arr.ravel()]
+            ty = ir.ArrayType(ety, len(flat))
+            gv = ir.GlobalVariable(self.module, ty, name=f"{self.name}.{name}")
+            gv.global_constant = True
+            gv.linkage = "private"
+            gv.initializer = ir.Constant(ty, flat)
+            got = self.tables[name] = (gv, arr.shape, kind)
+        return got
+
+    def view(self, name, value) -> bool:
+        """``name`` bound to an array: another array, ``X[a:b]`` (constant bounds), a row of a
+        matrix, a stack buffer (``numba.carray(_rt.stack_buffer(n), shape)``) or ``numpy.zeros``."""
+        sc = self.scope
+        arr = self.array_arg(value)
+        if arr is not None:
+            sc.arrays[name] = arr
+            return True
+        if (isinstance(value, ast.Subscript) and isinstance(value.value, ast.Name)
+                and value.value.id in sc.arrays and isinstance(value.slice, ast.Slice)):
+            data, shape = sc.arrays[value.value.id]
+            sl = value.slice
+            if len(shape) != 1 or sl.step is not None or sl.lower is None or sl.upper is None:
+                raise Unsupported("slice")
+            lo, hi = self.const_int(sl.lower), self.const_int(sl.upper)
+            sc.arrays[name] = (self.b.gep(data, [ir.Constant(_I64, lo)]), [ir.Constant(_I64, hi - lo)])
+            return True
+        if isinstance(value, ast.Call) and isinstance(value.func, ast.Attribute) and not value.keywords:
+            owner = value.func.value.id if isinstance(value.func.value, ast.Name) else None
+            if owner == "numpy" and value.func.attr == "zeros" and len(value.args) == 1:
+                shape = self.const_shape(value.args[0])
+                sc.arrays[name] = self.buffer(shape)
+                self.zero(ast.Name(id=name))
+                return True
+            if owner == "numba" and value.func.attr == "carray" and len(value.args) == 2:
+                inner = value.args[0]
+                if not (isinstance(inner, ast.Call) and isinstance(inner.func, ast.Attribute)
+                        and inner.func.attr == "stack_buffer"):
+                    raise Unsupported("carray of something else than a stack buffer")
+                sc.arrays[name] = self.buffer(self.const_shape(value.args[1]))
+                return True
+        return False
+
+    def const_shape(self, node):
+        dims = node.elts if isinstance(node, ast.Tuple) else [node]
+        return [self.const_int(d) for d in dims]
+
+    def buffer(self, shape):
+        """A work array on the stack (an alloca in the entry block)."""
+        total = 1
+        for n in shape:
+            total *= n
+        buf = self.f.alloca(_DBL, size=ir.Constant(_I64, max(total, 1)))
+        return buf, [ir.Constant(_I64, n) for n in shape]
+
+    @staticmethod
+    def is_full_slice(idx) -> bool:
+        parts = idx.elts if isinstance(idx, ast.Tuple) else [idx]
+        return all(isinstance(p, ast.Slice) and p.lower is None and p.upper is None and p.step is None
+                   for p in parts)
+
+    def zero(self, node):
+        if not isinstance(node, ast.Name) or node.id not in self.scope.arrays:
+            raise Unsupported("clearing a non-array")
+        b = self.b
+        data, shape = self.scope.arrays[node.id]
+        n = shape[0]
+        for e in shape[1:]:
+            n = b.mul(n, e)
+        fn = self.module.declare_intrinsic("llvm.memset", [_PTR, _I64])
+        b.call(fn, [b.bitcast(data, _PTR), ir.Constant(ir.IntType(8), 0), b.mul(n, ir.Constant(_I64, 8)),
+                    ir.Constant(ir.IntType(1), 0)])
+
+    # --- loops ----------------------------------------------------------------------------
+    def const_int(self, node):
+        c = self.const_eval(node)
+        if c is None:
+            raise Unsupported("non-constant integer")
+        return c
+
+    def const_eval(self, node):
+        """The Python int value of an integer expression known at translation time (constants,
+        the module's integer constants, the elements of a loop over a constant tuple), else None."""
+        if isinstance(node, ast.Constant) and type(node.value) is int:
+            return node.value
+        if isinstance(node, ast.Name):
+            sc = self.scope
+            if node.id in sc.consts:
+                return sc.consts[node.id]
+            if node.id in sc.slots or node.id in sc.arrays or node.id in sc.fconsts:
+                return None
+            v = sc.globals.get(node.id)
+            return v if type(v) is int and node.id.startswith("_") else None
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            v = self.const_eval(node.operand)
+            return None if v is None else -v
+        if isinstance(node, ast.BinOp) and type(node.op) in self._CONST_OPS:
+            a, b = self.const_eval(node.left), self.const_eval(node.right)
+            if a is None or b is None or (type(node.op) in (ast.FloorDiv, ast.Mod) and b == 0):
+                return None
+            return self._CONST_OPS[type(node.op)](a, b)
+        if isinstance(node, ast.BoolOp):
+            # ``and`` / ``or`` of comparisons (no side effects): decided at translation time when
+            # one operand decides it (False in an ``and``, True in an ``or``) or all are known
+            vals = [self.const_eval(v) for v in node.values]
+            decisive = 0 if isinstance(node.op, ast.And) else 1
+            if any(v is not None and bool(v) == bool(decisive) for v in vals):
+                return decisive
+            if all(v is not None for v in vals):
+                return 1 - decisive
+            return None
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+            v = self.const_eval(node.operand)
+            return None if v is None else int(not v)
+        if isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _CMP:
+            a, b = self.const_eval(node.left), self.const_eval(node.comparators[0])
+            if a is None or b is None:
+                return None
+            import operator
+            fn = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE: operator.ge,
+                  ast.Eq: operator.eq, ast.NotEq: operator.ne}[type(node.ops[0])]
+            return int(fn(a, b))
+        return None
+
+    def unrolled(self, st: ast.For):
+        """``for e in (c0, c1, …)`` (a literal tuple or a module-level tuple of numbers): the
+        body once per element, in order (a sum kept in its printed order)."""
+        if st.orelse or not isinstance(st.target, ast.Name):
+            raise Unsupported("loop")
+        if isinstance(st.iter, ast.Tuple):
+            items = [self.const_eval(e) if not (isinstance(e, ast.Constant) and type(e.value) is float)
+                     else e.value for e in st.iter.elts]
+        else:
+            items = self.scope.globals.get(st.iter.id)
+            if not isinstance(items, tuple):
+                raise Unsupported("loop over a non-tuple")
+            items = list(items)
+        if any(type(v) not in (int, float) for v in items):
+            raise Unsupported("loop over a tuple of non-numbers")
+        name = st.target.id
+        if name in self.loop_assigned and any(type(v) is int for v in items):
+            raise Unsupported("unrolled integer loop inside a run-time loop")
+        sc = self.scope
+        for v in items:
+            if type(v) is int:
+                sc.consts[name] = v
+            else:
+                sc.fconsts[name] = v
+            self.block(st.body)
+        sc.consts.pop(name, None)
+        sc.fconsts.pop(name, None)
+
+    def loop(self, st: ast.For):
+        """``for i in range(a, b)`` (bounds known now) as a loop in the machine code."""
+        it = st.iter
+        if (st.orelse or not isinstance(st.target, ast.Name) or not isinstance(it, ast.Call)
+                or not isinstance(it.func, ast.Name) or it.func.id != "range" or it.keywords
+                or not 1 <= len(it.args) <= 2):
+            raise Unsupported("loop")
+        bounds = [self.const_eval(a) for a in it.args]
+        name = st.target.id
+        sc = self.scope
+        sc.consts.pop(name, None)
+        b = self.b
+        if all(v is not None for v in bounds):
+            lo, hi = (0, bounds[0]) if len(bounds) == 1 else bounds
+            if hi <= lo:
+                return
+            lo, hi = ir.Constant(_I64, lo), ir.Constant(_I64, hi)
+            known = True
+        else:
+            # bounds known at run time only (evaluated once, as range() does)
+            vals = [self.int_expr(a) for a in it.args]
+            lo, hi = (ir.Constant(_I64, 0), vals[0]) if len(vals) == 1 else vals
+            known = False
+        var = self.slot(name, "i")
+        fn = self.f.fn
+        body = fn.append_basic_block(f"loop.{name}")
+        latch = fn.append_basic_block(f"next.{name}")
+        done = fn.append_basic_block(f"done.{name}")       # the normal exit (not a break)
+        after = fn.append_basic_block(f"after.{name}")
+        b.store(lo, var)
+        if known:
+            b.branch(body)
+        else:
+            b.cbranch(b.icmp_signed("<", lo, hi), body, after)
+        self.loop_body(body, st.body, latch, after)
+        b.position_at_end(latch)
+        nxt = b.add(b.load(var), ir.Constant(_I64, 1))
+        b.store(nxt, var)
+        b.cbranch(b.icmp_signed("<", nxt, hi), body, done)
+        b.position_at_end(done)
+        if known:                # Python leaves the index at its last value (a break: where it broke)
+            b.store(b.sub(hi, ir.Constant(_I64, 1)), var)
+        b.branch(after)
+        b.position_at_end(after)
+
+    def while_loop(self, st: ast.While):
+        """``while <condition>:`` (no ``else``), with ``break`` and ``continue``."""
+        if st.orelse:
+            raise Unsupported("while … else")
+        b = self.b
+        fn = self.f.fn
+        head = fn.append_basic_block("while")
+        body = fn.append_basic_block("while.body")
+        after = fn.append_basic_block("while.after")
+        b.branch(head)
+        b.position_at_end(head)
+        b.cbranch(self.bool_expr(st.test), body, after)
+        self.loop_body(body, st.body, head, after)
+        b.position_at_end(after)
+
+    def loop_body(self, block, stmts, cont, brk):
+        """``stmts`` translated into ``block``, ``continue`` going to ``cont`` and ``break`` to
+        ``brk``; falling off the end continues."""
+        b = self.b
+        b.position_at_end(block)
+        self.loops.append((cont, brk))
+        try:
+            self.block(stmts)
+        finally:
+            self.loops.pop()
+        if not b.block.is_terminated:
+            b.branch(cont)
+
+    # --- expressions ----------------------------------------------------------------------
+    def any_expr(self, node):
+        """``(kind, value)`` of an expression assigned to a name: an integer (index arithmetic)
+        or a float."""
+        try:
+            return "i", self.int_expr(node)
+        except Unsupported:
+            return "f", self.expr(node)
+
+    def expr(self, node):
+        b = self.b
+        sc = self.scope
+        if isinstance(node, ast.Constant):
+            if type(node.value) in (int, float):
+                return ir.Constant(_DBL, float(node.value))
+            raise Unsupported(f"constant {node.value!r}")
+        if isinstance(node, ast.Name):
+            if node.id in sc.fconsts:
+                return ir.Constant(_DBL, sc.fconsts[node.id])
+            got = sc.slots.get(node.id)
+            if got is not None:
+                v = b.load(got[1])
+                return v if got[0] == "f" else b.sitofp(v, _DBL)
+            c = self.const_eval(node)
+            if c is not None:
+                return ir.Constant(_DBL, float(c))
+            v = sc.globals.get(node.id)
+            if type(v) is float and node.id.startswith("_"):
+                return ir.Constant(_DBL, v)
+            raise Unsupported(f"name {node.id}")
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "math":
+            if node.attr in ("inf", "nan", "pi", "e", "tau"):
+                import math
+                return ir.Constant(_DBL, getattr(math, node.attr))
+            raise Unsupported(f"math.{node.attr}")
+        if isinstance(node, ast.Subscript):
+            if isinstance(node.value, ast.Name) and node.value.id not in sc.arrays:
+                gv, shape, kind = self.table(node.value.id)
+                v = b.load(self.table_address(gv, shape, node.slice))
+                return v if kind == "f" else b.sitofp(v, _DBL)
+            return b.load(self.address(node))
+        if isinstance(node, ast.UnaryOp):
+            if isinstance(node.op, ast.USub):
+                return b.fneg(self.expr(node.operand))
+            if isinstance(node.op, ast.UAdd):
+                return self.expr(node.operand)
+            raise Unsupported("unary operator")
+        if isinstance(node, ast.BinOp):
+            if isinstance(node.op, ast.Pow):
+                return self.power(node)
+            c = self.const_eval(node)
+            if c is not None:                     # integer arithmetic, then a float (as numba)
+                return ir.Constant(_DBL, float(c))
+            x, y = self.expr(node.left), self.expr(node.right)
+            op = {ast.Add: b.fadd, ast.Sub: b.fsub, ast.Mult: b.fmul, ast.Div: b.fdiv}.get(type(node.op))
+            if op is None:
+                raise Unsupported("binary operator")
+            return op(x, y)
+        if isinstance(node, (ast.Compare, ast.BoolOp)) or (isinstance(node, ast.UnaryOp)
+                                                             and isinstance(node.op, ast.Not)):
+            return b.uitofp(self.bool_expr(node), _DBL)       # a truth value stored as 1.0 / 0.0
+        if isinstance(node, ast.IfExp):
+            cond = self.bool_expr(node.test)
+            return b.select(cond, self.expr(node.body), self.expr(node.orelse))
+        if isinstance(node, ast.Call):
+            return self.call(node)
+        raise Unsupported(type(node).__name__)
+
+    def bool_expr(self, node):
+        b = self.b
+        c = self.const_eval(node)
+        if c is not None:
+            return ir.Constant(ir.IntType(1), int(bool(c)))
+        if isinstance(node, ast.Constant) and type(node.value) is bool:
+            return ir.Constant(ir.IntType(1), int(node.value))
+        if isinstance(node, ast.Compare) and len(node.ops) == 1 and type(node.ops[0]) in _CMP:
+            op = _CMP[type(node.ops[0])]
+            try:
+                x, y = self.int_expr(node.left), self.int_expr(node.comparators[0])
+                return b.icmp_signed(op, x, y)
+            except Unsupported:
+                pass
+            x, y = self.expr(node.left), self.expr(node.comparators[0])
+            # numba: ordered comparisons, except != (unordered: NaN != x)
+            return b.fcmp_unordered(op, x, y) if op == "!=" else b.fcmp_ordered(op, x, y)
+        if isinstance(node, ast.BoolOp):
+            # short-circuit, as Python and numba: a later operand is evaluated only when the
+            # earlier ones do not decide (``i < n and a[i] > 0`` never reads a[n])
+            is_and = isinstance(node.op, ast.And)
+            fn = self.f.fn
+            merge = fn.append_basic_block("bool.end")
+            incoming = []
+            for i, v in enumerate(node.values):
+                val = self.bool_expr(v)
+                here = b.block
+                if i == len(node.values) - 1:
+                    b.branch(merge)
+                    incoming.append((val, here))
+                else:
+                    nxt = fn.append_basic_block("bool.next")
+                    if is_and:
+                        b.cbranch(val, nxt, merge)
+                    else:
+                        b.cbranch(val, merge, nxt)
+                    incoming.append((ir.Constant(ir.IntType(1), 0 if is_and else 1), here))
+                    b.position_at_end(nxt)
+            b.position_at_end(merge)
+            phi = b.phi(ir.IntType(1))
+            for val, blk in incoming:
+                phi.add_incoming(val, blk)
+            return phi
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+            return b.not_(self.bool_expr(node.operand))
+        raise Unsupported("condition")
+
+    def power(self, node):
+        b = self.b
+        n = self.const_eval(node.right)
+        if n is not None and self.const_eval(node.left) is not None:
+            raise Unsupported("integer power of an integer")
+        x = self.expr(node.left)
+        if n is None or abs(n) > 0x10000:
+            fn = self.module.declare_intrinsic("llvm.pow", [_DBL])
+            return b.call(fn, [x, self.expr(node.right)])
+        # numba's static_power_impl: exponentiation by squaring, unrolled, from 1.0
+        res, val, e = ir.Constant(_DBL, 1.0), x, abs(n)
+        while e:
+            if e & 1:
+                res = b.fmul(res, val)
+            e >>= 1
+            val = b.fmul(val, val)
+        return b.fdiv(ir.Constant(_DBL, 1.0), res) if n < 0 else res
+
+    def call(self, node):
+        if node.keywords:
+            raise Unsupported("keyword arguments")
+        b = self.b
+        f = node.func
+        if isinstance(f, ast.Name) and f.id in ("max", "min") and len(node.args) >= 2:
+            # numba's do_minmax, left to right: v replaces the accumulator where v > acc (max)
+            # / v < acc (min)
+            acc = self.expr(node.args[0])
+            for a in node.args[1:]:
+                v = self.expr(a)
+                acc = b.select(b.fcmp_ordered(">" if f.id == "max" else "<", v, acc), v, acc)
+            return acc
+        if isinstance(f, ast.Name) and f.id == "abs" and len(node.args) == 1:
+            name, table = "fabs", _UNARY
+        elif (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "math"
+              and (f.attr in _UNARY or f.attr in _BINARY)):
+            name, table = f.attr, (_UNARY if f.attr in _UNARY else _BINARY)
+        elif isinstance(f, ast.Name):
+            if any(self.array_arg(a) is not None for a in node.args):
+                return self.call_inline(node, value=True)     # an array kernel returning a float
+            return self.call_helper(node)
+        else:
+            raise Unsupported("call")
+        args = [self.expr(a) for a in node.args]
+        if len(args) != (1 if table is _UNARY else 2):
+            raise Unsupported("argument count of a math function")
+        kind, sym = table[name]
+        if kind == "intr":
+            fn = self.module.declare_intrinsic(sym, [_DBL], ir.FunctionType(_DBL, [_DBL] * len(args)))
+        else:
+            fn = self.module.globals.get(sym)
+            if fn is None:
+                fn = ir.Function(self.module, ir.FunctionType(_DBL, [_DBL] * len(args)), name=sym)
+        return b.call(fn, args)
+
+    def _py_function(self, name):
+        obj = self.scope.globals.get(name)
+        py = getattr(obj, "py_func", obj)
+        if not callable(py) or not hasattr(py, "__code__"):
+            raise Unsupported(f"call of {name}")
+        return py
+
+    def call_helper(self, node):
+        """A call of one of the module's scalar helpers (floats in, a float out): the helper
+        translated once into a function of this module, called."""
+        name = node.func.id
+        fn = self.helpers.get(name)
+        if fn is None:
+            py = self._py_function(name)
+            fdef = _function_def(py)
+            n = len(fdef.args.args)
+            sig = _t.float64(*([_t.float64] * n))
+            sub = _Translator(self.module, fdef, sig, f"{self.name}.{name}", getattr(py, "__globals__", {}))
+            sub.tables = self.tables
+            sub.helpers = self.helpers
+            sub.run()
+            fn = self.helpers[name] = sub.f.fn
+            fn.linkage = "private"
+            fn.attributes.add("alwaysinline")
+        if len(node.args) != len(fn.args):
+            raise Unsupported("argument count of a helper")
+        return self.b.call(fn, [self.expr(a) for a in node.args])
+
+    def call_inline(self, node, value=False):
+        """A call statement of one of the module's array kernels (``_nb_field(_u, _p, _F[_k])``):
+        its body translated here, its parameters bound to the arguments.  ``value``: a call in
+        an expression of a kernel whose body ends in its only ``return <float>`` (the scale
+        kernel); that value is returned."""
+        if node.keywords or not isinstance(node.func, ast.Name):
+            raise Unsupported("call statement")
+        py = self._py_function(node.func.id)
+        fdef = _function_def(py)
+        params = [a.arg for a in fdef.args.args]
+        if len(params) != len(node.args) or self.inline_depth > 4:
+            raise Unsupported("call statement")
+        body = fdef.body
+        if value:
+            returns = [n for n in ast.walk(fdef) if isinstance(n, ast.Return)]
+            if (not body or not isinstance(body[-1], ast.Return) or body[-1].value is None
+                    or len(returns) != 1):
+                raise Unsupported("an inlined kernel with a value: one return, at its end")
+            body = body[:-1]
+        # the arguments, evaluated in the caller's scope: array views or float values
+        args = []
+        for a in node.args:
+            arr = self.array_arg(a)
+            args.append(("a", arr) if arr is not None else self.any_expr(a))
+        outer = self.scope
+        saved_assigned = self.loop_assigned
+        self.scope = _Scope(self.f, getattr(py, "__globals__", {}))
+        for p, (kind, v) in zip(params, args):
+            if kind == "a":
+                self.scope.arrays[p] = v
+            else:
+                self.store_name(p, v, kind)     # an integer (a count) stays one
+        self.inline_depth += 1
+        self.loop_assigned = self._assigned_in_loops(fdef.body)
+        try:
+            self.block(body)
+            if value:
+                return self.expr(fdef.body[-1].value)
+        finally:
+            self.scope = outer
+            self.inline_depth -= 1
+            self.loop_assigned = saved_assigned
+
+
+def _function_def(py_func) -> ast.FunctionDef:
+    # the definition in the text the module was executed from (methodgen.codegen.kernelsource): a
+    # module regenerated at the same path is never translated from its previous text
+    try:
+        return _ks.function_def(py_func)
+    except _ks.StaleSource as exc:
+        raise Unsupported(f"no source ({exc})") from None
+
+
+def compile_kernel(py_func, sig, globals_=None, c_entry=False) -> "LLVMKernel":
+    """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the numba
+    signature ``sig``, its names resolved in ``globals_`` (default: its module's).  Raises
+    :class:`Unsupported` when its source uses anything the translator does not know.
+
+    ``c_entry``: also a C entry point taking each array argument as a pointer to numba's
+    array structure (:func:`packed_structs`), callable from Python through ctypes
+    (:meth:`LLVMKernel.c_call`) with no numba dispatcher loaded."""
+    sig = _t.plain(sig)   # (numba's signatures are accepted too)
+    with _LOCK:     # one engine per process: modules are added to it one at a time
+        return _compile_kernel(py_func, sig, globals_, c_entry)
+
+
+def _add_c_entry(module, fn, sig, name):
+    """``name``(arrays by pointer, scalars by value): loads each structure and calls ``fn``."""
+    args = [ir.PointerType(_llvm_type(t)) if isinstance(t, _t.Array) else _llvm_type(t) for t in sig.args]
+    entry = ir.Function(module, ir.FunctionType(ir.VoidType(), args), name=name)
+    b = ir.IRBuilder(entry.append_basic_block("entry"))
+    vals = [b.load(a) if isinstance(t, _t.Array) else a for a, t in zip(entry.args, sig.args)]
+    b.call(fn, vals)
+    b.ret_void()
+
+
+def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
+    engine = _engine()
+    key = _objcache.key(py_func, sig, globals_, c_entry, _STATE)
+    if key is not None:
+        name = f"mg_{key[:24]}_{py_func.__name__}"      # the same in every process: a cached object's
+    else:
+        _STATE["count"] += 1
+        name = f"mg{_STATE['count']}_{py_func.__name__}"   # unique in the engine
+    got = _LOADED.get(name)
+    if got is None:
+        obj = _objcache.load(key, name) if key is not None else None
+        if obj is None:
+            obj = _translate_and_compile(py_func, sig, globals_, c_entry, name)
+            if key is not None:
+                _objcache.store(key, name, obj)
+        engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
+        engine.finalize_object()
+        addr = engine.get_function_address(name)
+        if not addr:
+            raise Unsupported("no address after compilation")
+        got = _LOADED[name] = (addr, engine.get_function_address(name + "_c") if c_entry else 0)
+    addr, c_addr = got
+    out = LLVMKernel(py_func, sig, addr, engine, name)
+    if c_entry:
+        argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
+                    ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
+        out.c_call = ctypes.CFUNCTYPE(None, *argtypes)(c_addr)
+    return out
+
+
+#: machine code in this process's engine, by symbol (a kernel asked for twice is added once)
+_LOADED: dict = {}
+
+
+def _translate_and_compile(py_func, sig, globals_, c_entry, name) -> bytes:
+    """The kernel's object code: translated to LLVM IR, optimised (-O2), emitted for the host."""
+    return _target_machine().emit_object(_optimised(py_func, sig, globals_, c_entry, name))
+
+
+def assembly(py_func, sig, globals_=None) -> str:
+    """The host assembly of ``py_func`` translated and optimised as :func:`compile_kernel` does
+    (for inspection: which loops LLVM vectorised, that no multiply-add was contracted)."""
+    with _LOCK:
+        _engine()
+        return _target_machine().emit_assembly(_optimised(py_func, sig, globals_, False, py_func.__name__))
+
+
+def _optimised(py_func, sig, globals_, c_entry, name):
+    """The kernel translated to LLVM IR and optimised (-O2): an llvmlite module."""
+    fdef = _function_def(py_func)
+    module = ir.Module(name=py_func.__name__)
+    module.triple = _STATE["triple"]
+    tr = _Translator(module, fdef, sig, name,
+                     getattr(py_func, "__globals__", {}) if globals_ is None else globals_)
+    tr.run()
+    if c_entry:
+        if sig.return_type != _t.none:
+            raise Unsupported("a C entry of a kernel that returns a value")
+        _add_c_entry(module, tr.f.fn, sig, name + "_c")
+    mod = llvm.parse_assembly(str(module))
+    mod.verify()
+    tm = _target_machine()
+    pto = llvm.create_pipeline_tuning_options(speed_level=2)
+    pb = llvm.create_pass_builder(tm, pto)
+    pb.getModulePassManager().run(mod, pb)
+    return mod
+
+
+def packed_structs(arrays):
+    """``(buffer, addresses)``: numba's structures of ``arrays`` (meminfo, parent, nitems,
+    itemsize, data, shape, strides: what a C entry point takes for each array argument) back to
+    back in one int64 buffer, and the address of each; pass the addresses, and keep the buffer
+    and the arrays alive while they are used.  One allocation for all of them (a ctypes
+    structure per array cost about 2.4 µs each, a tenth of a one-step call).  ValueError for an
+    array that is not C-contiguous float64 of 1-3 dimensions: the translated code indexes C
+    order from the shape alone."""
+    vals = []
+    offs = []
+    for a in arrays:
+        if a.dtype.char != "d" or not a.flags.c_contiguous or not 1 <= a.ndim <= 3:
+            raise ValueError(f"a C-contiguous float64 array of 1-3 dimensions is needed, got {a.dtype} {a.shape}")
+        try:
+            # the data pointer through the buffer protocol: a sixth of a.ctypes.data's cost
+            # (which builds numpy's ctypes helper object); read-only or empty arrays take the
+            # array interface
+            ptr = ctypes.addressof(ctypes.c_char.from_buffer(a))
+        except (TypeError, ValueError):
+            ptr = a.__array_interface__["data"][0]
+        offs.append(len(vals))
+        vals += (0, 0, a.size, 8, ptr)
+        vals += a.shape
+        vals += a.strides
+    buf = np.array(vals, dtype=np.int64)
+    base = buf.__array_interface__["data"][0]
+    return buf, [base + 8 * o for o in offs]
+
+
+class LLVMKernel:
+    """A kernel compiled by :func:`compile_kernel`.
+
+    For the shared runtime it is a first-class function: it implements numba's
+    wrapper-address protocol (``__wrapper_address__``, ``signature``; registered as such by
+    :mod:`methodgen.runtime.nbruntime`, which imports numba -- this module does not).  The fused loop
+    (:mod:`methodgen.runtime.fused`) inlines its source instead.  Callable from Python too (through
+    numba, compiled on the first such call: tests and diagnostics; the runtime never does)."""
+
+    __slots__ = ("py_func", "engine", "_nb", "c_call", "_sig", "_addr", "_type", "symbol")
+
+    def __init__(self, py_func, sig, addr, engine, symbol=""):
+        self._sig = sig               # methodgen.codegen.ktypes.Signature
+        self._addr = addr
+        self._type = None             # numba's FunctionType, made when numba asks
+        self.py_func = py_func
+        self.engine = engine          # owns the machine code
+        self._nb = None
+        self.c_call = None            # the C entry through ctypes (compile_kernel(c_entry=True))
+        # the machine code's symbol: named by the cache key of the text it was translated
+        # from (or unique in the process), so it identifies the code, as an id() cannot
+        self.symbol = symbol
+
+    def __wrapper_address__(self):
+        return self._addr
+
+    def signature(self):
+        """numba's signature of the kernel (imports numba)."""
+        return _t.to_numba(self._sig)
+
+    def numba_type(self):
+        """numba's FunctionType of the kernel, made once (numba's typeof of this object)."""
+        if self._type is None:
+            from numba import types as nt
+            self._type = nt.FunctionType(self.signature())
+        return self._type
+
+    def __call__(self, *args):
+        if self._nb is None:
+            numba = _numba_for(self.py_func)
+            self._nb = numba.njit(self.signature(), cache=True, error_model="numpy")(self.py_func)
+        return self._nb(*args)
+
+
+def _numba_for(py_func):
+    """numba, ready to compile a function of ``py_func``'s module: its cache guard installed and
+    its lazily compiled functions made dispatchers (:func:`methodgen.runtime.nbabi.materialize`)."""
+    g = getattr(py_func, "__globals__", None)
+    # a generated module's runtime interface (methodgen.runtime.nbabi, imported as _rt) prepares it;
+    # looked up in the module, not imported here (llvmkernels sits below the runtime)
+    prepare = getattr(g.get("_rt"), "materialize", None) if g is not None else None
+    if prepare is not None:
+        prepare(g)
+    return _nbcache.numba()
+
+
+def kernel(sig):
+    """Decorator: the kernel compiled through LLVM IR when it is straight-line code this
+    module translates (and the route is :func:`enabled`), else with numba for ``sig`` (cached
+    on disk) as every kernel was before."""
+    def deco(py_func):
+        if enabled():
+            try:
+                return compile_kernel(py_func, sig)
+            except Unsupported:
+                pass
+        numba = _numba_for(py_func)
+        return numba.njit(_t.to_numba(_t.plain(sig)), cache=True, error_model="numpy")(py_func)
+
+    return deco

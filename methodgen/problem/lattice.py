@@ -1,0 +1,401 @@
+"""Lattice Hamiltonians of symbolic size: a family of systems, one for every N.
+
+A semi-discretised Hamiltonian PDE (sine-Gordon, NLS, a wave equation) or a chain is a sum
+of *site terms*, each the same expression at every site of a range:
+
+    H = Sum(p[i]**2/2, i, 1, N) + Sum((q[i % N + 1] - q[i])**2 * N**2/(2*L**2), i, 1, N)
+        + Sum(1 - cos(q[i]), i, 1, N)
+
+with ``N`` a declared *size* (a positive integer symbol, usable in expressions too).  Unlike
+:mod:`methodgen.problem.parse`, which expands a sum over numbers into its terms, a sum over a symbolic
+range is kept as one template: its summand in *slot symbols* ``q_0, q_p1, p_m1, …`` (the field
+at the site ``i``, ``i + 1``, ``i - 1``), and its range ``lo ≤ i ≤ hi`` with each bound an integer
+or ``N + c``.  Everything derived from it -- gradients, discrete gradients, their Jacobians,
+the certificates -- is a statement about the template, independent of N; the generated module
+builds the index tables for the N of its input at run time.
+
+Index grammar (exact, by construction -- nothing is sampled):
+
+* ``q[i + c]`` -- the site ``i + c``, which must lie in ``1 … N`` for every ``i`` of the range
+  and every admissible N (checked from the bounds; e.g. ``Sum(…q[i+1]…, i, 1, N - 1)``);
+* ``q[(i + c) % N + 1]`` -- the periodic neighbour ``i + c + 1`` (mod N), always valid;
+* outside any Sum, ``q[k]`` and ``q[N - k]`` -- a fixed site (a boundary term).
+
+A site term may couple sites at most one apart (nearest neighbours, cyclically): the step's
+Newton matrix is then block tridiagonal, cyclic for a periodic lattice, and solved in O(N)
+(:func:`methodgen.symbolic.lattice_scheme`'s module).  Wider stencils and nested (pair) sums over a
+symbolic range are refused with a message saying so.
+
+References
+----------
+.. [1] E. Celledoni, V. Grimm, R. I. McLachlan, D. I. McLaren, D. O'Neale, B. Owren,
+   G. R. W. Quispel, "Preserving energy resp. dissipation in numerical PDEs using the
+   'Average Vector Field' method", J. Comput. Phys. 231 (2012) 6770-6789.
+.. [2] D. Furihata, T. Matsuo, *Discrete Variational Derivative Method*, CRC Press (2011).
+"""
+
+from __future__ import annotations
+
+import ast
+import keyword
+from dataclasses import dataclass
+from typing import Mapping
+
+import sympy as sp
+
+from ..errors import InputError, ParseError
+from .parse import (CONSTANTS, FUNCTIONS, MAX_TEXT, RESERVED, SUM, _Builder, _check_double_range,
+                    _NAME_RE, check_smooth)
+
+__all__ = ["Bound", "SiteTerm", "Lattice", "slot_symbol"]
+
+#: smallest size any lattice admits: with N ≥ 3 the sites i - 1, i, i + 1 are distinct
+MIN_SIZE = 3
+
+
+def slot_symbol(field: str, offset: int) -> sp.Symbol:
+    """The symbol of ``field`` at the site ``i + offset`` of a template (``q_0``, ``q_p1``, ``p_m2``)."""
+    tag = "0" if offset == 0 else (f"p{offset}" if offset > 0 else f"m{-offset}")
+    return sp.Symbol(f"{field}_{tag}", real=True)
+
+
+@dataclass(frozen=True)
+class Bound:
+    """A range bound: ``c`` (``from_end`` False) or ``N + c`` (``from_end`` True), 1-based."""
+
+    from_end: bool
+    c: int
+
+    def value(self, n: int) -> int:
+        return n + self.c if self.from_end else self.c
+
+    def __str__(self) -> str:
+        if not self.from_end:
+            return str(self.c)
+        return "N" if self.c == 0 else f"N {'+' if self.c > 0 else '-'} {abs(self.c)}"
+
+
+@dataclass(frozen=True)
+class SiteTerm:
+    """One template summed over a range of sites.
+
+    Attributes
+    ----------
+    template : sympy.Expr
+        The summand in slot symbols (:func:`slot_symbol`), parameters and the size symbol.
+    slots : tuple of (str, int)
+        The (field, offset) of each slot symbol the template uses, sorted.
+    lo, hi : Bound
+        The sites ``lo ≤ i ≤ hi`` (1-based) the template is summed over.
+    source : str
+        The text of the term.
+    """
+
+    template: sp.Expr
+    slots: tuple[tuple[str, int], ...]
+    lo: Bound
+    hi: Bound
+    source: str
+
+    def symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(slot_symbol(f, o) for f, o in self.slots)
+
+    def sites(self, n: int) -> tuple[int, int]:
+        """The 0-based first and last site of the range at size ``n``."""
+        return self.lo.value(n) - 1, self.hi.value(n) - 1
+
+    def width(self) -> int:
+        offs = [o for _, o in self.slots]
+        return max(offs) - min(offs) if offs else 0
+
+
+# --- index values: ("int", a) | ("size", c) = N + c | ("lin", c) = i + c | ("mod", c) = (i + c) % N
+#     | ("per", c) = (i + c - 1) % N + 1, the periodic site i + c
+
+_PERIODIC_HINT = "write a periodic neighbour as q[(i + c) % N + 1] (the site i + c + 1, mod N)"
+
+
+class _LatticeBuilder(_Builder):
+    """:class:`methodgen.problem.parse._Builder` with Sums over a symbolic size kept as templates."""
+
+    def __init__(self, symbols, fields, size: sp.Symbol, what: str):
+        super().__init__(symbols, what)
+        self.fields = fields
+        self.size = size
+        self.index_name: str | None = None      # the index of the enclosing Sum
+        self.sums: list[tuple[sp.Symbol, sp.Expr, Bound, Bound, str]] = []
+        self.anchors: dict[sp.Symbol, tuple[str, Bound]] = {}
+
+    # the symbolic index arithmetic
+    def ivalue(self, node: ast.AST, where: str):
+        if isinstance(node, ast.Constant) and isinstance(node.value, int) and not isinstance(node.value, bool):
+            return ("int", node.value)
+        if isinstance(node, ast.Name):
+            if node.id == self.index_name:
+                return ("lin", 0)
+            if node.id == self.size.name:
+                return ("size", 0)
+            hint = (f"{node.id!r} is not the index of the enclosing Sum" if self.index_name else
+                    f"{node.id!r} is not an index (outside a Sum, a site is a number k or N - k)")
+            raise self.fail(node, f"{where}: {hint}")
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+            kind, v = self.ivalue(node.operand, where)
+            if kind == "int":
+                return ("int", -v)
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub)):
+            (ka, a), (kb, b) = self.ivalue(node.left, where), self.ivalue(node.right, where)
+            sign = 1 if isinstance(node.op, ast.Add) else -1
+            if kb == "int" and ka in ("int", "size", "lin"):
+                return (ka, a + sign * b)
+            if ka == "int" and kb in ("size", "lin") and sign == 1:
+                return (kb, a + b)
+            if ka == "mod" and kb == "int" and sign == 1 and b == 1:
+                return ("per", a + 1)
+            if ka == "mod" or kb == "mod":
+                raise self.fail(node, f"{where}: {ast.unparse(node)!r} may leave 1 … N; {_PERIODIC_HINT}")
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mod):
+            (ka, a), (kb, b) = self.ivalue(node.left, where), self.ivalue(node.right, where)
+            if ka == "lin" and (kb, b) == ("size", 0):
+                return ("mod", a)
+            if ka == "int" and kb == "int" and b != 0:
+                return ("int", a % b)
+        raise self.fail(node, f"{where}: {ast.unparse(node)!r} is not a supported index; use i + c "
+                              f"(a site of the range), (i + c) % N + 1 (periodic), or a fixed site k or N - k")
+
+    def range_bound(self, node: ast.AST, where: str) -> Bound:
+        kind, v = self.ivalue(node, where)
+        if kind == "int":
+            return Bound(False, v)
+        if kind == "size":
+            return Bound(True, v)
+        raise self.fail(node, f"{where} must be an integer or N + c")
+
+    def subscript(self, node: ast.Subscript) -> sp.Expr:
+        if (not isinstance(node.value, ast.Name) or node.value.id not in self.fields
+                or isinstance(node.slice, (ast.Slice, ast.Tuple))):
+            raise self.fail(node, f"subscripting {ast.unparse(node)!r} is not allowed: write "
+                                  f"{'[…] or '.join(self.fields)}[…] with one index")
+        field = node.value.id
+        kind, v = self.ivalue(node.slice, f"subscripting {ast.unparse(node)}")
+        if self.index_name is not None:
+            if kind == "lin":
+                self.lin_offsets.append((node, v))
+                return slot_symbol(field, v)
+            if kind == "per":          # (i + c - 1) % N + 1: the site i + c, cyclically
+                return slot_symbol(field, v)
+            raise self.fail(node, f"subscripting {ast.unparse(node)} inside a Sum names a fixed site; a site "
+                                  f"term may use only sites relative to its index (i + c, or (i + c) % N + 1)")
+        if kind == "int":
+            b = Bound(False, v)
+        elif kind == "size":
+            b = Bound(True, v)
+        else:
+            raise self.fail(node, f"subscripting {ast.unparse(node)} outside a Sum needs a fixed site k or N - k")
+        if (not b.from_end and b.c < 1) or (b.from_end and b.c > 0):
+            raise self.fail(node, f"{ast.unparse(node)} is outside the sites 1 … N")
+        sym = sp.Symbol(f"_anchor_{field}_{'e' if b.from_end else 's'}{b.c}".replace("-", "m"), real=True)
+        self.anchors[sym] = (field, b)
+        return sym
+
+    def name(self, node: ast.Name) -> sp.Expr:
+        if node.id == self.size.name:
+            return self.size
+        if node.id == self.index_name:
+            raise self.fail(node, f"the Sum index {node.id!r} may appear only in subscripts")
+        return super().name(node)
+
+    def indexed_sum(self, node: ast.Call, depth: int) -> sp.Expr:
+        usage = "Sum(body, i, lo, hi) takes the summand, an index name and its bounds"
+        if node.keywords or len(node.args) != 4 or any(isinstance(a, ast.Starred) for a in node.args):
+            raise self.fail(node, f"{usage}, e.g. Sum(1 - cos(q[i]), i, 1, N)")
+        if self.index_name is not None:
+            raise self.fail(node, "nested Sums (pair interactions) over a symbolic size are not supported: "
+                                  "a lattice term couples neighbouring sites")
+        body, var, lo_node, hi_node = node.args
+        if not isinstance(var, ast.Name):
+            raise self.fail(var, f"{usage}: the second argument must be a name")
+        name = var.id
+        if (not _NAME_RE.fullmatch(name) or name in RESERVED or keyword.iskeyword(name)
+                or name in self.symbols or name in self.fields or name == self.size.name):
+            raise self.fail(var, f"Sum index {name!r} is not a free name (choose another, e.g. i)")
+        lo = self.range_bound(lo_node, f"the lower bound of Sum over {name}")
+        hi = self.range_bound(hi_node, f"the upper bound of Sum over {name}")
+        self.index_name, self.lin_offsets = name, []
+        try:
+            template = self.build(body, depth + 1)
+        finally:
+            self.index_name = None
+        lins, self.lin_offsets = self.lin_offsets, []
+        for sub, c in lins:    # q[i + c] must be a site 1 … N for every i of the range
+            low_ok = (lo.c + c >= 1) if not lo.from_end else True
+            high_ok = (hi.c + c <= 0) if hi.from_end else True
+            if not (low_ok and high_ok):
+                raise self.fail(sub, f"{ast.unparse(sub)} leaves the sites 1 … N for i = {lo} … {hi}; "
+                                     f"narrow the range or {_PERIODIC_HINT}")
+        placeholder = sp.Symbol(f"_sum{len(self.sums)}", real=True)
+        self.sums.append((placeholder, template, lo, hi, ast.unparse(node)))
+        return placeholder
+
+
+class Lattice:
+    """A Hamiltonian lattice of symbolic size N: canonical fields ``q[1..N]``, ``p[1..N]``.
+
+    Parameters
+    ----------
+    H : str
+        The Hamiltonian as text: a sum of site terms ``Sum(body, i, lo, hi)`` (times factors free
+        of the fields) and boundary terms at fixed sites (module docstring).
+    q, p : str
+        The field names (default ``"q"``, ``"p"``).
+    size : str
+        The name of the size (default ``"N"``).
+    params : mapping of str to float
+        Parameter values (names declared for H); the size is not one of them.
+    name : str
+    invariants : mapping of str to str, optional
+        Quantities to monitor, each a sum of site terms in the same grammar (e.g. the mass
+        ``"Sum(q[i]**2 + p[i]**2, i, 1, N)"`` of a Schrödinger lattice).  ``"H"`` is always one.
+
+    Attributes
+    ----------
+    terms : tuple of SiteTerm
+    invariants : dict of str to tuple of SiteTerm
+    nmin : int
+        The smallest N at which every term's range and site is valid.
+    """
+
+    def __init__(self, H: str, q: str = "q", p: str = "p", *, size: str = "N",
+                 params: Mapping[str, float] | None = None, name: str = "lattice",
+                 invariants: Mapping[str, str] | None = None):
+        if not isinstance(H, str):
+            raise InputError(f"the lattice Hamiltonian must be text, got {type(H).__name__}")
+        if len(H) > MAX_TEXT:
+            raise ParseError(f"Hamiltonian is longer than {MAX_TEXT} characters")
+        params = dict(params or {})
+        for nm in (q, p, size, *params):
+            if not isinstance(nm, str) or not _NAME_RE.fullmatch(nm) or nm in RESERVED or keyword.iskeyword(nm):
+                raise InputError(f"{nm!r} is not a valid name (a letter, then letters, digits, _)")
+        if len({q, p, size, *params}) != 2 + 1 + len(params):
+            raise InputError(f"the names q={q!r}, p={p!r}, size={size!r} and the parameters must differ")
+        clash = [k for k in params if k.startswith((f"{q}_", f"{p}_"))]
+        if clash:
+            raise InputError(f"parameter names may not start with {q + '_'!r} or {p + '_'!r} (the site "
+                             f"symbols' names): {', '.join(clash)}")
+        if size in params:
+            raise InputError(f"{size!r} is the size; give it as the state's length, not a parameter")
+        for k, v in params.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise InputError(f"parameter {k!r} must be a real number, got {v!r}")
+        self.name, self.text, self.q_name, self.p_name = name, H, q, p
+        self.size = sp.Symbol(size, integer=True, positive=True)
+        self.params = {k: float(v) for k, v in params.items()}
+        self.param_symbols = tuple(sp.Symbol(k, real=True) for k in params)
+        self.terms = self._parse(H, "Hamiltonian")
+        self.invariant_texts = dict(invariants or {})
+        self.invariants = {}
+        for k, text in self.invariant_texts.items():
+            if not isinstance(k, str) or not _NAME_RE.fullmatch(k) or k == "H":
+                raise InputError(f"invariant name {k!r} is not a valid name other than H")
+            if not isinstance(text, str):
+                raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
+            self.invariants[k] = self._parse(text, f"invariant {k}")
+        self.nmin = self._nmin()
+
+    def _parse(self, text: str, what: str) -> tuple[SiteTerm, ...]:
+        symbols = {s.name: s for s in self.param_symbols}
+        b = _LatticeBuilder(symbols, (self.q_name, self.p_name), self.size, what)
+        try:
+            tree = ast.parse(text.strip(), mode="eval")
+        except SyntaxError as exc:
+            raise ParseError(f"syntax error in {what}: {exc.msg}: {text!r}") from None
+        top = b.build(tree.body, 0)
+        if not isinstance(top, sp.Expr):
+            raise ParseError(f"{what} must be a scalar expression")
+        terms = []
+        placeholders = [s for s, *_ in b.sums]
+        for ph, template, lo, hi, src in b.sums:
+            coeff = sp.diff(top, ph)
+            if coeff.free_symbols & (set(placeholders) | set(b.anchors)):
+                raise ParseError(f"{what}: {src} enters non-linearly (times another sum or a field); "
+                                 "it must be a sum of site terms")
+            terms.append(self._term(coeff * template, lo, hi, src))
+        rest = sp.sympify(top.xreplace({ph: sp.S.Zero for ph in placeholders}))
+        for t in sp.Add.make_args(rest):
+            used = [s for s in t.free_symbols if s in b.anchors]
+            if not used:
+                continue      # a constant: no dynamics
+            terms.append(self._anchored(t, used, b.anchors))
+        if not terms:
+            raise ParseError(f"{what} has no term in the fields")
+        for t in terms:
+            check_smooth(t.template, what)
+            _check_double_range(t.template, what)
+            if t.template.has(sp.I) or t.template.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+                raise ParseError(f"{what} term {t.source} is not a finite real expression")
+            if t.width() > 1:
+                raise ParseError(f"{what} term {t.source} couples sites {t.width()} apart; lattice terms "
+                                 "may couple nearest neighbours only (wider stencils are not supported yet)")
+        return tuple(terms)
+
+    def _term(self, template, lo: Bound, hi: Bound, src: str) -> SiteTerm:
+        slots = sorted({k for k in map(_parse_slot, template.free_symbols) if k and k[0] in self.fields})
+        return SiteTerm(template, tuple(slots), lo, hi, src)
+
+    def _anchored(self, t: sp.Expr, used, anchors) -> SiteTerm:
+        # Positions 0-based with N taken as 0 (site N is -1): differences are the cyclic offsets
+        pos = {s: (anchors[s][1].c - 1) for s in used}
+        ref = min(used, key=lambda s: (anchors[s][1].from_end, anchors[s][1].c))
+        base = anchors[ref][1]
+        sub = {s: slot_symbol(anchors[s][0], pos[s] - pos[ref]) for s in used}
+        return self._term(t.xreplace(sub), base, base, str(t).replace("_anchor_", ""))
+
+    def _nmin(self) -> int:
+        n = MIN_SIZE
+        for t in self.terms + tuple(x for ts in self.invariants.values() for x in ts):
+            for (f, o) in t.slots:
+                for bnd in (t.lo, t.hi):
+                    # a fixed-count bound c and its slots must fit: c + o ≤ N
+                    if not bnd.from_end:
+                        n = max(n, bnd.c + max(o, 0))
+                    else:
+                        n = max(n, 1 - bnd.c - min(o, 0))
+            if not t.lo.from_end and t.hi.from_end:
+                n = max(n, t.lo.c - t.hi.c)
+        return n
+
+    # --- the pieces the derivations and the module need -------------------------------------
+
+    @property
+    def fields(self) -> tuple[str, str]:
+        return (self.q_name, self.p_name)
+
+    def check_size(self, n: int) -> None:
+        if isinstance(n, bool) or not isinstance(n, int) or n < self.nmin:
+            raise InputError(f"the lattice {self.name!r} needs N ≥ {self.nmin} sites, got {n!r}")
+
+    def expand(self, n: int) -> tuple[sp.Expr, list[sp.Symbol], list[sp.Symbol]]:
+        """H at size ``n`` as an expression in ``q1..qn, p1..pn`` (for tests and checks at small n)."""
+        self.check_size(n)
+        qs = [sp.Symbol(f"{self.q_name}{k}", real=True) for k in range(1, n + 1)]
+        ps = [sp.Symbol(f"{self.p_name}{k}", real=True) for k in range(1, n + 1)]
+        arrays = {self.q_name: qs, self.p_name: ps}
+        out = []
+        for t in self.terms:
+            a, b = t.sites(n)
+            for i in range(a, b + 1):
+                sub = {slot_symbol(f, o): arrays[f][(i + o) % n] for f, o in t.slots}
+                sub[self.size] = sp.Integer(n)
+                out.append(t.template.xreplace(sub))
+        return sp.Add(*out), qs, ps
+
+
+def _parse_slot(s: sp.Symbol):
+    name = s.name
+    if "_" not in name or name.startswith("_"):
+        return None
+    field, tag = name.rsplit("_", 1)
+    if tag == "0":
+        return (field, 0)
+    if tag[:1] in "pm" and tag[1:].isdigit():
+        return (field, int(tag[1:]) * (1 if tag[0] == "p" else -1))
+    return None

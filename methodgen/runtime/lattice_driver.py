@@ -1,0 +1,78 @@
+"""Run a compiled lattice module's steps: :mod:`methodgen.runtime.lattice_stepper` with the module's
+kernel bound, compiled through LLVM once per kernel text (machine code cached on disk, keyed by
+that text), or run as plain Python where llvmlite is missing or ``python=True``."""
+
+from __future__ import annotations
+
+import math
+import types
+
+import numpy
+
+from ..codegen import ktypes as _t
+from . import lattice_stepper as _ls
+
+__all__ = ["run_steps"]
+
+_f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
+#: Y (2, n), T (rows, 2n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W
+SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M)
+
+_LOOPS: dict = {}
+
+
+def _bound(grad) -> dict:
+    consts = {k: v for k, v in vars(_ls).items() if k.startswith("_I") and isinstance(v, int)}
+    consts.update(math=math, grad=grad)
+    for name in ("factor", "solve"):
+        consts[name] = types.FunctionType(getattr(_ls, name).__code__, consts, name)
+    return consts
+
+
+def _loop(grad, python: bool):
+    """The step loop for the module kernel ``grad``: compiled (cached per kernel) or Python."""
+    consts = _bound(grad)
+    fn = types.FunctionType(_ls.lattice_run.__code__, consts, "lattice_run")
+    if python:
+        return fn, False
+    from ..codegen import llvmkernels as _lk
+    if not _lk.enabled():
+        return fn, False
+    key = id(grad.__code__)
+    got = _LOOPS.get(key)
+    if got is None or got[1] is not grad:
+        try:
+            loop = _lk.compile_kernel(fn, SIG, globals_=consts, c_entry=True)
+        except _lk.Unsupported as exc:        # pragma: no cover - the printed kernels are in the subset
+            raise RuntimeError(f"the lattice step loop could not be compiled: {exc}") from None
+        # (the kernel is kept with its loop, so its code's id is not reused while the entry lives)
+        _LOOPS[key] = got = (loop, grad)
+    return got[0], True
+
+
+def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False):
+    """``steps`` steps from ``Y`` (2, n), updated in place: ``(rows, its, status)`` with rows
+    (steps // every + 1 + ..., 2n) (row 0 the start), Newton iterations per step, and
+    ``(code, step, iterations, value)`` of a failure (code 0: none)."""
+    n = Y.shape[1]
+    nrows = steps // every + (1 if steps % every else 0) + 1
+    T = numpy.zeros((nrows, 2 * n))
+    T[0, :n], T[0, n:] = Y[0], Y[1]
+    its = numpy.zeros(max(steps, 1))
+    fst = numpy.zeros(4)
+    W = numpy.zeros((_ls.W_ROWS, n))
+    p = numpy.ascontiguousarray(p, dtype=numpy.float64)
+    if p.size == 0:
+        p = numpy.zeros(1)
+    loop, compiled = _loop(grad, python)
+    args = (Y, T, its, fst, p, int(n), float(h), int(steps), int(every), int(maxiter), float(tol),
+            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W)
+    if compiled:
+        from .fused import _drive
+        _drive(loop, *args)
+    else:
+        loop(*args)
+    code = int(fst[0])
+    done = int(fst[1]) if code else steps
+    kept = done // every + 1 + (1 if code == 0 and steps % every else 0)
+    return T[:kept], its[:steps].astype(numpy.int64), (code, int(fst[1]), int(fst[2]), float(fst[3]))

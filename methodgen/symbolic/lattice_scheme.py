@@ -1,0 +1,274 @@
+"""One-step methods for lattices of symbolic size, derived once per site term.
+
+For ``H = Σ_t Σ_{i ∈ R_t} h_t(Z_t(i))`` (:class:`methodgen.problem.lattice.Lattice`; ``Z_t(i)`` the
+template's slots at site i) every method here has a discrete gradient of the same form:
+
+    ∇̄H(y0, y1)_{f, j} = Σ_t Σ_{s = (f, o) ∈ slots(t), j - o ∈ R_t} A_{t,s}(Z_t(j - o)|y0, Z_t(j - o)|y1)
+
+with one *piece* ``A_{t,s}`` per term and slot, an expression in the template's slots at the
+step's start and end.  The step is ``y1 = y0 + h J ∇̄H(y0, y1)`` (J canonical); its Newton
+matrix ``I - h J ∂∇̄H/∂y1`` is block tridiagonal in the sites (2 × 2 blocks), cyclic when a
+term wraps.  The pieces and their derivatives ``∂A_{t,s}/∂Z1_{s'}`` are all a module needs:
+they are derived here once, whatever N.
+
+Methods:
+
+* ``avf`` -- the average vector field: ``A_{t,s} = ∫₀¹ ∂h_t/∂s(Z0 + σ(Z1 - Z0)) dσ``, taken
+  per additive piece of ``h_t`` by the rule of :class:`methodgen.symbolic.schemes.discrete_gradients.AVF`
+  (polynomial: symbolic; ``G(L)`` with L affine: an exact divided difference; otherwise
+  Gauss–Legendre quadrature, not exact).  Energy-preserving: for each term,
+  ``Σ_s A_{t,s}(Z1_s - Z0_s) = h_t(Z1) - h_t(Z0)`` (the *term lemma*, proved exactly per
+  template by :func:`certificates`); summing it over the range and re-indexing the sites
+  (``j = i + o``, a bijection of the range onto its shift -- this is how the module assembles
+  ∇̄H) gives ``(y1 - y0)ᵀ ∇̄H = H(y1) - H(y0)``, and ``(y1 - y0)ᵀ∇̄H = h ∇̄Hᵀ Jᵀ ∇̄H = 0``.
+* ``midpoint`` -- the implicit midpoint rule: ``A_{t,s} = ∂h_t/∂s((Z0 + Z1)/2)``; symplectic,
+  keeps quadratic invariants, not H.
+
+References
+----------
+.. [1] G. R. W. Quispel, D. I. McLaren, "A new class of energy-preserving numerical
+   integration methods", J. Phys. A 41 (2008) 045206.
+.. [2] E. Celledoni et al., J. Comput. Phys. 231 (2012) 6770-6789.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from ..errors import InputError
+from ..problem.lattice import Lattice, SiteTerm, slot_symbol
+
+__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "discretize_lattice", "certificates"]
+
+#: the methods a lattice of symbolic size can be discretised with, and what they claim
+LATTICE_METHODS = {
+    "avf": "average vector field (energy-preserving, symmetric, order 2)",
+    "midpoint": "implicit midpoint rule (symplectic, symmetric, order 2; keeps quadratic invariants)",
+}
+
+QUADRATURE_NODES = 8
+
+
+def end_symbol(s: sp.Symbol) -> sp.Symbol:
+    """The slot ``s`` at the step's end (``q_p1`` → ``q_p1_new``)."""
+    return sp.Symbol(s.name + "_new", real=True)
+
+
+@dataclass(frozen=True)
+class TermPieces:
+    """A term's discrete-gradient pieces and their derivatives in the step's end values.
+
+    Attributes
+    ----------
+    term : SiteTerm
+    z0, z1 : tuple of sympy.Symbol
+        The slots at the step's start and end (same order as ``term.slots``).
+    pieces : tuple of sympy.Expr
+        ``A_s`` per slot.
+    jac : tuple of tuple of sympy.Expr
+        ``jac[a][b] = ∂A_a/∂z1_b``.
+    rules : tuple of str
+        How each additive part of the template was integrated ("symbolic", "divided
+        difference", "quadrature", "midpoint").
+    """
+
+    term: SiteTerm
+    z0: tuple
+    z1: tuple
+    pieces: tuple
+    jac: tuple
+    rules: tuple
+
+
+@dataclass(frozen=True)
+class LatticeScheme:
+    """A lattice method: the pieces of every term, and what the method claims."""
+
+    lattice: Lattice
+    method: str
+    terms: tuple[TermPieces, ...]
+    exact_energy: bool
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def traits(self) -> dict:
+        avf = self.method == "avf"
+        return {"order": 2, "symmetric": True, "symplectic": not avf,
+                "energy_preserving": avf and self.exact_energy,
+                "preserved": ("H",) if avf and self.exact_energy else (),
+                "solve": "newton (block tridiagonal, cyclic)"}
+
+
+def _avf_pieces(h: sp.Expr, z0, z1) -> tuple[list, list]:
+    from .schemes.discrete_gradients import (_is_polynomial, additive_terms, linear_form_gradient,
+                                             linear_form_term)
+    from .schemes.quadrature import gauss_legendre_f64
+
+    sigma = sp.Symbol("_sigma", real=True)
+    out = [sp.S.Zero] * len(z0)
+    rules = []
+    poly = []
+    for part in additive_terms(h):
+        if not part.free_symbols & set(z0):
+            continue
+        if _is_polynomial(part, z0):
+            poly.append(part)
+            continue
+        lf = linear_form_term(part, z0)
+        if lf is not None:
+            out = [o + g for o, g in zip(out, linear_form_gradient(lf, z0, z0, z1))]
+            rules.append("divided difference")
+            continue
+        x64, w64 = gauss_legendre_f64(QUADRATURE_NODES)
+        for k, s in enumerate(z0):
+            g = sp.diff(part, s)
+            out[k] += sp.Add(*[sp.Float(repr(w), 17) * g.xreplace({a: a + sp.Float(repr(x), 17) * (b - a)
+                                                                   for a, b in zip(z0, z1)})
+                               for x, w in zip(x64, w64)])
+        rules.append("quadrature")
+    if poly:
+        P = sp.Add(*poly)
+        path = {a: a + sigma * (b - a) for a, b in zip(z0, z1)}
+        out = [o + sp.integrate(sp.expand(sp.diff(P, s).xreplace(path)), (sigma, 0, 1))
+               for o, s in zip(out, z0)]
+        rules.append("symbolic")
+    return out, rules
+
+
+def _midpoint_pieces(h: sp.Expr, z0, z1) -> tuple[list, list]:
+    mid = {a: (a + b) / 2 for a, b in zip(z0, z1)}
+    return [sp.diff(h, s).xreplace(mid) for s in z0], ["midpoint"]
+
+
+def discretize_lattice(lattice: Lattice, method: str) -> LatticeScheme:
+    """Derive ``method``'s pieces for every site term of ``lattice`` (independent of N).
+
+    Raises
+    ------
+    InputError
+        ``method`` is not one of :data:`LATTICE_METHODS`.
+    """
+    if method not in LATTICE_METHODS:
+        raise InputError(f"method {method!r} is not available for a lattice of symbolic size; "
+                         f"available: {', '.join(LATTICE_METHODS)}")
+    make = _avf_pieces if method == "avf" else _midpoint_pieces
+    terms, exact = [], True
+    for t in lattice.terms:
+        z0 = t.symbols()
+        z1 = tuple(end_symbol(s) for s in z0)
+        pieces, rules = make(t.template, z0, z1)
+        exact &= "quadrature" not in rules
+        jac = tuple(tuple(sp.diff(a, b) for b in z1) for a in pieces)
+        terms.append(TermPieces(t, z0, z1, tuple(pieces), jac, tuple(rules)))
+    notes = ()
+    if method == "avf" and not exact:
+        notes = (f"H kept only up to the error of {QUADRATURE_NODES}-point Gauss-Legendre quadrature in "
+                 "the terms that are neither polynomial nor a function of one affine form",)
+    return LatticeScheme(lattice, method, tuple(terms), exact, notes)
+
+
+def certificates(scheme: LatticeScheme) -> list:
+    """The method's claims as certificates, each about one template (so independent of N).
+
+    * ``avf``: per term, the term lemma ``Σ_s A_s (Z1_s - Z0_s) - (h(Z1) - h(Z0)) = 0`` reduced
+      exactly (:func:`methodgen.symbolic.verify.exact.certify`); with the re-indexing of the module
+      docstring it is energy preservation at every N.
+    * both methods: symmetry, ``A_s(Z0, Z1) = A_s(Z1, Z0)`` per term and slot (the step's adjoint
+      is itself: y1 = y0 + h J ∇̄H(y0, y1) read backwards is the same equation).
+    """
+    from .verify.exact import certify
+
+    ref = "Quispel & McLaren (2008); Celledoni et al. (2012)"
+    out = []
+    for tp in scheme.terms:
+        t = tp.term
+        if scheme.method == "avf":
+            h0, h1 = t.template, t.template.xreplace(dict(zip(tp.z0, tp.z1)))
+            expr = sp.Add(*[a * (b - c) for a, b, c in zip(tp.pieces, tp.z1, tp.z0)]) - (h1 - h0)
+            out.append(certify(f"term lemma: Σ_s A_s ΔZ_s = h(Z1) - h(Z0) for {t.source}", expr, ref=ref))
+        swap = {**dict(zip(tp.z0, tp.z1)), **dict(zip(tp.z1, tp.z0))}
+        expr = sp.Matrix([a - a.xreplace(swap) for a in tp.pieces])
+        out.append(certify(f"symmetric: A_s(Z0, Z1) = A_s(Z1, Z0) for {t.source}", expr, ref=ref))
+    if scheme.method == "midpoint":
+        out += quadratic_invariant_certificates(scheme.lattice)
+    return out
+
+
+def _shift(expr: sp.Expr, k: int, fields) -> sp.Expr:
+    """``expr`` in slots relative to the site i, rewritten relative to the site i - k (every
+    slot (f, o) becomes (f, o + k))."""
+    from ..problem.lattice import _parse_slot
+
+    sub = {}
+    for s in expr.free_symbols:
+        got = _parse_slot(s)
+        if got and got[0] in fields:
+            sub[s] = slot_symbol(got[0], got[1] + k)
+    return expr.xreplace(sub)
+
+
+def _site_gradient(terms, field: str, fields) -> sp.Expr:
+    """∂/∂field_j of Σ_t Σ_i t(i) as an expression in slots relative to j (full-range terms)."""
+    out = sp.S.Zero
+    for t in terms:
+        for f, o in t.slots:
+            if f == field:
+                out += _shift(sp.diff(t.template, slot_symbol(f, o)), -o, fields)
+    return out
+
+
+def _full_periodic(t) -> bool:
+    return (t.lo.from_end, t.lo.c, t.hi.from_end, t.hi.c) == (False, 1, True, 0)
+
+
+def quadratic_invariant_certificates(lattice: Lattice) -> list:
+    """The midpoint rule keeps each monitored invariant Q that is quadratic and in involution
+    with H, on a periodic lattice -- decided per template, without expanding in N.
+
+    For quadratic Q, Q(y1) - Q(y0) = ∇Q(ȳ)ᵀ(y1 - y0) exactly, and the midpoint step is
+    y1 - y0 = h J ∇H(ȳ), so the change is h {Q, H}(ȳ) = h Σ_j E(j) with the bracket's site
+    density E (slots relative to j).  Σ_j E(j) vanishes for every state and every N iff E is a
+    difference F(j + 1) - F(j) plus nothing: iff the discrete Euler operator
+    ``Σ_o S^{-o} ∂E/∂f_o`` is 0 for each field f (the gradient of Σ_j E(j) at any site, whatever
+    N) and E(0) = 0.  Both reduce exactly, N never enters.  Lattices whose terms are not summed
+    over all sites (boundaries) are not decided here (no certificate: nothing is claimed).
+
+    References
+    ----------
+    P. E. Hydon, E. L. Mansfield, "A variational complex for difference equations", Found.
+    Comput. Math. 4 (2004) 187-217 (the kernel of the difference Euler operator).
+    """
+    from .verify.exact import certify
+
+    fields = lattice.fields
+    q, p = fields
+    allterms = list(lattice.terms) + [t for ts in lattice.invariants.values() for t in ts]
+    if not all(_full_periodic(t) for t in allterms):
+        return []
+    out = []
+    for name, terms in lattice.invariants.items():
+        quadratic = True
+        for t in terms:
+            syms = t.symbols()
+            try:
+                poly = sp.Poly(t.template, *syms)
+                quadratic &= poly.total_degree() <= 2 and not (poly.free_symbols_in_domain & set(syms))
+            except sp.PolynomialError:
+                quadratic = False
+        if not quadratic:
+            continue
+        E = (_site_gradient(terms, q, fields) * _site_gradient(lattice.terms, p, fields)
+             - _site_gradient(terms, p, fields) * _site_gradient(lattice.terms, q, fields))
+        E = sp.expand(E)
+        from ..problem.lattice import _parse_slot
+        slots = sorted({k for k in map(_parse_slot, E.free_symbols) if k and k[0] in fields})
+        euler = [sp.Add(*[_shift(sp.diff(E, slot_symbol(f, o)), -o, fields) for f2, o in slots if f2 == f])
+                 for f in fields]
+        at_zero = E.xreplace({slot_symbol(f, o): 0 for f, o in slots})
+        out.append(certify(f"midpoint keeps the quadratic invariant {name}: {{{name}, H}} sums to 0 on the "
+                           f"periodic lattice (Euler operator of its site density and its value at 0)",
+                           sp.Matrix(euler + [at_zero]),
+                           ref="Hairer, Lubich & Wanner, GNI (2006) IV.2; Hydon & Mansfield (2004)"))
+    return out
