@@ -59,7 +59,7 @@ def _time(mod, y0, h, steps, repeat):
 def _template_route_exists() -> bool:
     # The template route is the fallback for step structures the shared runtime does not know;
     # once every structure runs on the runtime it may be gone.
-    root = Path(emit.__file__).resolve().parent.parent
+    root = Path(emit.__file__).resolve().parents[2]
     return hasattr(emit, "shared_runtime_supports") and (root / "templates" / "numba_runtime.py.j2").exists()
 
 

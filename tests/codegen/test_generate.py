@@ -149,9 +149,17 @@ def test_non_editable_install_can_generate(tmp_path):
     assert files(target / "methodgen", "*.toml") == files(src, "*.toml")
     assert {p.name for p in (target / "methodgen" / "codegen" / "templates").glob("*.j2")} == \
         {p.name for p in (ROOT / "templates").glob("*.j2")}
+    # the console script names the command line where it is
+    entry = next(target.glob("methodgen-*.dist-info")) / "entry_points.txt"
+    assert "methodgen = methodgen.app.cli:main" in entry.read_text()
     code = textwrap.dedent("""
         import methodgen as mg, numpy as np, sys
         assert "site" in mg.__file__, mg.__file__
+        import contextlib, io
+        from methodgen.app.cli import main
+        with contextlib.redirect_stdout(io.StringIO()) as listed:
+            assert main(["scenes"]) == 0
+        assert "kepler" in listed.getvalue()
         from methodgen.codegen.emit import template_dir
         assert str(template_dir()).startswith(sys.argv[1]), template_dir()
         sc = mg.load_scene("kepler")

@@ -132,8 +132,9 @@ def test_the_runtime_is_stamped_with_its_content_hash():
     # the stamp covers the runtime and the contract whose layout it compiles in (abi, nbabi)
     import hashlib
     h = hashlib.sha256()
-    for name in ("abi.py", "nbabi.py", "nbruntime.py"):
-        with open(os.path.join(os.path.dirname(nbruntime.__file__), name), "rb") as f:
+    package = os.path.dirname(os.path.dirname(nbruntime.__file__))
+    for name in ("codegen/abi.py", "runtime/nbabi.py", "runtime/nbruntime.py"):
+        with open(os.path.join(package, name), "rb") as f:
             h.update(hashlib.sha256(f.read()).digest())
     assert h.hexdigest() == nbruntime.SOURCE_SHA256
 
@@ -244,7 +245,7 @@ def test_a_module_refuses_a_runtime_it_was_not_generated_for(tmp_path, monkeypat
     ok = _import_fresh(path, "rt_same")
     assert ok.integrate(np.array(scene.y0), scene.h, 3).shape == (4, 2)
     monkeypatch.setattr(nbabi, "SOURCE_SHA256", "0" * 64)   # (what a module checks, numba-free)
-    with pytest.raises(ImportError, match=r"generated for another methodgen\.nbruntime .*installed 0{16}.*regenerate"):
+    with pytest.raises(ImportError, match=r"generated for another methodgen\.runtime\.nbruntime .*installed 0{16}.*regenerate"):
         _import_fresh(path, "rt_other")
 
 
