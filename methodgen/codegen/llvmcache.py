@@ -11,7 +11,7 @@ defines the kernel was executed from (what the translator parses: the kernel, it
 its tables and constants are all in a generated module's text; recorded by methodgen's
 loader, never re-read from the file -- :mod:`methodgen.codegen.kernelsource`), the kernel's name, line and signature,
 the translation-time constants a fused loop binds (values, and for functions the text of
-their file), the C-entry flag; the SHA-256 of the translator and of the runtime
+their file), the C-entry flag and LLVM pipeline options; the SHA-256 of the translator and of the runtime
 (``llvmkernels.py``, ``nbruntime.py``); llvmlite's and LLVM's versions; the target triple,
 the host CPU's name and features.  Anything else a kernel could depend on makes it
 uncacheable (:func:`key` returns None: compiled as before).
@@ -92,8 +92,9 @@ def _value_part(value) -> str | None:
     return _function_part(value)
 
 
-def key(py_func, sig, globals_, c_entry, state) -> str | None:
-    """The cache key of this compilation (hex SHA-256), or None when it cannot be cached."""
+def key(py_func, sig, globals_, c_entry, state, options: str = "") -> str | None:
+    """The cache key of this compilation (hex SHA-256), or None when it cannot be cached.
+    ``options``: the compilation's other options as text (LLVM's pipeline settings), if any."""
     if not enabled():
         return None
     try:
@@ -101,6 +102,8 @@ def key(py_func, sig, globals_, c_entry, state) -> str | None:
         if fn is None:
             return None
         parts = [_static(state), fn, str(sig), f"c_entry:{bool(c_entry)}"]
+        if options:
+            parts.append(f"options:{options}")
         if globals_ is not None:
             for name in sorted(globals_):
                 v = _value_part(globals_[name])

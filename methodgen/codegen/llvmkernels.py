@@ -19,12 +19,21 @@ registers, so a value may be carried across iterations or branches), stores and 
 order), ``while``, ``break``, ``continue``, ``if``/``else`` on run-time or translation-time
 conditions, ``return``; views of
 the arguments (``X[a:b]``, rows ``A[i]``), stack buffers (``numba.carray(_rt.stack_buffer(n),
-shape)``) and ``numpy.zeros``; the module's constant tables (numpy arrays of indices or
-weights) and integer constants; calls of the module's scalar helpers (translated once,
-inlined by LLVM) and of its array kernels (inlined here); the arithmetic, comparisons and
-the math functions below.  Anything else (``for … else``, ``%`` of floats, an unknown function)
-raises :class:`Unsupported`, and :func:`kernel` then compiles the kernel with numba as
-before.  ``METHODGEN_KERNELS=numba`` forces numba for every kernel (the control the tests use).
+shape)``) and ``numpy.zeros`` / ``numpy.empty`` of shapes known now; the module's constant
+tables (numpy arrays of indices or weights) and integer constants; calls of the module's
+scalar helpers (translated once, inlined by LLVM) and of its array kernels (inlined here);
+the arithmetic, comparisons and the math functions below.  For a runtime written in this
+subset by hand (the Wisdom–Holman one, :mod:`methodgen.runtime.kepler_flow`) also: functions that
+return tuples or integers, anywhere in their body (inlined: every ``return`` continues after
+the call), unpacked into names, elements or array views (``a, b = f(…)``, ``x, y = y, x``,
+``q, g = work[0], work[1]``); chained assignment; ``range`` over run-time lengths
+(``x.shape[0]``, a count argument) with a constant step (``range(n - 1, -1, -1)``), the
+index left as Python leaves it; ``%`` and ``//`` of integers with Python's signs; the truth
+value of a number; ``math.isfinite``, ``math.floor``, numpy's ``inf``/``nan``; rows ``A[i]``
+of n-D views; and a kernel returning an int64 (a C entry returns its value).  Anything else
+(``for … else``, ``%`` of floats, an unknown function) raises :class:`Unsupported`, and
+:func:`kernel` then compiles the kernel with numba as before.  ``METHODGEN_KERNELS=numba``
+forces numba for every kernel (the control the tests use).
 
 Same arithmetic, same bits: every operation is the one numba emits for the same source
 without fastmath (IEEE add, sub, mul, div and negation; ``x**n`` for a constant integer n
@@ -45,6 +54,7 @@ from __future__ import annotations
 import ast
 import ctypes
 import ctypes.util
+import math
 import os
 import threading
 
@@ -196,16 +206,18 @@ class _Translator:
         self.helpers: dict = {}
         self.inline_depth = 0
         self.loops: list = []           # (continue target, break target) of the enclosing loops
+        self.frames: list = []          # the inlined calls being translated: their return frames
         argnames = [a.arg for a in fdef.args.args]
         if len(argnames) != len(sig.args):
             raise Unsupported("argument count differs from the signature")
         void = sig.return_type == _t.none
-        if not void and sig.return_type != _t.float64:
+        if not void and sig.return_type not in (_t.float64, _t.int64):
             raise Unsupported(f"return type {sig.return_type}")
-        fnty = ir.FunctionType(_PTR if void else _DBL, [_llvm_type(t) for t in sig.args])
+        integer = sig.return_type == _t.int64
+        fnty = ir.FunctionType(_PTR if void else _I64 if integer else _DBL, [_llvm_type(t) for t in sig.args])
         fn = ir.Function(module, fnty, name=name)
         self.name = name
-        self.ret = "void" if void else "f"
+        self.ret = "void" if void else "i" if integer else "f"
         self.f = _Function(fn)
         self.scope = _Scope(self.f, globals_)
         self.loop_assigned = self._assigned_in_loops(fdef.body)
@@ -242,9 +254,13 @@ class _Translator:
         out = set()
         for node in ast.walk(ast.Module(body=list(stmts), type_ignores=[])):
             if isinstance(node, (ast.Assign, ast.AugAssign)):
-                for t in (node.targets if isinstance(node, ast.Assign) else [node.target]):
+                targets = list(node.targets if isinstance(node, ast.Assign) else [node.target])
+                while targets:
+                    t = targets.pop()
                     if isinstance(t, ast.Name):
                         out.add(t.id)
+                    elif isinstance(t, (ast.Tuple, ast.List)):
+                        targets.extend(t.elts)          # a, b = …: both names
             elif isinstance(node, ast.For) and isinstance(node.target, ast.Name):
                 out.add(node.target.id)
         return out
@@ -291,7 +307,10 @@ class _Translator:
         if isinstance(st, ast.Pass):
             return
         if isinstance(st, ast.Expr) and isinstance(st.value, ast.Call):
-            self.call_inline(st.value)
+            self.call_values(st.value)                # its values, if any, unused
+            return
+        if isinstance(st, ast.Assign) and (len(st.targets) > 1 or isinstance(st.targets[0], (ast.Tuple, ast.List))):
+            self.assign_many(st)
             return
         if isinstance(st, ast.Assign) and len(st.targets) == 1:
             tgt = st.targets[0]
@@ -376,16 +395,90 @@ class _Translator:
                 b.unreachable()
             return
         if isinstance(st, ast.Return):
-            if self.inline_depth:
-                raise Unsupported("return from an inlined kernel")
+            if self.frames:
+                self.inline_return(st)
+                return
             if self.ret == "void":
                 if st.value is not None:
                     raise Unsupported("a value returned from a void kernel")
                 b.ret(ir.Constant(_PTR, None))
+            elif self.ret == "i":
+                kind, v = self.any_expr(st.value)
+                if kind != "i":
+                    raise Unsupported("a float returned from an integer kernel")
+                b.ret(v)
             else:
                 b.ret(self.expr(st.value))
             return
         raise Unsupported(type(st).__name__)
+
+    def assign_many(self, st: ast.Assign):
+        """``a, b = x, y`` (every value computed before any is stored, as Python), ``a, b = f(…)``
+        (a function returning a tuple, inlined), and ``a = b = x`` (x computed once).  Targets
+        are names (an integer or a float; an array view for ``q, g = work[0], work[1]``) or
+        array elements."""
+        if len(st.targets) == 1:
+            targets = st.targets[0].elts
+            value = st.value
+            if isinstance(value, (ast.Tuple, ast.List)):
+                if len(value.elts) != len(targets):
+                    raise Unsupported("unpacking of another number of values")
+                vals = []
+                for t, e in zip(targets, value.elts):
+                    arr = self.array_arg(e) if isinstance(t, ast.Name) else None
+                    vals.append(("a", arr) if arr is not None else self.any_expr(e))
+            elif isinstance(value, ast.Call):
+                vals = self.call_values(value)
+                if len(vals) != len(targets):
+                    raise Unsupported("unpacking of another number of values")
+            else:
+                raise Unsupported("unpacking of a non-tuple")
+            for t, (kind, v) in zip(targets, vals):
+                if kind == "a":
+                    if not isinstance(t, ast.Name) or t.id in self.scope.slots:
+                        raise Unsupported("an array bound to a scalar name")
+                    self.scope.arrays[t.id] = v
+                else:
+                    self.store_target(t, kind, v)
+            return
+        if any(isinstance(t, (ast.Tuple, ast.List)) for t in st.targets):
+            raise Unsupported("chained unpacking")
+        kind, v = self.any_expr(st.value)
+        for t in st.targets:
+            self.store_target(t, kind, v)
+
+    def store_target(self, t, kind, v):
+        """``v`` (of ``kind``) into a name or an array element."""
+        if isinstance(t, ast.Name):
+            self.store_name(t.id, v, kind)
+        elif isinstance(t, ast.Subscript):
+            self.b.store(v if kind == "f" else self.b.sitofp(v, _DBL), self.address(t))
+        else:
+            raise Unsupported("assignment target")
+
+    def inline_return(self, st: ast.Return):
+        """``return …`` in an inlined call: its values into the call's result slots (made at its
+        first return, of that return's kinds), then to the code after the call."""
+        frame = self.frames[-1]
+        node = st.value
+        if node is None:
+            vals = []
+        elif isinstance(node, (ast.Tuple, ast.List)):
+            vals = [self.any_expr(e) for e in node.elts]
+        else:
+            vals = [self.any_expr(node)]
+        b = self.b
+        if frame["slots"] is None:
+            frame["slots"] = [(k, self.f.alloca(_DBL if k == "f" else _I64, name="ret")) for k, _ in vals]
+        if len(vals) != len(frame["slots"]):
+            raise Unsupported("returns of different numbers of values")
+        for (k, slot), (vk, v) in zip(frame["slots"], vals):
+            if k != vk:
+                if k == "i":
+                    raise Unsupported("an integer and a float returned at one place")
+                v = b.sitofp(v, _DBL)
+            b.store(v, slot)
+        b.branch(frame["exit"])
 
     # --- arrays ---------------------------------------------------------------------------
     def address(self, sub: ast.Subscript):
@@ -414,10 +507,14 @@ class _Translator:
         if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in sc.arrays
                 and not isinstance(node.slice, (ast.Tuple, ast.Slice))):
             data, shape = sc.arrays[node.value.id]
-            if len(shape) != 2:
+            if len(shape) < 2:
                 return None                   # an element, not a view
-            row = self.b.mul(self.int_expr(node.slice), shape[1])
-            return self.b.gep(data, [row]), [shape[1]]
+            # A[i] of an n-D view: the (n-1)-D view at row i (C order)
+            size = shape[1]
+            for e in shape[2:]:
+                size = self.b.mul(size, e)
+            row = self.b.mul(self.int_expr(node.slice), size)
+            return self.b.gep(data, [row]), list(shape[1:])
         return None
 
     def int_expr(self, node):
@@ -436,17 +533,20 @@ class _Translator:
             x, y = self.int_expr(node.left), self.int_expr(node.right)
             return {ast.Add: b.add, ast.Sub: b.sub, ast.Mult: b.mul}[type(node.op)](x, y)
         if isinstance(node, ast.BinOp) and type(node.op) in (ast.Mod, ast.FloorDiv):
-            # Python's floor semantics: C's truncated remainder, moved into the divisor's sign
-            # (a zero divisor is the caller's to exclude, as LLVM leaves it undefined)
-            x, y = self.int_expr(node.left), self.int_expr(node.right)
-            zero = ir.Constant(_I64, 0)
-            r = b.srem(x, y)
-            fix = b.and_(b.icmp_signed("!=", r, zero),
-                         b.icmp_signed("!=", b.icmp_signed("<", r, zero), b.icmp_signed("<", y, zero)))
-            if isinstance(node.op, ast.Mod):
-                return b.select(fix, b.add(r, y), r)
-            q = b.sdiv(x, y)
-            return b.select(fix, b.sub(q, ir.Constant(_I64, 1)), q)
+            return self.floor_div_mod(node)
+        if (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Attribute)
+                and node.value.attr == "shape" and isinstance(node.value.value, ast.Name)
+                and node.value.value.id in sc.arrays):
+            # X.shape[k] of a view: its extent (a run-time value)
+            shape = sc.arrays[node.value.value.id][1]
+            k = self.const_int(node.slice)
+            if not -len(shape) <= k < len(shape):
+                raise Unsupported("shape index out of range")
+            return shape[k]
+        if isinstance(node, ast.IfExp):
+            # both sides integers (no side effects: a call is refused here), chosen by select
+            x, y = self.int_expr(node.body), self.int_expr(node.orelse)
+            return b.select(self.bool_expr(node.test), x, y)
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "int"
                 and len(node.args) == 1 and not node.keywords):
             # a float holding an integer (a row permutation kept in a float64 array)
@@ -467,6 +567,25 @@ class _Translator:
                 raise Unsupported("float table as an index")
             return b.load(self.table_address(gv, shape, node.slice))
         raise Unsupported(f"index expression {ast.unparse(node)!r}")
+
+    def floor_div_mod(self, node):
+        """``a % b`` and ``a // b`` of integers with Python's (and numba's) signs: the remainder
+        has the sign of b, the quotient is rounded down.  A zero divisor gives 0 here (Python
+        raises); it is never a trap."""
+        b = self.b
+        x, y = self.int_expr(node.left), self.int_expr(node.right)
+        zero, one = ir.Constant(_I64, 0), ir.Constant(_I64, 1)
+        is0 = b.icmp_signed("==", y, zero)
+        ys = b.select(is0, one, y)
+        q, r = b.sdiv(x, ys), b.srem(x, ys)
+        # r != 0 with a sign other than y's: one step down
+        fix = b.and_(b.icmp_signed("!=", r, zero), b.icmp_signed("!=", b.icmp_signed("<", r, zero),
+                                                                   b.icmp_signed("<", ys, zero)))
+        if isinstance(node.op, ast.Mod):
+            out = b.select(fix, b.add(r, ys), r)
+        else:
+            out = b.select(fix, b.sub(q, one), q)
+        return b.select(is0, zero, out)
 
     def table_address(self, gv, shape, idx):
         b = self.b
@@ -519,10 +638,12 @@ class _Translator:
             return True
         if isinstance(value, ast.Call) and isinstance(value.func, ast.Attribute) and not value.keywords:
             owner = value.func.value.id if isinstance(value.func.value, ast.Name) else None
-            if owner == "numpy" and value.func.attr == "zeros" and len(value.args) == 1:
+            if self.is_numpy(owner) and value.func.attr in ("zeros", "empty") and len(value.args) == 1:
+                # a work array of a shape known now (numpy.empty's: not cleared, as numpy)
                 shape = self.const_shape(value.args[0])
                 sc.arrays[name] = self.buffer(shape)
-                self.zero(ast.Name(id=name))
+                if value.func.attr == "zeros":
+                    self.zero(ast.Name(id=name))
                 return True
             if owner == "numba" and value.func.attr == "carray" and len(value.args) == 2:
                 inner = value.args[0]
@@ -532,6 +653,13 @@ class _Translator:
                 sc.arrays[name] = self.buffer(self.const_shape(value.args[1]))
                 return True
         return False
+
+    def is_numpy(self, name) -> bool:
+        """Whether ``name`` is numpy here (``numpy``, or a name the module bound to it: ``np``)."""
+        if name is None:
+            return False
+        got = self.scope.globals.get(name)
+        return name == "numpy" if got is None else got is np
 
     def const_shape(self, node):
         dims = node.elts if isinstance(node, ast.Tuple) else [node]
@@ -573,8 +701,8 @@ class _Translator:
     def const_eval(self, node):
         """The Python int value of an integer expression known at translation time (constants,
         the module's integer constants, the elements of a loop over a constant tuple), else None."""
-        if isinstance(node, ast.Constant) and type(node.value) is int:
-            return node.value
+        if isinstance(node, ast.Constant) and type(node.value) in (int, bool):
+            return int(node.value)
         if isinstance(node, ast.Name):
             sc = self.scope
             if node.id in sc.consts:
@@ -647,44 +775,54 @@ class _Translator:
         it = st.iter
         if (st.orelse or not isinstance(st.target, ast.Name) or not isinstance(it, ast.Call)
                 or not isinstance(it.func, ast.Name) or it.func.id != "range" or it.keywords
-                or not 1 <= len(it.args) <= 2):
+                or not 1 <= len(it.args) <= 3):
             raise Unsupported("loop")
-        bounds = [self.const_eval(a) for a in it.args]
+        step = 1
+        args = list(it.args)
+        if len(args) == 3:
+            # a step known now (``range(n - 1, -1, -1)``: down to 0)
+            step = self.const_eval(args.pop())
+            if not step:
+                raise Unsupported("a range step that is zero or not known at translation time")
+        bounds = [self.const_eval(a) for a in args]
         name = st.target.id
         sc = self.scope
         sc.consts.pop(name, None)
         b = self.b
+        cmp = "<" if step > 0 else ">"
         if all(v is not None for v in bounds):
             lo, hi = (0, bounds[0]) if len(bounds) == 1 else bounds
-            if hi <= lo:
+            if not len(range(lo, hi, step)):
                 return
             lo, hi = ir.Constant(_I64, lo), ir.Constant(_I64, hi)
             known = True
         else:
             # bounds known at run time only (evaluated once, as range() does)
-            vals = [self.int_expr(a) for a in it.args]
+            vals = [self.int_expr(a) for a in args]
             lo, hi = (ir.Constant(_I64, 0), vals[0]) if len(vals) == 1 else vals
             known = False
         var = self.slot(name, "i")
+        # the count in a slot of its own, the name set from it at each iteration's start (as
+        # Python: an assignment to the name in the body does not change the iteration; after
+        # the loop the name holds its last value, or where it broke; a loop that does not run
+        # leaves it as it was)
+        ctr = self.f.alloca(_I64, name=f"{name}.count")
         fn = self.f.fn
         body = fn.append_basic_block(f"loop.{name}")
         latch = fn.append_basic_block(f"next.{name}")
-        done = fn.append_basic_block(f"done.{name}")       # the normal exit (not a break)
         after = fn.append_basic_block(f"after.{name}")
-        b.store(lo, var)
+        b.store(lo, ctr)
         if known:
             b.branch(body)
         else:
-            b.cbranch(b.icmp_signed("<", lo, hi), body, after)
+            b.cbranch(b.icmp_signed(cmp, lo, hi), body, after)
+        b.position_at_end(body)
+        b.store(b.load(ctr), var)
         self.loop_body(body, st.body, latch, after)
         b.position_at_end(latch)
-        nxt = b.add(b.load(var), ir.Constant(_I64, 1))
-        b.store(nxt, var)
-        b.cbranch(b.icmp_signed("<", nxt, hi), body, done)
-        b.position_at_end(done)
-        if known:                # Python leaves the index at its last value (a break: where it broke)
-            b.store(b.sub(hi, ir.Constant(_I64, 1)), var)
-        b.branch(after)
+        nxt = b.add(b.load(ctr), ir.Constant(_I64, step))
+        b.store(nxt, ctr)
+        b.cbranch(b.icmp_signed(cmp, nxt, hi), body, after)
         b.position_at_end(after)
 
     def while_loop(self, st: ast.While):
@@ -719,6 +857,12 @@ class _Translator:
     def any_expr(self, node):
         """``(kind, value)`` of an expression assigned to a name: an integer (index arithmetic)
         or a float."""
+        if isinstance(node, ast.Call) and self.inlined_call(node):
+            # a function of the module, inlined: its value keeps its kind (an index, a status)
+            vals = self.call_values(node)
+            if len(vals) != 1:
+                raise Unsupported("a call returning a tuple (or nothing) used as one value")
+            return vals[0]
         try:
             return "i", self.int_expr(node)
         except Unsupported:
@@ -728,7 +872,7 @@ class _Translator:
         b = self.b
         sc = self.scope
         if isinstance(node, ast.Constant):
-            if type(node.value) in (int, float):
+            if type(node.value) in (int, float, bool):
                 return ir.Constant(_DBL, float(node.value))
             raise Unsupported(f"constant {node.value!r}")
         if isinstance(node, ast.Name):
@@ -750,6 +894,9 @@ class _Translator:
                 import math
                 return ir.Constant(_DBL, getattr(math, node.attr))
             raise Unsupported(f"math.{node.attr}")
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and self.is_numpy(node.value.id)
+                and node.attr in ("inf", "nan", "pi", "e")):
+            return ir.Constant(_DBL, float(getattr(np, node.attr)))      # numpy's constants (np.inf)
         if isinstance(node, ast.Subscript):
             if isinstance(node.value, ast.Name) and node.value.id not in sc.arrays:
                 gv, shape, kind = self.table(node.value.id)
@@ -768,6 +915,8 @@ class _Translator:
             c = self.const_eval(node)
             if c is not None:                     # integer arithmetic, then a float (as numba)
                 return ir.Constant(_DBL, float(c))
+            if type(node.op) in (ast.Mod, ast.FloorDiv):
+                return b.sitofp(self.int_expr(node), _DBL)      # of integers only (a float's: refused)
             x, y = self.expr(node.left), self.expr(node.right)
             op = {ast.Add: b.fadd, ast.Sub: b.fsub, ast.Mult: b.fmul, ast.Div: b.fdiv}.get(type(node.op))
             if op is None:
@@ -828,7 +977,24 @@ class _Translator:
             return phi
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
             return b.not_(self.bool_expr(node.operand))
+        if self.is_math_call(node, "isfinite"):
+            # |x| ordered and not equal to inf: false for NaN and ±inf (numba's isfinite)
+            x = self.expr(node.args[0])
+            fabs = self.module.declare_intrinsic("llvm.fabs", [_DBL], ir.FunctionType(_DBL, [_DBL]))
+            return b.fcmp_ordered("!=", b.call(fabs, [x]), ir.Constant(_DBL, math.inf))
+        if isinstance(node, (ast.Name, ast.Call, ast.Subscript, ast.BinOp, ast.IfExp)):
+            # the truth value of a number, as Python's: not zero (NaN is true)
+            kind, v = self.any_expr(node)
+            if kind == "i":
+                return b.icmp_signed("!=", v, ir.Constant(_I64, 0))
+            return b.fcmp_unordered("!=", v, ir.Constant(_DBL, 0.0))
         raise Unsupported("condition")
+
+    def is_math_call(self, node, name) -> bool:
+        """Whether ``node`` is ``math.<name>(x)``."""
+        f = getattr(node, "func", None)
+        return (isinstance(node, ast.Call) and isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name)
+                and f.value.id == "math" and f.attr == name and len(node.args) == 1 and not node.keywords)
 
     def power(self, node):
         b = self.b
@@ -861,14 +1027,24 @@ class _Translator:
                 v = self.expr(a)
                 acc = b.select(b.fcmp_ordered(">" if f.id == "max" else "<", v, acc), v, acc)
             return acc
+        if self.is_math_call(node, "floor"):
+            # llvm.floor; numba's math.floor is this value as an int64, converted back where a
+            # float is wanted: the same value for |x| < 2**63
+            fn = self.module.declare_intrinsic("llvm.floor", [_DBL], ir.FunctionType(_DBL, [_DBL]))
+            return b.call(fn, [self.expr(node.args[0])])
+        if self.is_math_call(node, "isfinite"):
+            return b.uitofp(self.bool_expr(node), _DBL)
+        if isinstance(f, ast.Name) and f.id == "int" and len(node.args) == 1:
+            return b.sitofp(self.int_expr(node), _DBL)      # int(x) where a float is wanted
         if isinstance(f, ast.Name) and f.id == "abs" and len(node.args) == 1:
             name, table = "fabs", _UNARY
         elif (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "math"
               and (f.attr in _UNARY or f.attr in _BINARY)):
             name, table = f.attr, (_UNARY if f.attr in _UNARY else _BINARY)
         elif isinstance(f, ast.Name):
-            if any(self.array_arg(a) is not None for a in node.args):
-                return self.call_inline(node, value=True)     # an array kernel returning a float
+            if self.inlined_call(node):
+                kind, v = self.any_expr(node)       # an array kernel (or a helper) inlined
+                return v if kind == "f" else b.sitofp(v, _DBL)
             return self.call_helper(node)
         else:
             raise Unsupported("call")
@@ -912,28 +1088,65 @@ class _Translator:
             raise Unsupported("argument count of a helper")
         return self.b.call(fn, [self.expr(a) for a in node.args])
 
-    def call_inline(self, node, value=False):
-        """A call statement of one of the module's array kernels (``_nb_field(_u, _p, _F[_k])``):
-        its body translated here, its parameters bound to the arguments.  ``value``: a call in
-        an expression of a kernel whose body ends in its only ``return <float>`` (the scale
-        kernel); that value is returned."""
+    #: builtins the translator knows (not functions of the module)
+    _BUILTINS = frozenset({"max", "min", "abs", "int", "range"})
+    #: calls inlined into one another at most this deep
+    _MAX_INLINE = 16
+
+    def inlined_call(self, node) -> bool:
+        """Whether the call ``node`` is of a function of the module to inline (:meth:`call_values`):
+        one taking an array, returning a tuple or an integer constant somewhere, or called with
+        fewer arguments than it has (its defaults); other scalar helpers are translated once and
+        called (:meth:`call_helper`)."""
+        f = node.func
+        if not isinstance(f, ast.Name) or f.id in self._BUILTINS or node.keywords:
+            return False
+        py = self._py_function(f.id)
+        if any(self.is_array(a) for a in node.args):
+            return True
+        fdef = _function_def(py)
+        if len(node.args) != len(fdef.args.args):
+            return True
+        for n in ast.walk(fdef):
+            if isinstance(n, ast.Return) and (isinstance(n.value, (ast.Tuple, ast.List)) or (
+                    isinstance(n.value, ast.Constant) and type(n.value.value) in (int, bool))):
+                return True
+        return False
+
+    def is_array(self, node) -> bool:
+        """Whether ``node`` is an array view (a name bound to one, or a row ``A[i]`` of one);
+        nothing is emitted."""
+        sc = self.scope
+        if isinstance(node, ast.Name):
+            return node.id in sc.arrays
+        return (isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name) and node.value.id in sc.arrays
+                and not isinstance(node.slice, (ast.Tuple, ast.Slice)) and len(sc.arrays[node.value.id][1]) >= 2)
+
+    def call_values(self, node):
+        """A call of one of the module's functions, inlined: its body translated here with its
+        parameters bound to the arguments (array views, or integer or float values, computed
+        first in the caller's scope; omitted trailing ones take the definition's constant
+        defaults).  Every ``return`` stores its values and continues after the call.  Returns
+        ``[(kind, value), …]``: what it returned (empty for nothing)."""
         if node.keywords or not isinstance(node.func, ast.Name):
             raise Unsupported("call statement")
         py = self._py_function(node.func.id)
         fdef = _function_def(py)
         params = [a.arg for a in fdef.args.args]
-        if len(params) != len(node.args) or self.inline_depth > 4:
+        argnodes = list(node.args)
+        defaults = fdef.args.defaults
+        missing = len(params) - len(argnodes)
+        if 0 < missing <= len(defaults):
+            extra = defaults[len(defaults) - missing:]
+            if not all(isinstance(d, ast.Constant) and type(d.value) in (int, float, bool) for d in extra):
+                raise Unsupported("a default that is not a number")
+            argnodes += extra
+        if (len(params) != len(argnodes) or self.inline_depth >= self._MAX_INLINE or fdef.args.vararg
+                or fdef.args.kwarg or fdef.args.kwonlyargs):
             raise Unsupported("call statement")
-        body = fdef.body
-        if value:
-            returns = [n for n in ast.walk(fdef) if isinstance(n, ast.Return)]
-            if (not body or not isinstance(body[-1], ast.Return) or body[-1].value is None
-                    or len(returns) != 1):
-                raise Unsupported("an inlined kernel with a value: one return, at its end")
-            body = body[:-1]
-        # the arguments, evaluated in the caller's scope: array views or float values
+        # the arguments, evaluated in the caller's scope: array views or integer / float values
         args = []
-        for a in node.args:
+        for a in argnodes:
             arr = self.array_arg(a)
             args.append(("a", arr) if arr is not None else self.any_expr(a))
         outer = self.scope
@@ -944,14 +1157,20 @@ class _Translator:
                 self.scope.arrays[p] = v
             else:
                 self.store_name(p, v, kind)     # an integer (a count) stays one
+        frame = {"exit": self.f.fn.append_basic_block(f"ret.{node.func.id}"), "slots": None}
+        self.frames.append(frame)
         self.inline_depth += 1
         self.loop_assigned = self._assigned_in_loops(fdef.body)
         try:
-            self.block(body)
-            if value:
-                return self.expr(fdef.body[-1].value)
+            self.block(fdef.body)
+            b = self.b
+            if not b.block.is_terminated:
+                b.branch(frame["exit"])         # off the end: returns None
+            b.position_at_end(frame["exit"])
+            return [(k, b.load(slot)) for k, slot in (frame["slots"] or ())]
         finally:
             self.scope = outer
+            self.frames.pop()
             self.inline_depth -= 1
             self.loop_assigned = saved_assigned
 
@@ -965,32 +1184,46 @@ def _function_def(py_func) -> ast.FunctionDef:
         raise Unsupported(f"no source ({exc})") from None
 
 
-def compile_kernel(py_func, sig, globals_=None, c_entry=False) -> "LLVMKernel":
+def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, vectorize=True) -> "LLVMKernel":
     """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the numba
     signature ``sig``, its names resolved in ``globals_`` (default: its module's).  Raises
     :class:`Unsupported` when its source uses anything the translator does not know.
 
     ``c_entry``: also a C entry point taking each array argument as a pointer to numba's
     array structure (:func:`packed_structs`), callable from Python through ctypes
-    (:meth:`LLVMKernel.c_call`) with no numba dispatcher loaded."""
+    (:meth:`LLVMKernel.c_call`; its result is the kernel's float64 or int64 value, if it
+    returns one) with no numba dispatcher loaded.
+
+    ``unroll``, ``vectorize``: LLVM's loop unrolling and loop / SLP vectorisation in the -O2
+    pipeline (both by default).  Code of many short loops over run-time lengths (a few bodies
+    of an N-body loop) gains nothing from either and pays for them in compile time: the
+    Wisdom–Holman runtime turns them off.  They never change the bits (no fast-math: LLVM
+    does not reassociate)."""
     sig = _t.plain(sig)   # (numba's signatures are accepted too)
+    options = (bool(unroll), bool(vectorize))
     with _LOCK:     # one engine per process: modules are added to it one at a time
-        return _compile_kernel(py_func, sig, globals_, c_entry)
+        return _compile_kernel(py_func, sig, globals_, c_entry, options)
 
 
 def _add_c_entry(module, fn, sig, name):
     """``name``(arrays by pointer, scalars by value): loads each structure and calls ``fn``."""
     args = [ir.PointerType(_llvm_type(t)) if isinstance(t, _t.Array) else _llvm_type(t) for t in sig.args]
-    entry = ir.Function(module, ir.FunctionType(ir.VoidType(), args), name=name)
+    void = sig.return_type == _t.none
+    ret = ir.VoidType() if void else _I64 if sig.return_type == _t.int64 else _DBL
+    entry = ir.Function(module, ir.FunctionType(ret, args), name=name)
     b = ir.IRBuilder(entry.append_basic_block("entry"))
     vals = [b.load(a) if isinstance(t, _t.Array) else a for a, t in zip(entry.args, sig.args)]
-    b.call(fn, vals)
-    b.ret_void()
+    got = b.call(fn, vals)
+    if void:
+        b.ret_void()
+    else:
+        b.ret(got)                  # the kernel's value (float64 or int64)
 
 
-def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
+def _compile_kernel(py_func, sig, globals_=None, c_entry=False, options=(True, True)):
     engine = _engine()
-    key = _objcache.key(py_func, sig, globals_, c_entry, _STATE)
+    key = _objcache.key(py_func, sig, globals_, c_entry, _STATE,
+                        options="" if options == (True, True) else f"unroll={options[0]},vectorize={options[1]}")
     if key is not None:
         name = f"mg_{key[:24]}_{py_func.__name__}"      # the same in every process: a cached object's
     else:
@@ -1000,7 +1233,7 @@ def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
     if got is None:
         obj = _objcache.load(key, name) if key is not None else None
         if obj is None:
-            obj = _translate_and_compile(py_func, sig, globals_, c_entry, name)
+            obj = _translate_and_compile(py_func, sig, globals_, c_entry, name, options)
             if key is not None:
                 _objcache.store(key, name, obj)
         engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
@@ -1014,7 +1247,9 @@ def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
     if c_entry:
         argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
                     ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
-        out.c_call = ctypes.CFUNCTYPE(None, *argtypes)(c_addr)
+        restype = (None if sig.return_type == _t.none else ctypes.c_int64 if sig.return_type == _t.int64
+                   else ctypes.c_double)
+        out.c_call = ctypes.CFUNCTYPE(restype, *argtypes)(c_addr)
     return out
 
 
@@ -1022,20 +1257,21 @@ def _compile_kernel(py_func, sig, globals_=None, c_entry=False):
 _LOADED: dict = {}
 
 
-def _translate_and_compile(py_func, sig, globals_, c_entry, name) -> bytes:
+def _translate_and_compile(py_func, sig, globals_, c_entry, name, options=(True, True)) -> bytes:
     """The kernel's object code: translated to LLVM IR, optimised (-O2), emitted for the host."""
-    return _target_machine().emit_object(_optimised(py_func, sig, globals_, c_entry, name))
+    return _target_machine().emit_object(_optimised(py_func, sig, globals_, c_entry, name, options))
 
 
-def assembly(py_func, sig, globals_=None) -> str:
+def assembly(py_func, sig, globals_=None, *, unroll=True, vectorize=True) -> str:
     """The host assembly of ``py_func`` translated and optimised as :func:`compile_kernel` does
     (for inspection: which loops LLVM vectorised, that no multiply-add was contracted)."""
     with _LOCK:
         _engine()
-        return _target_machine().emit_assembly(_optimised(py_func, sig, globals_, False, py_func.__name__))
+        return _target_machine().emit_assembly(_optimised(py_func, _t.plain(sig), globals_, False, py_func.__name__,
+                                                          (bool(unroll), bool(vectorize))))
 
 
-def _optimised(py_func, sig, globals_, c_entry, name):
+def _optimised(py_func, sig, globals_, c_entry, name, options=(True, True)):
     """The kernel translated to LLVM IR and optimised (-O2): an llvmlite module."""
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
@@ -1044,13 +1280,16 @@ def _optimised(py_func, sig, globals_, c_entry, name):
                      getattr(py_func, "__globals__", {}) if globals_ is None else globals_)
     tr.run()
     if c_entry:
-        if sig.return_type != _t.none:
-            raise Unsupported("a C entry of a kernel that returns a value")
         _add_c_entry(module, tr.f.fn, sig, name + "_c")
     mod = llvm.parse_assembly(str(module))
     mod.verify()
     tm = _target_machine()
     pto = llvm.create_pipeline_tuning_options(speed_level=2)
+    if not options[0]:
+        pto.loop_unrolling = False
+    if not options[1]:
+        pto.loop_vectorization = False
+        pto.slp_vectorization = False
     pb = llvm.create_pass_builder(tm, pto)
     pb.getModulePassManager().run(mod, pb)
     return mod

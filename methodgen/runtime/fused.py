@@ -207,7 +207,8 @@ def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, o
 
 
 #: The stepper's helpers (:mod:`methodgen.runtime.stepper`), bound with each loop's constants.
-_HELPERS = ("lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax")
+_HELPERS = ("lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax",
+            "compensated_add")
 
 
 def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None) -> dict:

@@ -9,9 +9,16 @@ the splitting: the flow of ``H_K`` is solved exactly (universal variables), the 
 ``C = Σ_i |∂H_I/∂q'_i|² / m'_i``, computed exactly as ``2 Hess(H_I) M'⁻¹ ∇H_I``.
 
 Nothing here is generated per system: the masses are arrays, so the runtime is compiled
-once per machine (``numba.njit(cache=True)``, the cache stamped with this file's SHA-256 as
-:mod:`methodgen.runtime.nbruntime` is).  Without numba the same functions run as Python (correct,
-about 100× slower).  This module imports numpy (and numba when present) only.
+once per machine, the way the generated schemes' stepper is (:mod:`methodgen.runtime.fused`): each
+function called from Python (:func:`run`'s loop, :func:`to_jacobi`, :func:`kick`, …) is
+translated from this file's source to LLVM IR by :mod:`methodgen.codegen.llvmkernels` with every
+function it calls inlined, compiled on its first call, its machine code kept on disk by
+:mod:`methodgen.codegen.llvmcache` under the SHA-256 of the exact source it was translated from (this
+file's, and :mod:`methodgen.runtime.stepper`'s for the compensated add it shares), and called through
+its C entry (ctypes).  numba is not imported.  Without llvmlite (or with
+``METHODGEN_STEPPER=python``, the reference) the same functions run as Python: the same
+numbers bitwise, about 100× slower.  This module imports numpy (and llvmlite on first use)
+only.
 
 Layout: positions and momenta are ``(n, 3)`` C-contiguous arrays; Jacobi body 0 is the
 centre of mass (its momentum is the total momentum).  Constants, per body ``i``:
@@ -35,42 +42,124 @@ References
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
+import threading
+import types
 
 import numpy as np
 
-try:
-    import numba
-except ImportError:   # pragma: no cover - the runtime then runs as Python
-    numba = None
+from ..codegen import ktypes as _t
+from .stepper import compensated_add
 
-__all__ = ["HAVE_NUMBA", "SOURCE_SHA256", "STATUS", "to_jacobi", "from_jacobi", "kepler_drift",
+__all__ = ["COMPILED", "STATUS", "to_jacobi", "from_jacobi", "kepler_drift",
            "interaction_gradient", "corrector_gradient", "gradients", "apply_kick", "kick", "potential",
-           "invariants", "project", "run", "run_projected"]
+           "invariants", "project", "run", "run_projected", "compiled"]
 
-HAVE_NUMBA = numba is not None
+#: Whether the runtime is compiled (llvmlite is installed); else it runs as Python.
+COMPILED = importlib.util.find_spec("llvmlite") is not None
 
-if HAVE_NUMBA:
-    from ..codegen.nbcache import install_stamp_guard as _install_stamp_guard
-    from ..codegen.nbcache import source_digest as _source_digest
+_V, _M2, _M3 = _t.float64[::1], _t.float64[:, ::1], _t.float64[:, :, ::1]
+_f8, _i8 = _t.float64, _t.int64
+_LOCK = threading.Lock()
+#: LLVM's loop unrolling and vectorisation for this runtime's code: off (its loops run over a few
+#: bodies or 3 components).  Measured on the outer solar system (sbab4): the run loop compiles in
+#: 2.3–3.5 s without them, 8–9 s with unrolling, more with vectorisation too, and a step is no
+#: slower (min-of-20 wall clock, interleaved)
+_UNROLL = False
+_VECTORIZE = False
 
-    #: SHA-256 of this file: the stamp of its cached machine code.
-    SOURCE_SHA256 = _source_digest(os.path.abspath(__file__))
-    _install_stamp_guard(os.path.abspath(__file__), SOURCE_SHA256, owner="methodgen.runtime.kepler_flow")
-    # error_model="numpy": a division by zero gives inf/nan, reported by run's finiteness
-    # check with the step, instead of an exception without one.  No fastmath (round-off
-    # stopping rule of the Kepler solve).
-    _jit = numba.njit(cache=True, error_model="numpy")
-    # inlined at the numba IR level (the compensated add runs 36 times per drift)
-    _inline = numba.njit(inline="always", cache=True, error_model="numpy")
-else:   # pragma: no cover
-    SOURCE_SHA256 = None
 
-    def _jit(f):
-        return f
+class _Kernel:
+    """A function of this module as Python calls it: compiled on its first call through LLVM IR
+    (:func:`methodgen.codegen.llvmkernels.compile_kernel`, the functions it calls inlined; the machine
+    code cached on disk, keyed by the source) for the signature ``sig`` and called through its
+    C entry -- arrays as C-contiguous float64, the others as the signature's int64 or float64
+    (a bool is an int) -- or run as Python (without llvmlite, or ``METHODGEN_STEPPER=python``).
+    ``py_func`` is the Python function: what other functions of the module inline."""
 
-    _inline = _jit
+    __slots__ = ("py_func", "sig", "_entry", "__name__", "__wrapped__", "__dict__")
+
+    def __init__(self, fn, sig):
+        self.py_func = fn
+        self.sig = sig
+        self._entry = None               # the C entry once compiled (False: runs as Python)
+        self.__name__ = fn.__name__
+        self.__doc__ = fn.__doc__
+        self.__wrapped__ = fn
+
+    def __repr__(self):
+        return f"<methodgen.runtime.kepler_flow.{self.__name__}>"
+
+    def entry(self):
+        """The compiled C entry (ctypes), compiled or loaded from the cache on the first call;
+        None where the function runs as Python."""
+        got = self._entry
+        if got is None:
+            with _LOCK:
+                got = self._entry
+                if got is None:
+                    got = self._entry = _compile(self.py_func, self.sig)
+        return got or None
+
+    def __call__(self, *args):
+        fn = self.py_func
+        if len(args) < fn.__code__.co_argcount and fn.__defaults__:
+            args += fn.__defaults__[len(args) - fn.__code__.co_argcount:]
+        if os.environ.get("METHODGEN_STEPPER", "").strip() == "python":
+            return fn(*args)
+        c = self.entry()
+        if c is None:
+            return fn(*args)
+        from ..codegen.llvmkernels import packed_structs
+        buf, addrs = packed_structs([a for a in args if isinstance(a, np.ndarray)])
+        it = iter(addrs)
+        out = c(*[next(it) if isinstance(a, np.ndarray) else a for a in args])
+        del buf             # (the structures live until the call has returned)
+        return out
+
+
+def _kernel(sig):
+    """Decorator: the function as a :class:`_Kernel` of signature ``sig``."""
+    return lambda fn: _Kernel(fn, sig)
+
+
+def _compile(fn, sig):
+    """The C entry of ``fn`` compiled for ``sig`` (ctypes), or False where the runtime runs as
+    Python (no llvmlite).  A function the translator refuses is a defect of this module: the
+    error is raised (a test compiles every entry)."""
+    if not COMPILED:
+        return False
+    from ..codegen import llvmkernels as lk
+
+    return lk.compile_kernel(fn, sig, globals_=_kernel_globals(), c_entry=True, unroll=_UNROLL,
+                             vectorize=_VECTORIZE).c_call
+
+
+_GLOBALS: dict = {}
+
+
+def _kernel_globals() -> dict:
+    """The names the compiled functions may use -- this module's functions, modules, constant
+    tables and numbers -- as the namespace they are translated in.  Every value enters the
+    machine-code cache key (:func:`methodgen.codegen.llvmcache.key`): a function by the text of its
+    file, so the key covers :mod:`methodgen.runtime.stepper`'s source (:func:`compensated_add`) as
+    well as this file's."""
+    if not _GLOBALS:
+        g = {}
+        for name, v in globals().items():
+            if (isinstance(v, (_Kernel, types.FunctionType, types.ModuleType, np.ndarray))
+                    or type(v) in (int, float, bool)) and not name.startswith("__"):
+                g[name] = v
+        _GLOBALS.update(g)
+    return _GLOBALS
+
+
+def compiled() -> bool:
+    """Whether the runtime's functions run compiled here (llvmlite installed and
+    ``METHODGEN_STEPPER`` is not ``python``)."""
+    return COMPILED and os.environ.get("METHODGEN_STEPPER", "").strip() != "python"
 
 #: run()'s status codes.
 STATUS = {0: "ok", 1: "Kepler solve did not converge", 2: "non-finite state (or a body at its centre)",
@@ -88,9 +177,9 @@ _PROJ_PLATEAU = 64 * _EPS
 #: Largest number of iterations of the Kepler solve (Laguerre–Conway); it takes 2–6 at the
 #: steps of a converged run.
 KEPLER_MAXITER = 50
+_KEPLER_MAXITER = KEPLER_MAXITER        # (the compiled code's constant: a private name)
 
 
-@_jit
 def _copy(src, dst):
     """``dst[:] = src`` for (n, 3) arrays (the identity map about a fixed centre)."""
     for i in range(src.shape[0]):
@@ -98,7 +187,7 @@ def _copy(src, dst):
             dst[i, k] = src[i, k]
 
 
-@_jit
+@_kernel(_t.none(_M2, _M2, _V, _V, _i8, _M2, _M2))
 def to_jacobi(q, p, m, M, jacobi, qj, pj):
     """Jacobi coordinates ``qj = A q`` and momenta ``pj = A⁻ᵀ p`` (into qj, pj; (n, 3) each).
 
@@ -120,7 +209,7 @@ def to_jacobi(q, p, m, M, jacobi, qj, pj):
         qj[0, k] = R / M[n - 1]
 
 
-@_jit
+@_kernel(_t.none(_M2, _M2, _V, _V, _i8, _M2, _M2))
 def from_jacobi(qj, pj, m, M, jacobi, q, p):
     """The inverse of :func:`to_jacobi` (into q, p)."""
     _positions(qj, m, M, jacobi, q)
@@ -136,7 +225,6 @@ def from_jacobi(qj, pj, m, M, jacobi, q, p):
         p[0, k] = P
 
 
-@_jit
 def _positions(qj, m, M, jacobi, q):
     """Cartesian positions of Jacobi positions (the position half of :func:`from_jacobi`)."""
     if not jacobi:
@@ -152,7 +240,6 @@ def _positions(qj, m, M, jacobi, q):
         q[0, k] = R
 
 
-@_jit
 def _gradient_to_jacobi(g, m, M, jacobi, gj):
     """``gj = A⁻ᵀ g``: a Cartesian gradient (or momentum) as one in Jacobi coordinates."""
     if not jacobi:
@@ -172,7 +259,6 @@ _R3 = np.array([1.0 / ((2 * k + 4) * (2 * k + 5)) for k in range(14)])
 _R2 = np.array([1.0 / ((2 * k + 3) * (2 * k + 4)) for k in range(14)])
 
 
-@_jit
 def _stumpff(z):
     """Stumpff functions ``c0, c1, c2, c3`` at ``z`` (series for |z| < 1, closed forms otherwise).
 
@@ -203,18 +289,22 @@ def _stumpff(z):
     return math.cosh(x), s / x, 2.0 * h * h / (-z), (s - x) / (-z * x)
 
 
-@_inline
 def _kadd(s, c, x, comp):
     """Compensated ``s + x`` (Kahan) when ``comp``: the new sum and compensation (true sum ≈
-    sum − c); else the plain sum and ``c`` unchanged."""
+    sum − c); else the plain sum and ``c`` unchanged.
+
+    The stepper's compensated add (:func:`methodgen.runtime.stepper.compensated_add`, whose
+    compensation has the other sign: true sum ≈ sum + c) with the sign turned at both ends,
+    bit for bit the sum ``t = s + (x − c)`` and compensation ``(t − s) − (x − c)`` this module
+    has always computed: ``x + (−c)`` is ``x − c`` exactly, and ``0.0 − e`` is ``−e`` except
+    that a zero comes out +0.0, as ``(t − s) − y`` does (``t − s`` is never −0.0 there)."""
     if not comp:
         return s + x, c
-    y = x - c
-    t = s + y
-    return t, (t - s) - y
+    t, e = compensated_add(s, -c, x)
+    return t, 0.0 - e
 
 
-@_jit
+@_kernel(_i8(_M2, _M2, _M2, _M2, _i8, _f8, _f8, _f8, _i8))
 def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
     """Advance Jacobi body ``i`` (``qj[i]``, ``pj[i]``) along its Kepler orbit ``μ = mu`` by ``dt``.
 
@@ -265,7 +355,7 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
     it = 0
     done = False
     c0 = G1 = G2 = G3 = ds = 0.0
-    while it < KEPLER_MAXITER:
+    while it < _KEPLER_MAXITER:
         it += 1
         c0, c1, c2, c3 = _stumpff(beta * s * s)
         G1 = s * c1
@@ -310,7 +400,6 @@ def kepler_drift(qj, pj, cq, cp, i, mj, mu, dt, comp=True):
     return it
 
 
-@_jit
 def drift(qj, pj, cq, cp, mj, mu, jacobi, dt, comp):
     """The exact flow of ``H_K`` over ``dt``: every Kepler body, and the centre of mass
     moving freely (Jacobi).  Returns ``(status, body)``: (0, −1), or the first failing body
@@ -327,7 +416,7 @@ def drift(qj, pj, cq, cp, mj, mu, jacobi, dt, comp):
     return 0, -1
 
 
-@_jit
+@_kernel(_t.none(_M2, _V, _V, _V, _f8, _i8, _M2, _M2, _M2))
 def interaction_gradient(qj, m, M, KM, G, jacobi, q, g, gj):
     """``gj = ∇_{q'} H_I`` at the Jacobi positions ``qj`` (q, g: (n, 3) work arrays).
 
@@ -365,7 +454,7 @@ def interaction_gradient(qj, m, M, KM, G, jacobi, q, g, gj):
             gj[i, 2] -= w * z
 
 
-@_jit
+@_kernel(_t.none(_M2, _M2, _V, _V, _V, _V, _f8, _i8, _M2, _M2, _M2, _M2, _M2))
 def corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj):
     """``hj = ∇C = 2 Hess(H_I) u'`` with ``u' = M'⁻¹ gj`` and ``gj = ∇H_I`` at ``qj``.
 
@@ -425,7 +514,7 @@ def corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj):
             hj[i, k] *= 2.0
 
 
-@_jit
+@_kernel(_t.none(_M2, _f8, _V, _V, _V, _V, _f8, _i8, _M3))
 def gradients(qj, b, m, M, mj, KM, G, jacobi, work):
     """``work[2] = ∇H_I`` and, when ``b != 0``, ``work[6] = ∇C`` at ``qj`` (Jacobi; ``work[0]``
     then holds the Cartesian positions): what a kick at ``qj`` adds, before it is added."""
@@ -435,7 +524,7 @@ def gradients(qj, b, m, M, mj, KM, G, jacobi, work):
         corrector_gradient(qj, gj, m, M, mj, KM, G, jacobi, q, u, w, h, hj)
 
 
-@_jit
+@_kernel(_t.none(_M2, _M2, _f8, _f8, _M3, _i8))
 def apply_kick(pj, cp, a, b, work, comp=True):
     """``p' −= a ∇H_I + b ∇C`` with the gradients :func:`gradients` left in ``work``."""
     gj, hj = work[2], work[6]
@@ -450,7 +539,7 @@ def apply_kick(pj, cp, a, b, work, comp=True):
                 pj[i, k], cp[i, k] = _kadd(pj[i, k], cp[i, k], -(a * gj[i, k]), comp)
 
 
-@_jit
+@_kernel(_t.none(_M2, _M2, _M2, _f8, _f8, _V, _V, _V, _V, _f8, _i8, _M3, _i8))
 def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
     """``p' −= a ∇H_I + b ∇C`` (positions unchanged): the flow of ``a H_I + b C`` over time 1,
     added with compensated summation (compensation ``cp``, as :func:`kepler_drift`).
@@ -461,7 +550,6 @@ def kick(qj, pj, cp, a, b, m, M, mj, KM, G, jacobi, work, comp=True):
     apply_kick(pj, cp, a, b, work, comp)
 
 
-@_jit
 def _kick_size(qj, pj, work, a, b, first, mj, mu):
     """``(max_i |Δp'_i| / p_ref,i, i)`` of the kick just made (``work`` as :func:`kick` left it).
 
@@ -489,7 +577,6 @@ def _kick_size(qj, pj, work, a, b, first, mj, mu):
     return worst, body
 
 
-@_jit
 def _finite(qj, pj):
     n = qj.shape[0]
     for i in range(n):
@@ -499,7 +586,6 @@ def _finite(qj, pj):
     return True
 
 
-@_jit
 def _row(tq, tp, tc, m, M, jacobi, work, row):
     """``row`` = the Cartesian state (q then p) of the Jacobi state ``tq``, ``tp − tc``."""
     n = tq.shape[0]
@@ -515,7 +601,6 @@ def _row(tq, tp, tc, m, M, jacobi, work, row):
             row[3 * n + 3 * i + k] = p[i, k]
 
 
-@_jit
 def _emit(qj, pj, cq, cp, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, tc, row, comp):
     """The output row of the carried state: its compensated value with the lagged kick ``(a, b)``,
     on a copy, in Cartesian (``tq``, ``tp``, ``tc``: work arrays)."""
@@ -530,7 +615,7 @@ def _emit(qj, pj, cq, cp, a, b, m, M, mj, KM, G, jacobi, work, tq, tp, tc, row, 
     _row(tq, tp, tc, m, M, jacobi, work, row)
 
 
-@_jit
+@_kernel(_f8(_M2, _V, _V, _f8, _i8))
 def potential(q, m, mu, G, jacobi):
     """``U(q) = −Σ_{a<b} G m_a m_b/|q_a − q_b|`` (Cartesian positions ``q``), and about a fixed
     centre also ``− Σ_b μ_b m_b/|q_b|``."""
@@ -547,7 +632,7 @@ def potential(q, m, mu, G, jacobi):
     return U
 
 
-@_jit
+@_kernel(_t.none(_M2, _M2, _M2, _f8, _V, _V, _i8, _M2))
 def invariants(tq, tp, tc, U, mj, out, first, A):
     """``out[0:4] = (H, Lx, Ly, Lz)`` of the Jacobi state ``tq``, ``tp − tc`` with potential
     ``U`` (``H = Σ_i |p'_i|²/(2m'_i) + U``, ``L = Σ_i q'_i × p'_i``: the Jacobi map is a linear
@@ -600,7 +685,6 @@ def invariants(tq, tp, tc, U, mj, out, first, A):
         out[k] = sL
 
 
-@_jit
 def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback):
     """Project the output state onto ``(H, L) = tgt`` by moving its Jacobi momenta only.
 
@@ -664,7 +748,7 @@ def project(tq, tp, tc, pj, cp, tgt, U, mj, jacobi, inv, comp, maxiter, feedback
     return 5, maxiter
 
 
-@_jit
+@_kernel(_t.none(_M2, _V))
 def _solve_sym(A, x):
     """``x ← A⁻¹ x`` for the symmetric positive semi-definite 4×4 ``A`` (in place, A destroyed).
 
@@ -673,16 +757,17 @@ def _solve_sym(A, x):
     relative to the largest entry would depend on the unit of time), then Gaussian elimination
     with diagonal pivoting; a pivot below 1e-13 of its scaled row (a direction that moves
     nothing: the rotation about the line of a single body) gets 0 in that component, the least
-    correction that solves the rest."""
-    m = x.shape[0]
-    order = np.zeros(m, dtype=np.int64)
-    used = np.zeros(m, dtype=np.bool_)
-    d = np.zeros(m)
+    correction that solves the rest.  (The work arrays are float64 of 4 entries: the pivot
+    order as float indices, the flags as 0.0 / 1.0.)"""
+    m = 4
+    order = np.zeros(4)
+    used = np.zeros(4)
+    d = np.zeros(4)
     for a in range(m):
         if A[a, a] > 0.0:
             d[a] = math.sqrt(A[a, a])
         else:
-            used[a] = True         # moves nothing at all: component 0 (below)
+            used[a] = 1.0          # moves nothing at all: component 0 (below)
     for a in range(m):
         for b in range(m):
             A[a, b] = A[a, b] / (d[a] * d[b]) if d[a] > 0.0 and d[b] > 0.0 else 0.0
@@ -697,7 +782,7 @@ def _solve_sym(A, x):
                 k = a
         if k < 0:
             break
-        used[k] = True
+        used[k] = 1.0
         order[npiv] = k
         npiv += 1
         for a in range(m):
@@ -706,24 +791,23 @@ def _solve_sym(A, x):
                 for b in range(m):
                     A[a, b] -= f * A[k, b]
                 x[a] -= f * x[k]
-    solved = np.zeros(m, dtype=np.bool_)
+    solved = np.zeros(4)
     for s in range(npiv):
-        solved[order[s]] = True
+        solved[int(order[s])] = 1.0
     for a in range(m):
         if not solved[a]:
             x[a] = 0.0
     for s in range(npiv - 1, -1, -1):
-        k = order[s]
+        k = int(order[s])
         v = x[k]
         for t in range(s + 1, npiv):
-            v -= A[k, order[t]] * x[order[t]]
+            v -= A[k, int(order[t])] * x[int(order[t])]
         x[k] = v / A[k, k]
     for a in range(m):
         if d[a] > 0.0:
             x[a] = x[a] / d[a]
 
 
-@_jit
 def _save(qj, pj, cq, cp, sq, sp, scq, scp):
     """Copy the carried state and its compensations (to restore it after a failed step)."""
     for i in range(qj.shape[0]):
@@ -734,14 +818,12 @@ def _save(qj, pj, cq, cp, sq, sp, scq, scp):
             scp[i, k] = cp[i, k]
 
 
-@_jit
 def _buffers(n):
-    """The loops' work arrays for n bodies: the kicks' (7, n, 3), the output state's three
-    (n, 3) and the saved state's (4, n, 3)."""
+    """The loops' work arrays for n bodies (Python's, passed to the compiled loops): the kicks'
+    (7, n, 3), the output state's three (n, 3) and the saved state's (4, n, 3)."""
     return np.empty((7, n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((4, n, 3))
 
 
-@_jit
 def _step(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, a0, b0, fresh, work, fail, comp, limit, peak):
     """One step of the splitting on the carried state (in place): the fused kick ``(a0, b0)``
     (with the gradients already in ``work`` when ``fresh``), then the drifts and the inner
@@ -780,7 +862,6 @@ def _step(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, a0, b0, fresh, w
     return True
 
 
-@_jit
 def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail, comp,
         limit, peak):
     """``steps`` steps of the corrected splitting from the carried state ``(qj, pj)`` (in place;
@@ -798,9 +879,21 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     (:data:`STATUS`); the state is then the last good one.  ``peak[0]`` (in/out) is the largest
     relative change of a Jacobi momentum by one kick so far (``peak[1]``: that body); a kick
     above ``limit`` stops the run with status 4 (a close encounter: H_I is no longer small).
+    The loop is :func:`_run`, compiled; its work arrays are allocated here.
     """
+    f = np.array(fail, dtype=np.float64)
+    done = _run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, f, comp,
+                limit, peak, *_buffers(qj.shape[0]))
+    fail[:] = f
+    return done
+
+
+@_kernel(_i8(_M2, _M2, _M2, _M2, _V, _V, _V, _V, _V, _f8, _i8, _V, _V, _f8, _f8, _i8, _i8, _M2, _V, _i8, _f8, _V,
+             _M3, _M2, _M2, _M2, _M3))
+def _run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail, comp,
+         limit, peak, work, tq, tp, tc, saved):
+    """:func:`run`'s loop (``fail`` as float64; the work arrays of :func:`_buffers`)."""
     ns = c.shape[0]
-    work, tq, tp, tc, saved = _buffers(qj.shape[0])
     a0 = (d[ns] + d[0]) * h
     b0 = 2.0 * kappa
     row = 1
@@ -816,7 +909,6 @@ def run(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save
     return steps
 
 
-@_jit
 def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail,
                   comp, limit, peak, proj, tgt, pstat, pmaxiter):
     """:func:`run` with the energy projection (:func:`project`) onto ``tgt = (H, Lx, Ly, Lz)``:
@@ -829,9 +921,21 @@ def run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, s
     potential evaluation and a few 4×4 solves.  ``pstat`` (float, in/out) accumulates the
     projection's iterations (total, largest, -, count); on status 5 ``pstat[2]`` is the
     largest residual relative to its size.  ``pmaxiter``: the projection's iteration limit.
+    The loop is :func:`_run_projected`, compiled; its work arrays are allocated here.
     """
+    f = np.array(fail, dtype=np.float64)
+    done = _run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, f,
+                          comp, limit, peak, proj, tgt, pstat, pmaxiter, *_buffers(qj.shape[0]))
+    fail[:] = f
+    return done
+
+
+@_kernel(_i8(_M2, _M2, _M2, _M2, _V, _V, _V, _V, _V, _f8, _i8, _V, _V, _f8, _f8, _i8, _i8, _M2, _V, _i8, _f8, _V,
+             _i8, _V, _V, _i8, _M3, _M2, _M2, _M2, _M3))
+def _run_projected(qj, pj, cq, cp, m, M, mj, mu, KM, G, jacobi, c, d, h, kappa, steps, save_every, out, fail,
+                   comp, limit, peak, proj, tgt, pstat, pmaxiter, work, tq, tp, tc, saved):
+    """:func:`run_projected`'s loop (``fail`` as float64; the work arrays of :func:`_buffers`)."""
     ns = c.shape[0]
-    work, tq, tp, tc, saved = _buffers(qj.shape[0])
     a0 = (d[ns] + d[0]) * h
     b0 = 2.0 * kappa
     a1 = d[ns] * h

@@ -183,11 +183,13 @@ class WisdomHolman:
         self.n_bodies = n
         self.METHOD = split.name + ("-corrected" if corrector else "") + {
             None: "", "energy-output": "-projected-output", "energy-standard": "-projected"}[project]
-        self.BACKEND = "numba" if kf.HAVE_NUMBA else "python"
-        if not kf.HAVE_NUMBA:
+        # "numba": the compiled backend's name (as a generated module's), though compiled through
+        # LLVM IR (methodgen.codegen.llvmkernels), not by numba
+        self.BACKEND = "numba" if kf.COMPILED else "python"
+        if not kf.COMPILED:
             import warnings
-            warnings.warn("numba is not installed: the Wisdom–Holman runtime runs as Python, the same numbers "
-                          "about 100x slower (pip install 'methodgen[fast]')", RuntimeWarning, stacklevel=3)
+            warnings.warn("llvmlite is not installed: the Wisdom–Holman runtime runs as Python, the same numbers "
+                          "about 100x slower (pip install 'methodgen[compiled]')", RuntimeWarning, stacklevel=3)
         self.__file__ = kf.__file__
         self.STATE_NAMES = tuple(s.name for s in system.q) + tuple(s.name for s in system.p)
         self.INVARIANT_NAMES = ("H", "Lx", "Ly", "Lz", "Px", "Py", "Pz")

@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["stepper", "lockstep", "rows", "lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax"]
+__all__ = ["stepper", "lockstep", "rows", "lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax",
+           "compensated_add"]
 
 # The names below that this file does not define (``numba``, ``_rt``, the upper-case
 # constants and the kernels) are bound by methodgen.runtime.fused when it compiles the loop.
@@ -425,9 +426,7 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
                     if _comp != 0:
                         # compensated (Kahan) summation: the rounding error of y + Δy is
                         # carried to the next stage
-                        _a = _out[_i] + _cl[_i]
-                        _s = _yl[_i] + _a
-                        _cl[_i] = _a - (_s - _yl[_i])
+                        _s, _cl[_i] = compensated_add(_yl[_i], _cl[_i], _out[_i])
                         _yl[_i] = _s
                     else:
                         _s = _yl[_i] + _out[_i]
@@ -565,10 +564,7 @@ def project(y, c, lam, tgt, p, h, ka, kd, kb, maxiter, z, frc, out, y1, c1, yt, 
             for k in range(_STAGES):
                 post(z, yt, ct, frc, h * ka[k], h * kd[k], h * kb[k], p, out)
                 for i in range(_DIM):
-                    d = out[i] + ct[i]
-                    s = yt[i] + d
-                    ct[i] = d - (s - yt[i])
-                    yt[i] = s
+                    yt[i], ct[i] = compensated_add(yt[i], ct[i], out[i])
                 for i in range(_NF):
                     frc[i] = out[_DIM + i]
                 if _LERR == 1:
@@ -636,10 +632,7 @@ def project(y, c, lam, tgt, p, h, ka, kd, kb, maxiter, z, frc, out, y1, c1, yt, 
             status = _S_OK
             # y1 rebuilt with D(y1) itself (the lag, already in the residual, leaves y1)
             for i in range(_DIM):
-                d = lag[i] + c1[i]
-                s = y1[i] + d
-                c1[i] = d - (s - y1[i])
-                y1[i] = s
+                y1[i], c1[i] = compensated_add(y1[i], c1[i], lag[i])
             break
         prev = rel
         if it == 1:
@@ -692,6 +685,17 @@ def project(y, c, lam, tgt, p, h, ka, kd, kb, maxiter, z, frc, out, y1, c1, yt, 
     res[0] = status
     res[1] = rn
     res[2] = it
+
+
+def compensated_add(y, c, x):
+    """Compensated (Kahan) ``y + x`` with the compensation ``c`` of ``y`` (the true value is
+    about ``y + c``): ``(s, c')`` with ``s = y + (x + c)`` and ``c' = (x + c) - (s - y)``, the
+    rounding error of that sum, carried to the next.  The one implementation of the
+    compensated add: the stepper's state updates and the Wisdom–Holman runtime's
+    (:mod:`methodgen.runtime.kepler_flow`, whose compensations have the other sign) call it."""
+    a = x + c
+    s = y + a
+    return s, a - (s - y)
 
 
 def small_solve(A, b, x, W, c):

@@ -23,6 +23,7 @@ numba = pytest.importorskip("numba")
 
 from methodgen.codegen import llvmkernels as lk  # noqa: E402
 from methodgen.runtime import nbruntime as rt  # noqa: E402
+from methodgen.codegen import ktypes as kt  # noqa: E402
 
 RES = rt.KERNEL_TYPES["res"]
 
@@ -427,30 +428,211 @@ def test_and_or_short_circuit_as_python(tmp_path, guard):
         assert proc.returncode != 0
 
 
-INTDIV = """
-def intdiv(_y, _r, n):
-    for i in range(-7, 8):
-        k = (i % n) * 100 + (i // n)
-        _r[i + 7] = k
-    for i in range(-7, 8):
-        k = (i % (-n)) * 100 + (i // (-n))
-        _r[15 + i + 7] = k
+# --- the constructs of the Wisdom–Holman runtime (methodgen.runtime.kepler_flow) ----------------------------
+# Compared with the same source run as Python (the runtime's fallback), each with a control.
+
+def _load_plain(tmp_path, name, source):
+    """A module of functions written to a file (no numba import: these need none)."""
+    path = tmp_path / f"{name}.py"
+    path.write_text("import math\nimport numpy as np\n\n" + textwrap.dedent(source))
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _ccall(kernel, *args):
+    """The kernel's C entry called with numpy arrays (by their structures) and scalars."""
+    buf, addrs = lk.packed_structs([a for a in args if isinstance(a, np.ndarray)])
+    it = iter(addrs)
+    return kernel.c_call(*[next(it) if isinstance(a, np.ndarray) else a for a in args])
+
+
+_V, _M = kt.float64[::1], kt.float64[:, ::1]
+_T3 = kt.float64[:, :, ::1]
+
+TUPLES = """
+def _pair(a, b):
+    if a > b:
+        return b, a                      # an early return of two floats
+    return a, b
+
+
+def _first_above(x, lim):
+    # returns (value, index) from inside a loop; (0.0, -1) when none
+    for i in range(x.shape[0]):
+        if x[i] > lim:
+            return x[i], i
+    return 0.0, -1
+
+
+def _fill(w, v):
+    for i in range(w.shape[0]):
+        for k in range(w.shape[1]):
+            w[i, k] = v + i - k
+
+
+def tuples(x, work, out):
+    lo, hi = _pair(x[0], x[1])
+    out[0] = lo
+    out[1] = hi
+    a = x[2]
+    b = x[3]
+    a, b = b, a                           # simultaneous: a swap
+    out[2] = a - 2.0 * b
+    v, i = _first_above(x, 0.5)
+    out[3] = v
+    out[4] = i
+    out[5] = i + 1                        # i is an integer (an index)
+    q, g = work[0], work[1]               # views of a 3-D array, unpacked
+    _fill(q, 1.0)
+    _fill(g, x[4])
+    out[6] = q[1, 2] + g[2, 0]
+    s = t = x[5]                          # chained: one value, two names
+    s += 1.0
+    out[7] = s * t
+    out[8], out[9] = _pair(x[6], x[7])    # into array elements
 """
 
 
-@pytest.mark.parametrize("n", [1, 2, 3, 5])
-def test_integer_floor_division_and_modulo_are_pythons(tmp_path, n):
-    """Run-time ``%`` and ``//`` of integers with Python's floor semantics for every sign (C's
-    remainder truncates); negative control: C's truncated remainder differs for negative i."""
-    from methodgen import ktypes as kt
+def test_tuple_returns_unpacking_and_views_as_python(tmp_path):
+    """Functions returning tuples (early, from inside loops, of a float and an index), unpacked
+    into names, array elements and array views (``q, g = work[0], work[1]`` of a 3-D array),
+    a swap, chained assignment: bitwise the same source run as Python.  Control: a swap
+    translated as two sequential assignments would differ, and the test sees that."""
+    sig = kt.none(_V, _T3, _V)
+    mod = _load_plain(tmp_path, "k_tuples", TUPLES)
+    ll = lk.compile_kernel(mod.tuples, sig, c_entry=True)
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        x = rng.normal(size=8)
+        work = np.zeros((2, 4, 3))
+        got, ref = np.zeros(10), np.zeros(10)
+        _ccall(ll, x, work, got)
+        mod.tuples(x, np.zeros((2, 4, 3)), ref)
+        assert np.array_equal(got, ref), (got, ref)
+    # control: sequential assignments (a = b; b = a) are not the swap
+    seq = _load_plain(tmp_path, "k_tuples_seq", TUPLES.replace("    a, b = b, a ", "    a = b\n    b = a\n    #"))
+    x = np.arange(8.0)
+    r1, r2 = np.zeros(10), np.zeros(10)
+    mod.tuples(x, np.zeros((2, 4, 3)), r1)
+    _ccall(lk.compile_kernel(seq.tuples, sig, c_entry=True), x, np.zeros((2, 4, 3)), r2)
+    assert r1[2] != r2[2] and np.array_equal(np.delete(r1, 2), np.delete(r2, 2))
 
-    mod = _load(tmp_path, "k_intdiv", INTDIV)
-    ll = lk.compile_kernel(mod.intdiv, kt.void(kt.float64[::1], kt.float64[::1], kt.int64), c_entry=True)
-    r = np.zeros(30)
-    y = np.zeros(1)
-    buf, (ay, ar) = lk.packed_structs([y, r])
-    ll.c_call(ay, ar, n)
-    expect = [(i % n) * 100 + (i // n) for i in range(-7, 8)] + [(i % -n) * 100 + (i // -n) for i in range(-7, 8)]
-    assert r.tolist() == expect
-    truncated = [math.fmod(i, n) * 100 + int(i / n) for i in range(-7, 8)]
-    assert n == 1 or truncated != expect[:15]
+
+@pytest.mark.parametrize("body, why", [
+    ("def _f(x):\n    if x > 0.0:\n        return 1\n    return 0.5\n\n\ndef k(x, out):\n    out[0] = _f(x[0])\n",
+     "an integer and a float returned at one place"),
+    ("def _f(x):\n    return x, 2.0\n\n\ndef k(x, out):\n    a, b, c = _f(x[0])\n    out[0] = a\n",
+     "unpacking of another number of values"),
+    ("def k(x, out):\n    a, b = x[0]\n    out[0] = a\n", "unpacking of a non-tuple"),
+])
+def test_tuple_mistakes_are_refused(tmp_path, body, why):
+    """What Python would reject or numba type differently is refused, never translated."""
+    mod = _load_plain(tmp_path, f"k_bad_{abs(hash(why))}", body)
+    with pytest.raises(lk.Unsupported, match=why):
+        lk.compile_kernel(mod.k, kt.none(_V, _V), c_entry=True)
+
+
+LOOPS_RT = """
+def loops(x, n, out):
+    m = x.shape[0]
+    s = 0.0
+    for i in range(m - 1, -1, -1):          # down to 0: a run-time start, a constant step
+        s = s * 0.5 + x[i]
+    out[0] = s
+    out[1] = i                               # Python leaves the index at its last value
+    t = 0.0
+    j = -5
+    for j in range(1, n):                    # a run-time length (none when n <= 1: j stays -5)
+        t += x[j % m] * j
+    out[2] = t
+    for j in range(2, m, 3):
+        out[3] += x[j]
+    out[4] = j
+    out[5] = (n - 7) % 3                     # Python's signs (of the divisor)
+    out[6] = (n - 7) // 3
+    out[7] = -n % m
+    out[8] = n // -2
+    for k in range(n):
+        if k > 2:
+            break
+    out[9] = k                               # where it broke
+"""
+
+
+def test_run_time_length_loops_and_integer_division_as_python(tmp_path):
+    """``range`` over run-time lengths (``x.shape[0]``, a count argument), with a constant step
+    (``range(m - 1, -1, -1)``), the index after the loop, ``%`` and ``//`` of integers with
+    Python's signs: bitwise the source run as Python.  Control: Python's ``%`` is not C's
+    (``-n % m`` differs from the truncated remainder), and a loop one short differs."""
+    sig = kt.none(_V, kt.int64, _V)
+    mod = _load_plain(tmp_path, "k_rtloops", LOOPS_RT)
+    ll = lk.compile_kernel(mod.loops, sig, c_entry=True)
+    rng = np.random.default_rng(3)
+    for m in (1, 3, 4, 7):
+        for n in (1, 2, 5, 8, 13):
+            x = rng.normal(size=m)
+            got, ref = np.zeros(10), np.zeros(10)
+            _ccall(ll, x, n, got)
+            mod.loops(x, n, ref)
+            assert np.array_equal(got, ref), (m, n, got, ref)
+    assert math.fmod(-5, 3) != -5 % 3          # (the control of the signs: C's remainder differs)
+    short = _load_plain(tmp_path, "k_rtloops2", LOOPS_RT.replace("range(m - 1, -1, -1)", "range(m - 1, 0, -1)"))
+    x = rng.normal(size=4)
+    a, b = np.zeros(10), np.zeros(10)
+    _ccall(ll, x, 5, a)
+    _ccall(lk.compile_kernel(short.loops, sig, c_entry=True), x, 5, b)
+    assert a[0] != b[0] and a[1] != b[1]
+    # a step not known at translation time is refused
+    var = _load_plain(tmp_path, "k_rtloops3", "def k(x, n, out):\n    for i in range(0, 4, n):\n        out[i] = 1.0\n")
+    with pytest.raises(lk.Unsupported, match="range step"):
+        lk.compile_kernel(var.k, sig, c_entry=True)
+
+
+VALUES = """
+def _count(x):
+    n = 0
+    for i in range(x.shape[0]):
+        if math.isfinite(x[i]):
+            n += 1
+    return n
+
+
+def ivalue(x, out):
+    n = _count(x)
+    if not n:
+        return -1
+    out[0] = math.floor(x[0]) * 2.0
+    out[1] = np.inf if x[1] else -np.inf      # the truth of a float (NaN is true)
+    out[2] = int(x[2])
+    flag = x[0] > 0.0 and n > 2
+    if flag:
+        out[3] = 1.0
+    return n + 10
+
+
+def fvalue(x, out):
+    return x[0] * x[1]
+"""
+
+
+def test_c_entry_returns_values_and_truth_values_as_python(tmp_path):
+    """A C entry returns its kernel's int64 or float64 value; ``math.isfinite``, ``math.floor``,
+    numpy's constants, ``int()`` where a float is wanted and the truth value of an integer or
+    a float (NaN is true) are Python's.  Control: a void kernel's entry returns None."""
+    mod = _load_plain(tmp_path, "k_values", VALUES)
+    iv = lk.compile_kernel(mod.ivalue, kt.int64(_V, _V), c_entry=True)
+    fv = lk.compile_kernel(mod.fvalue, kt.float64(_V, _V), c_entry=True)
+    cases = [[1.5, 0.0, -2.7, 3.0], [-1.5, np.nan, 2.7, np.inf], [0.25, np.nan, 0.5, np.nan],
+             [3.0, -0.0, 9.9, 1.0], [-2.0, 3.0, 1.0, -np.inf]]
+    for c in cases:
+        x = np.array(c)
+        got, ref = np.zeros(4), np.zeros(4)
+        r = _ccall(iv, x, got)
+        assert type(r) is int and r == mod.ivalue(x, ref)
+        assert np.array_equal(got, ref)
+        assert _ccall(fv, x, got) == mod.fvalue(x, ref) or math.isnan(mod.fvalue(x, ref))
+    assert _ccall(iv, np.array([np.nan] * 4), np.zeros(4)) == -1
+    void = _load_plain(tmp_path, "k_void", "def k(x, out):\n    out[0] = x[0]\n")
+    assert _ccall(lk.compile_kernel(void.k, kt.none(_V, _V), c_entry=True), np.ones(1), np.zeros(1)) is None

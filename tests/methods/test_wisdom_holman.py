@@ -19,7 +19,7 @@ from methodgen.symbolic import nbody as S
 from methodgen.errors import InputError, MethodNotApplicable
 from methodgen.symbolic.scene import NBody
 
-pytest.importorskip("numba")   # the runtime runs as Python without it: too slow for these runs
+pytest.importorskip("llvmlite")   # the runtime runs as Python without it: too slow for these runs
 
 
 def star_and_planets(eps: float, n_planets: int = 2):
@@ -804,16 +804,16 @@ def test_splitting_names_elsewhere_say_where_they_belong(capsys, tmp_path):
     assert code == 2 and "benchmarked by --peers" in one_line(err)
 
 
-def test_without_numba_the_runtime_runs_as_python_bitwise(tmp_path):
-    """In a process where numba cannot be imported the runtime runs as Python (a RuntimeWarning
+def test_without_llvmlite_the_runtime_runs_as_python_bitwise(tmp_path):
+    """In a process where llvmlite cannot be imported the runtime runs as Python (a RuntimeWarning
     says so) and gives the compiled run's numbers bitwise (no fastmath, the same operations)."""
     import subprocess
     import sys
 
-    script = tmp_path / "nonumba.py"
+    script = tmp_path / "nollvm.py"
     script.write_text(
         "import sys\n"
-        "sys.modules['numba'] = None\n"
+        "sys.modules['llvmlite'] = None\n"
         "import warnings, numpy as np, methodgen as mg\n"
         "sc = mg.load_scene('outer-solar-system')\n"
         "with warnings.catch_warnings(record=True) as w:\n"
@@ -821,12 +821,65 @@ def test_without_numba_the_runtime_runs_as_python_bitwise(tmp_path):
         "    wh = mg.wisdom_holman(sc, 'sbab3')\n"
         "assert any('runs as Python' in str(x.message) for x in w), w\n"
         "assert wh.BACKEND == 'python'\n"
-        f"np.save({str(tmp_path / 'y.npy')!r}, wh.integrate(np.array(sc.y0), 135.0, 12))\n")
+        f"np.save({str(tmp_path / 'y.npy')!r}, wh.integrate(np.array(sc.y0), 135.0, 12))\n"
+        "assert 'llvmlite.binding' not in sys.modules\n")
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     sc = mg.load_scene("outer-solar-system")
     Y = W.wisdom_holman(sc, "sbab3").integrate(np.array(sc.y0), 135.0, 12)
-    assert np.array_equal(np.load(tmp_path / "y.npy"), Y)
+    assert kf.compiled() and np.array_equal(np.load(tmp_path / "y.npy"), Y)
+
+
+@pytest.mark.parametrize("control", [False, True])
+def test_a_wisdom_holman_run_does_not_import_numba(tmp_path, control):
+    """The runtime is compiled through LLVM IR (methodgen.codegen.llvmkernels), not numba: a process that
+    builds and runs Wisdom–Holman splittings (with the projection, and the Jacobi map and kicks
+    called from Python) never imports numba.  Control: the same check, in a process that does
+    import numba, sees it."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "nonumba.py"
+    script.write_text(
+        "import sys, numpy as np, methodgen as mg\n"
+        + ("import numba\n" if control else "") +
+        "sc = mg.load_scene('outer-solar-system')\n"
+        "for project in (None, 'energy-output'):\n"
+        "    wh = mg.wisdom_holman(sc, 'sbab3', project=project)\n"
+        "    wh.integrate(np.array(sc.y0), 135.0, 5, info={})\n"
+        "print('numba' in sys.modules, wh.BACKEND)\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [str(control), "numba"]      # ("numba": the compiled backend's name)
+
+
+def test_every_entry_compiles_and_is_the_python_functions_bitwise(monkeypatch):
+    """Each function Python calls is compiled (the translator refuses nothing of this module: a
+    refusal would raise), its machine code cacheable, keyed by this file's and the stepper's
+    source (the compensated add it shares); and a run, plain and projected, gives bitwise the
+    numbers of the same functions run as Python (``METHODGEN_STEPPER=python``).  Control: the
+    Python run really is Python (no compiled entry is used)."""
+    from methodgen.codegen import llvmcache, llvmkernels
+    from methodgen.runtime import stepper
+
+    entries = [v for v in vars(kf).values() if isinstance(v, kf._Kernel)]
+    assert {e.__name__ for e in entries} >= {"to_jacobi", "kick", "potential", "invariants", "_run", "_run_projected"}
+    for e in entries:
+        assert e.entry() is not None
+        assert llvmcache.key(e.py_func, e.sig, kf._kernel_globals(), True, llvmkernels._STATE) is not None
+    assert kf._kernel_globals()["compensated_add"] is stepper.compensated_add
+    sc = mg.load_scene("outer-solar-system")
+    y0 = np.array(sc.y0)
+    runs = {}
+    for route in ("compiled", "python"):
+        if route == "python":
+            monkeypatch.setenv("METHODGEN_STEPPER", "python")
+            monkeypatch.setattr(kf._Kernel, "entry", lambda self: pytest.fail("a compiled entry on the Python route"))
+        runs[route] = [W.wisdom_holman(sc, "saba3", project=p).integrate(y0, 135.0, 6, save_every=2)
+                       for p in (None, "energy-standard")]
+    assert kf.compiled() is False
+    for a, b in zip(runs["compiled"], runs["python"]):
+        assert a.tobytes() == b.tobytes()
 
 
 def test_comparable_masses_are_warned():

@@ -21,7 +21,7 @@ from methodgen.symbolic import nbody as S
 from methodgen.errors import InputError
 from test_wisdom_holman import error, reference, star_and_planets
 
-pytest.importorskip("numba")   # the runtime runs as Python without it: too slow for these runs
+pytest.importorskip("llvmlite")   # the runtime runs as Python without it: too slow for these runs
 
 EPS = np.finfo(float).eps
 
