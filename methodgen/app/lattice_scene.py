@@ -205,7 +205,7 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
 
 
 def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None,
-                      t_final=None, solver="newton", check_resolution=True, backend="numpy", progress=None) -> dict:
+                      t_final=None, solver="simplified", check_resolution=True, backend="numpy", progress=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
     ``size``: N for this run (default the scene's); ``params``: parameter values for this run;

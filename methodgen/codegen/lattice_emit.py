@@ -63,10 +63,20 @@ def _cse_lines(exprs, printer, prefix: str) -> tuple[list[str], list[str]]:
     return lines, [printer.doprint(e) for e in outs]
 
 
-def _gathers(symbols, names, source: str, fields) -> list[str]:
+def _full(t) -> bool:
+    """The term is summed over every site (1 … N): its site tables are rotations, so gathers and
+    scatters are numpy.roll (a copy) instead of fancy indexing (a gather, a scattered add)."""
+    return (t.lo.from_end, t.lo.c, t.hi.from_end, t.hi.c) == (False, 1, True, 0)
+
+
+def _gathers(symbols, names, source: str, fields, full: bool = False) -> list[str]:
     out = []
     for s, (f, o) in zip(symbols, names):
-        out.append(f"{s.name} = {source}[{fields.index(f)}, ix[{o}]]")
+        if full:
+            row = f"{source}[{fields.index(f)}]"
+            out.append(f"{s.name} = {row}" if o == 0 else f"{s.name} = numpy.roll({row}, {-o})")
+        else:
+            out.append(f"{s.name} = {source}[{fields.index(f)}, ix[{o}]]")
     return out
 
 
@@ -145,7 +155,7 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     fields = lat.fields
     def values(t, z0):
         pre, (value,) = _cse_lines([t.template], printer, "_e")
-        return (_bind([t.template], lat) + _gathers(z0, t.slots, "Y", fields) + pre
+        return (_bind([t.template], lat) + _gathers(z0, t.slots, "Y", fields, _full(t)) + pre
                 + [f"return numpy.broadcast_to({value}, ix[{t.slots[0][1]}].shape)"])
 
     def entry(t):
@@ -161,10 +171,11 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
         k = len(tp.pieces)
         jac_rows = [_tuple(j_out[k + a * k:k + (a + 1) * k]) for a in range(k)]
         piece_lines = (_bind(list(tp.pieces) + flat_jac, lat)
-                       + _gathers(tp.z0, t.slots, "Y0", fields) + _gathers(tp.z1, t.slots, "Z", fields)
+                       + _gathers(tp.z0, t.slots, "Y0", fields, _full(t))
+                       + _gathers(tp.z1, t.slots, "Z", fields, _full(t))
                        + ["if not jac:"] + ["    " + ln for ln in g_pre] + [f"    return {_tuple(g_out)}, None"]
                        + j_pre + [f"return {_tuple(j_out[:k])}, {_tuple(jac_rows)}"])
-        terms.append({**entry(t), "slots": [(fields.index(f), o) for f, o in t.slots],
+        terms.append({**entry(t), "full": _full(t), "slots": [(fields.index(f), o) for f, o in t.slots],
                       "slot_names": [s.name for s in tp.z0],
                       "energy_lines": values(t, tp.z0), "piece_lines": piece_lines})
     quantities = [("H", list(range(len(terms))))]

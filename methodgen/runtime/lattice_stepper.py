@@ -262,12 +262,13 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             _W[_IZP + 0, j] = z0
             _W[_IZP + 1, j] = z1
         last = math.inf
+        refac = 0
         done = 0
         it = 0
         size = 0.0
         while it < _maxiter:
             it += 1
-            jac = 1 if (it == 1 or _simpl == 0) else 0
+            jac = 1 if (it == 1 or _simpl == 0 or refac == 1) else 0
             for j in range(n):
                 _W[_IG + 0, j] = 0.0
                 _W[_IG + 1, j] = 0.0
@@ -303,6 +304,10 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             if size <= _tol * scale or (size <= 1e3 * 2.220446049250313e-16 * scale and size > 0.5 * last):
                 done = 1
                 break
+            # simplified Newton converging slowly (the matrix at the predictor too far off): the
+            # matrix at the iterate from now on, for this step
+            if size > 0.25 * last:
+                refac = 1
             last = size
         if done == 0:
             # the residual at the last iterate, for the message
