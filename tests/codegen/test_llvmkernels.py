@@ -18,6 +18,7 @@ import pytest
 
 import methodgen as mg
 from methodgen.codegen.emit import module_filename
+from methodgen.codegen.lower import uses_loops
 
 numba = pytest.importorskip("numba")
 
@@ -303,13 +304,20 @@ def _chain(n):
     return system, y0
 
 
-@pytest.mark.parametrize("case", ["kepler-sv8", "hh-em2", "oss-em2", "chain24-em2"])
+@pytest.mark.parametrize("case", ["kepler-sv8", "hh-em2", "nbody3-em2", "chain24-em2",
+                                  # loops over like terms as nbody3-em2, at six bodies
+                                  pytest.param("oss-em2", marks=pytest.mark.slow)])
 def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, monkeypatch, case):
     """Every straight-line kernel of the module takes the LLVM route (straight-line code, loops
     over like terms, like rows, unrolled sums); the trajectory is bitwise the numba route's."""
     if case == "chain24-em2":
         system, y0 = _chain(24)            # 48 state components: like rows (lower_rows)
         method, opts, h, steps = "energy-momentum", {}, 0.05, 60
+    elif case == "nbody3-em2":             # three pair terms: kernels that loop over them (lower_loops)
+        from methodgen.bench import nbody_initial, nbody_system
+
+        system, y0 = nbody_system(3), nbody_initial(3)
+        method, opts, h, steps = "energy-momentum", {}, 0.01, 60
     else:
         name, method, opts = {"kepler-sv8": ("kepler", "stormer-verlet", {"order": 8}),
                               "hh-em2": ("henon-heiles-2d", "energy-momentum", {}),
@@ -317,6 +325,8 @@ def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, 
         scene = mg.load_scene(name)
         system, y0, h, steps = scene.system, np.array(scene.y0, float), scene.h, 60
     scheme = mg.discretize(system, method, **opts)
+    if case in ("nbody3-em2", "oss-em2"):
+        assert uses_loops(scheme)
     runs = {}
     for route in ("llvm", "numba"):
         monkeypatch.setenv("METHODGEN_KERNELS", route)

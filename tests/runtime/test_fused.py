@@ -10,6 +10,7 @@ driver for the spectral radius and resumes at that stage.
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -276,16 +277,29 @@ def test_the_asked_spectral_radius_decides(monkeypatch):
     assert wrong != ref
 
 
-@pytest.mark.parametrize("case", ["hh2d-em4", "kepler-gauss2", "oss-em2"])
+@pytest.mark.parametrize("case", ["hh2d-em4", "kepler-gauss2", "nbody3-em2",
+                                  # the same kernels' shape (pair loops, a dense 18×18 LU) at
+                                  # six bodies: its Python-stepper reference costs ~25 s of CPU
+                                  pytest.param("oss-em2", marks=pytest.mark.slow)])
 def test_solver_reuse_runs_on_the_stepper(monkeypatch, case):
     """Solver "reuse" (LU factors kept over steps and calls, refreshed when an iteration
     contracts slowly or diverges): on the compiled stepper, bitwise the Python stepper's --
-    rows, iterations and the kept factors, permutations and flags -- in two chunks."""
-    name, method, kw = {"hh2d-em4": ("henon-heiles-2d", "energy-momentum", {"order": 4}),
-                        "kepler-gauss2": ("kepler", "gauss", {"stages": 2}),
-                        "oss-em2": ("outer-solar-system", "energy-momentum", {})}[case]
-    scene = mg.load_scene(name)
+    rows, iterations and the kept factors, permutations and flags -- in two chunks.  The
+    N-body cases have kernels that loop over the pair terms (methodgen.lower_loops) and a
+    dense LU of more than three unknowns."""
+    if case == "nbody3-em2":
+        from methodgen.bench import nbody_initial, nbody_system
+
+        scene = SimpleNamespace(system=nbody_system(3), y0=nbody_initial(3), h=0.01)
+        method, kw = "energy-momentum", {}
+    else:
+        name, method, kw = {"hh2d-em4": ("henon-heiles-2d", "energy-momentum", {"order": 4}),
+                            "kepler-gauss2": ("kepler", "gauss", {"stages": 2}),
+                            "oss-em2": ("outer-solar-system", "energy-momentum", {})}[case]
+        scene = mg.load_scene(name)
     mod = mg.build(scene.system, method, backend="numba", **kw)
+    if case.startswith(("nbody", "oss")):
+        assert np.size(mod._IDX0), "the N-body module loops over its pairs"
     y0 = np.array(scene.y0, float)
     runs = {}
     for fused in ("1", "0"):
