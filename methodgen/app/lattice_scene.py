@@ -175,6 +175,9 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
             if not isinstance(v, str):
                 raise SceneError(f"{where} [{name}]: {k!r} must be a formula (text), got {v!r}")
     name = data.get("name", p.stem)
+    if "i" in params or lt.get("size") == "i":
+        raise SceneError(f"{where}: 'i' is the site index of the [initial] formulas; give the parameter "
+                         "or the size another name")
     try:
         lat = Lattice(lt["H"], lt.get("q", "q"), lt.get("p", "p"), size=lt.get("size", "N"), params=params,
                       name=name, invariants=invariants)
@@ -238,4 +241,4 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     return dict(scene=scene.name, method=method, backend=backend, N=n, h=h, steps=steps, t_final=h * steps, success=True,
                 build_seconds=build_seconds, seconds=seconds, seconds_per_step=seconds / steps,
                 newton_iterations_mean=float(np.mean(info["newton_iterations"])), invariants=inv,
-                traits=dict(module.TRAITS), y_final=rows[-1].tolist())
+                traits=dict(module.TRAITS), module_file=str(module.__file__), y_final=rows[-1].tolist())

@@ -104,7 +104,7 @@ def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
     j + r - 1, entry (f, g)), a
     loop over the sites of each term -- the scalar form of the module's vectorised kernels, in
     the subset :mod:`methodgen.codegen.llvmkernels` translates (:mod:`methodgen.runtime.lattice_stepper` inlines
-    it).  Sites are (i + o + n) % n: non-negative operands, so C's and Python's % agree."""
+    it).  Sites are (i + o) % n with Python's floor modulo (the translator's too)."""
     lat = scheme.lattice
     printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
     fields = lat.fields
@@ -115,11 +115,14 @@ def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
     body = [ln.replace("float(n)", "n * 1.0") for ln in body]
     for k, tp in enumerate(scheme.terms):
         t = tp.term
+        if not t.slots:
+            continue              # a constant: no gradient
         body.append(f"# {_docsafe(t.source)}")
         body.append(f"for i in range({_bound_text(t.lo)}, {_bound_text(t.hi)} + 1):")
         inner = []
         for o in sorted({o for _, o in t.slots}):
-            inner.append(f"i{_otag(o)} = i" if o == 0 else f"i{_otag(o)} = (i + {o + 0} + n) % n")
+            # every site modulo n (floor modulo, as Python's: a range may start at 0 or end past N)
+            inner.append(f"i{_otag(o)} = (i + {o}) % n")
         for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
             inner.append(f"{s0.name} = Y0[{fields.index(f)}, i{_otag(o)}]")
             inner.append(f"{s1.name} = W[{14 + fields.index(f)}, i{_otag(o)}]")
@@ -156,11 +159,11 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     def values(t, z0):
         pre, (value,) = _cse_lines([t.template], printer, "_e")
         return (_bind([t.template], lat) + _gathers(z0, t.slots, "Y", fields, _full(t)) + pre
-                + [f"return numpy.broadcast_to({value}, ix[{t.slots[0][1]}].shape)"])
+                + [f"return numpy.broadcast_to({value}, ix[0].shape)"])
 
     def entry(t):
         return {"source": _docsafe(t.source), "lo": (t.lo.from_end, t.lo.c), "hi": (t.hi.from_end, t.hi.c),
-                "offsets": sorted({o for _, o in t.slots})}
+                "offsets": sorted({o for _, o in t.slots} | {0})}
 
     terms = []
     for tp in scheme.terms:
@@ -175,7 +178,8 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
                        + _gathers(tp.z1, t.slots, "Z", fields, _full(t))
                        + ["if not jac:"] + ["    " + ln for ln in g_pre] + [f"    return {_tuple(g_out)}, None"]
                        + j_pre + [f"return {_tuple(j_out[:k])}, {_tuple(jac_rows)}"])
-        terms.append({**entry(t), "full": _full(t), "slots": [(fields.index(f), o) for f, o in t.slots],
+        terms.append({**entry(t), "index": len(terms), "full": _full(t),
+                      "slots": [(fields.index(f), o) for f, o in t.slots],
                       "slot_names": [s.name for s in tp.z0],
                       "energy_lines": values(t, tp.z0), "piece_lines": piece_lines})
     quantities = [("H", list(range(len(terms))))]

@@ -183,6 +183,9 @@ class _LatticeBuilder(_Builder):
                 return slot_symbol(field, v)
             if kind == "per":          # (i + c - 1) % N + 1: the site i + c, cyclically
                 return slot_symbol(field, v)
+            if kind == "mod":
+                raise self.fail(node, f"{ast.unparse(node)}: (i + c) % N is 0 … N-1, not a site 1 … N; "
+                                      f"{_PERIODIC_HINT}")
             raise self.fail(node, f"subscripting {ast.unparse(node)} inside a Sum names a fixed site; a site "
                                   f"term may use only sites relative to its index (i + c, or (i + c) % N + 1)")
         if kind == "int":
@@ -217,9 +220,14 @@ class _LatticeBuilder(_Builder):
         name = var.id
         if (not _NAME_RE.fullmatch(name) or name in RESERVED or keyword.iskeyword(name)
                 or name in self.symbols or name in self.fields or name == self.size.name):
-            raise self.fail(var, f"Sum index {name!r} is not a free name (choose another, e.g. i)")
+            raise self.fail(var, f"Sum index {name!r} is not a free name (it is a field, the size, a parameter or "
+                                 "a word of the grammar): choose another, e.g. j or k")
         lo = self.range_bound(lo_node, f"the lower bound of Sum over {name}")
         hi = self.range_bound(hi_node, f"the upper bound of Sum over {name}")
+        # empty for every N, or for every N but finitely many: a typo, not a term
+        if (lo.from_end == hi.from_end and hi.c < lo.c) or (lo.from_end and not hi.from_end):
+            raise self.fail(node, f"Sum over {name} from {lo} to {hi} is empty (for all but a few N); the "
+                                  "bounds are inclusive, lo ≤ hi, e.g. Sum(…, i, 1, N)")
         self.index_name, self.lin_offsets = name, []
         try:
             template = self.build(body, depth + 1)
@@ -323,9 +331,11 @@ class Lattice:
         for t in sp.Add.make_args(rest):
             used = [s for s in t.free_symbols if s in b.anchors]
             if not used:
-                continue      # a constant: no dynamics
+                if t != 0:    # a constant: no dynamics, but part of the value
+                    terms.append(SiteTerm(t, (), Bound(False, 1), Bound(False, 1), str(t)))
+                continue
             terms.append(self._anchored(t, used, b.anchors))
-        if not terms:
+        if not any(t.slots for t in terms):
             raise ParseError(f"{what} has no term in the fields")
         for t in terms:
             check_smooth(t.template, what)
@@ -347,7 +357,8 @@ class Lattice:
         ref = min(used, key=lambda s: (anchors[s][1].from_end, anchors[s][1].c))
         base = anchors[ref][1]
         sub = {s: slot_symbol(anchors[s][0], pos[s] - pos[ref]) for s in used}
-        return self._term(t.xreplace(sub), base, base, str(t).replace("_anchor_", ""))
+        shown = {s: sp.Symbol(f"{anchors[s][0]}[{anchors[s][1]}]") for s in used}
+        return self._term(t.xreplace(sub), base, base, str(t.xreplace(shown)))
 
     def _nmin(self) -> int:
         n = MIN_SIZE

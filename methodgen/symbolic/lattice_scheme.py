@@ -184,6 +184,8 @@ def certificates(scheme: LatticeScheme) -> list:
     out = []
     for tp in scheme.terms:
         t = tp.term
+        if not t.slots:
+            continue              # a constant: no pieces, nothing to claim
         if scheme.method == "avf":
             h0, h1 = t.template, t.template.xreplace(dict(zip(tp.z0, tp.z1)))
             expr = sp.Add(*[a * (b - c) for a, b, c in zip(tp.pieces, tp.z1, tp.z0)]) - (h1 - h0)
@@ -245,7 +247,7 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
     fields = lattice.fields
     q, p = fields
     allterms = list(lattice.terms) + [t for ts in lattice.invariants.values() for t in ts]
-    if not all(_full_periodic(t) for t in allterms):
+    if not all(_full_periodic(t) for t in allterms if t.slots):   # (constants have no bracket)
         return []
     out = []
     for name, terms in lattice.invariants.items():
