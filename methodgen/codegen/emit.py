@@ -545,12 +545,21 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
     if path is None:
         path = cache_dir() / module_filename(f"{name}_{sig[:12]}", scheme.key, backend)
     path = Path(path)
+    return write_and_load(path, sig, lambda: emit_source(scheme, sig, path.stem, backend, progress=progress),
+                          progress)
+
+
+def write_and_load(path, sig: str, source, progress=None) -> ModuleType:
+    """The module of signature ``sig`` at ``path``: written from ``source()`` (called only when
+    the file is missing, stale, edited or untrusted; a warning says which where it was not
+    ours), then imported from the checked bytes (:func:`load_module`)."""
+    path = Path(path)
     check_cache_folder(path)
     status = file_status(path, sig)
     if status != "ok":
         if status == "untrusted":
             warn_regenerating(path, status)
-        text = emit_source(scheme, sig, path.stem, backend, progress=progress)
+        text = source()
         with phase("write", progress):
             write_module(path, text)
     with phase("load", progress):

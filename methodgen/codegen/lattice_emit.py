@@ -18,15 +18,15 @@ from pathlib import Path
 import sympy as sp
 
 from .._version import __version__
-from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, template_dir,
-                   file_status, generator_hash, load_module, template_hash, warn_regenerating)
+from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, generator_hash, template_dir,
+                   template_hash, write_and_load)
 from ..errors import InputError
 from ..problem.lattice import Lattice
 from ..symbolic.lattice_scheme import LATTICE_METHODS, LatticeScheme, discretize_lattice
 from .lower import _HELPER_CALL, ScalarPrinter, VectorPrinter, _helper_closure
 from .progress import phase
 from ..problem.special import SPECIAL_FUNCTIONS
-from .store import cache_dir, check_cache_folder, write_module
+from .store import cache_dir
 
 __all__ = ["render", "lattice_signature", "build_lattice"]
 
@@ -251,17 +251,11 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, backend: 
     if path is None:
         suffix = "" if backend == "numpy" else f"_{backend}"
         path = cache_dir() / f"{lattice.name}_{method}_lattice{suffix}_{sig[:12]}.py".replace("-", "_")
-    path = Path(path)
-    check_cache_folder(path)
-    status = file_status(path, sig)
-    if status != "ok":
-        if status == "untrusted":
-            warn_regenerating(path, status)
+
+    def source() -> str:
         with phase("derive", progress):
             scheme = discretize_lattice(lattice, method)
         with phase("render", progress):
-            text = render(scheme, sig, backend)
-        with phase("write", progress):
-            write_module(path, text)
-    with phase("load", progress):
-        return load_module(path, expected_signature=sig)
+            return render(scheme, sig, backend)
+
+    return write_and_load(path, sig, source, progress)

@@ -45,148 +45,107 @@ W_ROWS = 42
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2, "RESOLUTION": 3, "SINGULAR": 4}
 
 
-def factor(_W, _n, _h):
-    """Build the Newton matrix from ``D`` and factor it into UI, LL, E, ML (rows of _W; the last
-    site's eliminated block's inverse in column n-1 of UI).  Returns 0, or 1 for a singular block."""
-    n = _n
-    h = _h
+def block(_W, r, j, h):
+    """The Newton matrix's 2 × 2 block of site j to j + r - 1 (r = 0, 1, 2), from ∂∇̄H in D: row q
+    is -h (row p of D), row p is +h (row q of D), the identity added on the diagonal (r = 1)."""
+    d = 1.0 if r == 1 else 0.0
+    return (d - h * _W[_ID + 4 * r + 2, j], -h * _W[_ID + 4 * r + 3, j],
+            h * _W[_ID + 4 * r + 0, j], d + h * _W[_ID + 4 * r + 1, j])
+
+
+def mm(a00, a01, a10, a11, b00, b01, b10, b11):
+    """The product of two 2 × 2 matrices, entries row by row."""
+    return (a00 * b00 + a01 * b10, a00 * b01 + a01 * b11, a10 * b00 + a11 * b10, a10 * b01 + a11 * b11)
+
+
+def load4(_W, row, j):
+    return _W[row + 0, j], _W[row + 1, j], _W[row + 2, j], _W[row + 3, j]
+
+
+def store4(_W, row, j, x00, x01, x10, x11):
+    _W[row + 0, j] = x00
+    _W[row + 1, j] = x01
+    _W[row + 2, j] = x10
+    _W[row + 3, j] = x11
+
+
+def store_inverse(_W, j, b00, b01, b10, b11):
+    """The inverse of the block into UI at j; 1 where it is singular (stored as if det were 1)."""
+    det = b00 * b11 - b01 * b10
     bad = 0
-    # block j of M: row q is -h (row p of D), row p is +h (row q of D); identity on the diagonal
-    # blocks A_j = M[0] (to j-1), B_j = M[1], C_j = M[2]; D rows: 2 + 4 r + (2 f + g)
-    # forward elimination over j = 0 .. n-2 with the border x_{n-1}
-    for j in range(n - 1):
-        # B_j
-        b00 = 1.0 - h * _W[_ID + 4 + 2, j]
-        b01 = -h * _W[_ID + 4 + 3, j]
-        b10 = h * _W[_ID + 4 + 0, j]
-        b11 = 1.0 + h * _W[_ID + 4 + 1, j]
-        # border entry of row j: A_0 (j = 0) + C_{n-2} (j = n-2)
-        e00 = 0.0
-        e01 = 0.0
-        e10 = 0.0
-        e11 = 0.0
-        if j == 0:
-            e00 += -h * _W[_ID + 2, 0]
-            e01 += -h * _W[_ID + 3, 0]
-            e10 += h * _W[_ID + 0, 0]
-            e11 += h * _W[_ID + 1, 0]
-        if j == n - 2:
-            e00 += -h * _W[_ID + 8 + 2, j]
-            e01 += -h * _W[_ID + 8 + 3, j]
-            e10 += h * _W[_ID + 8 + 0, j]
-            e11 += h * _W[_ID + 8 + 1, j]
-        if j > 0:
-            # L_j = A_j U_{j-1}^{-1}; U_j = B_j - L_j S_{j-1}; E_j -= L_j E_{j-1}
-            a00 = -h * _W[_ID + 2, j]
-            a01 = -h * _W[_ID + 3, j]
-            a10 = h * _W[_ID + 0, j]
-            a11 = h * _W[_ID + 1, j]
-            u00 = _W[_IUI + 0, j - 1]
-            u01 = _W[_IUI + 1, j - 1]
-            u10 = _W[_IUI + 2, j - 1]
-            u11 = _W[_IUI + 3, j - 1]
-            l00 = a00 * u00 + a01 * u10
-            l01 = a00 * u01 + a01 * u11
-            l10 = a10 * u00 + a11 * u10
-            l11 = a10 * u01 + a11 * u11
-            _W[_ILL + 0, j] = l00
-            _W[_ILL + 1, j] = l01
-            _W[_ILL + 2, j] = l10
-            _W[_ILL + 3, j] = l11
-            if j - 1 < n - 2:     # S_{j-1} = C_{j-1} (the super-diagonal, not the border)
-                s00 = -h * _W[_ID + 8 + 2, j - 1]
-                s01 = -h * _W[_ID + 8 + 3, j - 1]
-                s10 = h * _W[_ID + 8 + 0, j - 1]
-                s11 = h * _W[_ID + 8 + 1, j - 1]
-                b00 -= l00 * s00 + l01 * s10
-                b01 -= l00 * s01 + l01 * s11
-                b10 -= l10 * s00 + l11 * s10
-                b11 -= l10 * s01 + l11 * s11
-            p00 = _W[_IE + 0, j - 1]
-            p01 = _W[_IE + 1, j - 1]
-            p10 = _W[_IE + 2, j - 1]
-            p11 = _W[_IE + 3, j - 1]
-            e00 -= l00 * p00 + l01 * p10
-            e01 -= l00 * p01 + l01 * p11
-            e10 -= l10 * p00 + l11 * p10
-            e11 -= l10 * p01 + l11 * p11
-        det = b00 * b11 - b01 * b10
-        if not (det != 0.0 and abs(det) < math.inf):
-            bad = 1           # (one return, at the end: the translator inlines this function)
-            det = 1.0
-        _W[_IUI + 0, j] = b11 / det
-        _W[_IUI + 1, j] = -b01 / det
-        _W[_IUI + 2, j] = -b10 / det
-        _W[_IUI + 3, j] = b00 / det
-        _W[_IE + 0, j] = e00
-        _W[_IE + 1, j] = e01
-        _W[_IE + 2, j] = e10
-        _W[_IE + 3, j] = e11
-    # the last row: W_j (its coefficient on x_j) from C_{n-1} (j = 0) and A_{n-1} (j = n-2)
-    last = n - 1
-    c00 = 1.0 - h * _W[_ID + 4 + 2, last]
-    c01 = -h * _W[_ID + 4 + 3, last]
-    c10 = h * _W[_ID + 4 + 0, last]
-    c11 = 1.0 + h * _W[_ID + 4 + 1, last]
-    w00 = -h * _W[_ID + 8 + 2, last]
-    w01 = -h * _W[_ID + 8 + 3, last]
-    w10 = h * _W[_ID + 8 + 0, last]
-    w11 = h * _W[_ID + 8 + 1, last]
-    for j in range(n - 1):
-        if j == n - 2:
-            w00 += -h * _W[_ID + 2, last]
-            w01 += -h * _W[_ID + 3, last]
-            w10 += h * _W[_ID + 0, last]
-            w11 += h * _W[_ID + 1, last]
-        # M_j = W_j U_j^{-1}
-        u00 = _W[_IUI + 0, j]
-        u01 = _W[_IUI + 1, j]
-        u10 = _W[_IUI + 2, j]
-        u11 = _W[_IUI + 3, j]
-        m00 = w00 * u00 + w01 * u10
-        m01 = w00 * u01 + w01 * u11
-        m10 = w10 * u00 + w11 * u10
-        m11 = w10 * u01 + w11 * u11
-        _W[_IML + 0, j] = m00
-        _W[_IML + 1, j] = m01
-        _W[_IML + 2, j] = m10
-        _W[_IML + 3, j] = m11
-        p00 = _W[_IE + 0, j]
-        p01 = _W[_IE + 1, j]
-        p10 = _W[_IE + 2, j]
-        p11 = _W[_IE + 3, j]
-        c00 -= m00 * p00 + m01 * p10
-        c01 -= m00 * p01 + m01 * p11
-        c10 -= m10 * p00 + m11 * p10
-        c11 -= m10 * p01 + m11 * p11
-        # W_{j+1} = -M_j S_j (S_j = C_j for j < n-2; the border otherwise)
-        if j < n - 2:
-            s00 = -h * _W[_ID + 8 + 2, j]
-            s01 = -h * _W[_ID + 8 + 3, j]
-            s10 = h * _W[_ID + 8 + 0, j]
-            s11 = h * _W[_ID + 8 + 1, j]
-            w00 = -(m00 * s00 + m01 * s10)
-            w01 = -(m00 * s01 + m01 * s11)
-            w10 = -(m10 * s00 + m11 * s10)
-            w11 = -(m10 * s01 + m11 * s11)
-    det = c00 * c11 - c01 * c10
     if not (det != 0.0 and abs(det) < math.inf):
         bad = 1
         det = 1.0
-    _W[_IUI + 0, last] = c11 / det
-    _W[_IUI + 1, last] = -c01 / det
-    _W[_IUI + 2, last] = -c10 / det
-    _W[_IUI + 3, last] = c00 / det
+    store4(_W, _IUI, j, b11 / det, -b01 / det, -b10 / det, b00 / det)
+    return bad
+
+
+def factor(_W, _n, _h):
+    """Factor the Newton matrix (blocks from ``D``) into UI, LL, E, ML (rows of _W; the last
+    site's eliminated block's inverse in column n-1 of UI).  Returns 0, or 1 for a singular block.
+
+    Forward elimination over the sites j = 0 … n-2, the last site x_{n-1} a border: row j is
+    U_j x_j + S_j x_{j+1} + E_j x_{n-1} (S_j = C_j for j < n-2; the border collects A_0 at j = 0
+    and C_{n-2} at j = n-2); L_j = A_j U_{j-1}⁻¹, U_j = B_j - L_j S_{j-1}, E_j = E⁰_j - L_j E_{j-1}.
+    The last row's coefficient W_j on x_j (C_{n-1} at j = 0, A_{n-1} joining at j = n-2) is
+    eliminated alongside: M_j = W_j U_j⁻¹, its diagonal block less M_j E_j, W_{j+1} = -M_j S_j.
+    """
+    n = _n
+    h = _h
+    bad = 0
+    for j in range(n - 1):
+        b00, b01, b10, b11 = block(_W, 1, j, h)
+        e00, e01, e10, e11 = 0.0, 0.0, 0.0, 0.0
+        if j == 0:
+            c00, c01, c10, c11 = block(_W, 0, 0, h)
+            e00, e01, e10, e11 = e00 + c00, e01 + c01, e10 + c10, e11 + c11
+        if j == n - 2:
+            c00, c01, c10, c11 = block(_W, 2, j, h)
+            e00, e01, e10, e11 = e00 + c00, e01 + c01, e10 + c10, e11 + c11
+        if j > 0:
+            a00, a01, a10, a11 = block(_W, 0, j, h)
+            u00, u01, u10, u11 = load4(_W, _IUI, j - 1)
+            l00, l01, l10, l11 = mm(a00, a01, a10, a11, u00, u01, u10, u11)
+            store4(_W, _ILL, j, l00, l01, l10, l11)
+            if j - 1 < n - 2:     # S_{j-1} = C_{j-1} (the super-diagonal, not the border)
+                s00, s01, s10, s11 = block(_W, 2, j - 1, h)
+                t00, t01, t10, t11 = mm(l00, l01, l10, l11, s00, s01, s10, s11)
+                b00, b01, b10, b11 = b00 - t00, b01 - t01, b10 - t10, b11 - t11
+            p00, p01, p10, p11 = load4(_W, _IE, j - 1)
+            t00, t01, t10, t11 = mm(l00, l01, l10, l11, p00, p01, p10, p11)
+            e00, e01, e10, e11 = e00 - t00, e01 - t01, e10 - t10, e11 - t11
+        if store_inverse(_W, j, b00, b01, b10, b11) != 0:
+            bad = 1
+        store4(_W, _IE, j, e00, e01, e10, e11)
+    last = n - 1
+    c00, c01, c10, c11 = block(_W, 1, last, h)
+    w00, w01, w10, w11 = block(_W, 2, last, h)
+    for j in range(n - 1):
+        if j == n - 2:
+            a00, a01, a10, a11 = block(_W, 0, last, h)
+            w00, w01, w10, w11 = w00 + a00, w01 + a01, w10 + a10, w11 + a11
+        u00, u01, u10, u11 = load4(_W, _IUI, j)
+        m00, m01, m10, m11 = mm(w00, w01, w10, w11, u00, u01, u10, u11)
+        store4(_W, _IML, j, m00, m01, m10, m11)
+        p00, p01, p10, p11 = load4(_W, _IE, j)
+        t00, t01, t10, t11 = mm(m00, m01, m10, m11, p00, p01, p10, p11)
+        c00, c01, c10, c11 = c00 - t00, c01 - t01, c10 - t10, c11 - t11
+        if j < n - 2:
+            s00, s01, s10, s11 = block(_W, 2, j, h)
+            t00, t01, t10, t11 = mm(m00, m01, m10, m11, s00, s01, s10, s11)
+            w00, w01, w10, w11 = -t00, -t01, -t10, -t11
+    if store_inverse(_W, last, c00, c01, c10, c11) != 0:
+        bad = 1
     return bad
 
 
 def solve(_W, _n, _h):
     """Solve the factored system for the right-hand side -R (rows _IR), in place: _IR becomes
-    the update."""
+    the update.  Forward: y_j = r_j - L_j y_{j-1}, the last row less M_j y_j; the last site;
+    back: x_j = U_j⁻¹ (y_j - S_j x_{j+1} - E_j x_{n-1})."""
     n = _n
     h = _h
     last = n - 1
-    # forward: y_j = r_j - L_j y_{j-1}; the last row y_last -= M_j y_j
     yl0 = -_W[_IR + 0, last]
     yl1 = -_W[_IR + 1, last]
     y0 = 0.0
@@ -195,34 +154,35 @@ def solve(_W, _n, _h):
         r0 = -_W[_IR + 0, j]
         r1 = -_W[_IR + 1, j]
         if j > 0:
-            r0 -= _W[_ILL + 0, j] * y0 + _W[_ILL + 1, j] * y1
-            r1 -= _W[_ILL + 2, j] * y0 + _W[_ILL + 3, j] * y1
+            l00, l01, l10, l11 = load4(_W, _ILL, j)
+            r0 -= l00 * y0 + l01 * y1
+            r1 -= l10 * y0 + l11 * y1
         y0 = r0
         y1 = r1
         _W[_IY + 0, j] = y0
         _W[_IY + 1, j] = y1
-        yl0 -= _W[_IML + 0, j] * y0 + _W[_IML + 1, j] * y1
-        yl1 -= _W[_IML + 2, j] * y0 + _W[_IML + 3, j] * y1
-    xl0 = _W[_IUI + 0, last] * yl0 + _W[_IUI + 1, last] * yl1
-    xl1 = _W[_IUI + 2, last] * yl0 + _W[_IUI + 3, last] * yl1
+        m00, m01, m10, m11 = load4(_W, _IML, j)
+        yl0 -= m00 * y0 + m01 * y1
+        yl1 -= m10 * y0 + m11 * y1
+    u00, u01, u10, u11 = load4(_W, _IUI, last)
+    xl0 = u00 * yl0 + u01 * yl1
+    xl1 = u10 * yl0 + u11 * yl1
     _W[_IR + 0, last] = xl0
     _W[_IR + 1, last] = xl1
-    # back: x_j = U_j^{-1} (y_j - S_j x_{j+1} - E_j x_last)
     x0 = xl0
     x1 = xl1
     for k in range(n - 1):
         j = n - 2 - k
-        t0 = _W[_IY + 0, j] - (_W[_IE + 0, j] * xl0 + _W[_IE + 1, j] * xl1)
-        t1 = _W[_IY + 1, j] - (_W[_IE + 2, j] * xl0 + _W[_IE + 3, j] * xl1)
+        e00, e01, e10, e11 = load4(_W, _IE, j)
+        t0 = _W[_IY + 0, j] - (e00 * xl0 + e01 * xl1)
+        t1 = _W[_IY + 1, j] - (e10 * xl0 + e11 * xl1)
         if j < n - 2:
-            s00 = -h * _W[_ID + 8 + 2, j]
-            s01 = -h * _W[_ID + 8 + 3, j]
-            s10 = h * _W[_ID + 8 + 0, j]
-            s11 = h * _W[_ID + 8 + 1, j]
+            s00, s01, s10, s11 = block(_W, 2, j, h)
             t0 -= s00 * x0 + s01 * x1
             t1 -= s10 * x0 + s11 * x1
-        x0 = _W[_IUI + 0, j] * t0 + _W[_IUI + 1, j] * t1
-        x1 = _W[_IUI + 2, j] * t0 + _W[_IUI + 3, j] * t1
+        u00, u01, u10, u11 = load4(_W, _IUI, j)
+        x0 = u00 * t0 + u01 * t1
+        x1 = u10 * t0 + u11 * t1
         _W[_IR + 0, j] = x0
         _W[_IR + 1, j] = x1
 
