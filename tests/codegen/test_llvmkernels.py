@@ -314,7 +314,7 @@ def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, 
         system, y0 = _chain(24)            # 48 state components: like rows (lower_rows)
         method, opts, h, steps = "energy-momentum", {}, 0.05, 60
     elif case == "nbody3-em2":             # three pair terms: kernels that loop over them (lower_loops)
-        from methodgen.bench import nbody_initial, nbody_system
+        from methodgen.app.bench import nbody_initial, nbody_system
 
         system, y0 = nbody_system(3), nbody_initial(3)
         method, opts, h, steps = "energy-momentum", {}, 0.01, 60

@@ -288,7 +288,7 @@ def test_solver_reuse_runs_on_the_stepper(monkeypatch, case):
     N-body cases have kernels that loop over the pair terms (methodgen.lower_loops) and a
     dense LU of more than three unknowns."""
     if case == "nbody3-em2":
-        from methodgen.bench import nbody_initial, nbody_system
+        from methodgen.app.bench import nbody_initial, nbody_system
 
         scene = SimpleNamespace(system=nbody_system(3), y0=nbody_initial(3), h=0.01)
         method, kw = "energy-momentum", {}
