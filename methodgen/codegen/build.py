@@ -164,7 +164,7 @@ def generate(scheme, path=None, backend: str = "numpy", *, progress=None) -> Mod
         ``"numba"``: kernels, Newton's method and the integration loop compiled
         with ``numba.njit(cache=True)`` (same interface, same results to
         round-off).  Without numba installed: a RuntimeWarning and the numpy module.
-    progress : callable, optional
+    progress : callable or True, optional
         ``progress(phase, elapsed, done)`` for the phases lower, render, write and
         load (:mod:`methodgen.codegen.progress`); default: the installed reporter (silent in the API).
     """
@@ -230,7 +230,7 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     order : {2, 4, 6, 8, 10}
     composition : str, optional
         For ``order > 2``: the composition family (see :func:`methodgen.discretize`).
-    progress : callable, optional
+    progress : callable or True, optional
         ``progress(phase, elapsed, done)``, called at the start and the end of each
         phase of a cold build — derive, lower, render, write — and of load
         (:mod:`methodgen.codegen.progress`; :func:`methodgen.codegen.progress.tqdm_reporter` for tqdm
@@ -601,7 +601,7 @@ def build_processed(system, method: str, order: int = 8, family: str = "blanes-c
     family : str
         One of :data:`PROCESSED`.
     backend : {"numpy", "numba"}
-    progress : callable, optional
+    progress : callable or True, optional
         As for :func:`methodgen.build` (the phases of each module's generation).
     **options
         Method options, passed to :func:`methodgen.discretize`.

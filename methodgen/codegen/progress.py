@@ -99,7 +99,18 @@ def subject() -> str:
 
 @contextmanager
 def phase(name: str, progress: Reporter | None = None) -> Iterator[None]:
-    """Report the phase ``name`` to ``progress`` (default: the installed reporter), start and end."""
+    """Report the phase ``name`` to ``progress`` (default: the installed reporter), start and end.
+
+    ``progress=True``: a line on stderr per phase (a :class:`StderrReporter` reporting every
+    phase), as ``solve(progress=True)`` writes one for the steps; ``False``: silent."""
+    if progress is True:
+        progress = StderrReporter(0.0)
+    elif progress is False:
+        yield
+        return
+    elif progress is not None and not callable(progress):
+        raise InputError(f"progress must be True, False, None or a callable (phase, elapsed, done), "
+                         f"got {progress!r}")
     report = progress if progress is not None else _installed
     if report is None:
         yield

@@ -314,3 +314,17 @@ def test_the_cli_compile_phase_names_its_module(tmp_path, capsys, monkeypatch):
     out = io.StringIO()
     StderrReporter(threshold=0, stream=out)("compile", 0.0, False)
     assert out.getvalue() == "methodgen: compile …\n"
+
+
+def test_build_progress_true_writes_a_line_per_phase(tmp_path, capsys):
+    """``mg.build(..., progress=True)`` as ``solve(progress=True)``: lines on stderr (it raised
+    TypeError: 'bool' object is not callable); a progress that is neither is refused by name."""
+    mod = mg.build_text("p**2/2 + q**4/4", ["q"], ["p"], "midpoint", name="quartp", path=tmp_path / "a.py",
+                        progress=True)
+    err = capsys.readouterr().err
+    assert mod.METHOD == "midpoint" and "methodgen: derive" in err and "methodgen: load" in err
+    mg.build_text("p**2/2 + q**4/4", ["q"], ["p"], "midpoint", name="quartp", path=tmp_path / "b.py", progress=False)
+    assert capsys.readouterr().err == ""                 # control: silent
+    with pytest.raises(mg.InputError, match="progress must be True, False, None or a callable"):
+        mg.build_text("p**2/2 + q**4/4", ["q"], ["p"], "midpoint", name="quartp", path=tmp_path / "c.py",
+                      progress="yes")
