@@ -24,7 +24,7 @@ _LOOPS: dict = {}
 def _bound(grad) -> dict:
     consts = {k: v for k, v in vars(_ls).items() if k.startswith("_I") and isinstance(v, int)}
     consts.update(math=math, grad=grad)
-    for name in ("factor", "solve", "block", "mm", "load4", "store4", "store_inverse"):
+    for name in ("factor", "solve", "block", "mm", "mv", "load4", "store4", "store_inverse"):
         consts[name] = types.FunctionType(getattr(_ls, name).__code__, consts, name)
     return consts
 

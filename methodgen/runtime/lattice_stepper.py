@@ -58,6 +58,11 @@ def mm(a00, a01, a10, a11, b00, b01, b10, b11):
     return (a00 * b00 + a01 * b10, a00 * b01 + a01 * b11, a10 * b00 + a11 * b10, a10 * b01 + a11 * b11)
 
 
+def mv(a00, a01, a10, a11, v0, v1):
+    """A 2 × 2 matrix (entries row by row) times a vector."""
+    return a00 * v0 + a01 * v1, a10 * v0 + a11 * v1
+
+
 def load4(_W, row, j):
     return _W[row + 0, j], _W[row + 1, j], _W[row + 2, j], _W[row + 3, j]
 
@@ -155,18 +160,19 @@ def solve(_W, _n, _h):
         r1 = -_W[_IR + 1, j]
         if j > 0:
             l00, l01, l10, l11 = load4(_W, _ILL, j)
-            r0 -= l00 * y0 + l01 * y1
-            r1 -= l10 * y0 + l11 * y1
+            a0, a1 = mv(l00, l01, l10, l11, y0, y1)
+            r0 -= a0
+            r1 -= a1
         y0 = r0
         y1 = r1
         _W[_IY + 0, j] = y0
         _W[_IY + 1, j] = y1
         m00, m01, m10, m11 = load4(_W, _IML, j)
-        yl0 -= m00 * y0 + m01 * y1
-        yl1 -= m10 * y0 + m11 * y1
+        a0, a1 = mv(m00, m01, m10, m11, y0, y1)
+        yl0 -= a0
+        yl1 -= a1
     u00, u01, u10, u11 = load4(_W, _IUI, last)
-    xl0 = u00 * yl0 + u01 * yl1
-    xl1 = u10 * yl0 + u11 * yl1
+    xl0, xl1 = mv(u00, u01, u10, u11, yl0, yl1)
     _W[_IR + 0, last] = xl0
     _W[_IR + 1, last] = xl1
     x0 = xl0
@@ -174,18 +180,18 @@ def solve(_W, _n, _h):
     for k in range(n - 1):
         j = n - 2 - k
         e00, e01, e10, e11 = load4(_W, _IE, j)
-        t0 = _W[_IY + 0, j] - (e00 * xl0 + e01 * xl1)
-        t1 = _W[_IY + 1, j] - (e10 * xl0 + e11 * xl1)
+        a0, a1 = mv(e00, e01, e10, e11, xl0, xl1)
+        t0 = _W[_IY + 0, j] - a0
+        t1 = _W[_IY + 1, j] - a1
         if j < n - 2:
             s00, s01, s10, s11 = block(_W, 2, j, h)
-            t0 -= s00 * x0 + s01 * x1
-            t1 -= s10 * x0 + s11 * x1
+            a0, a1 = mv(s00, s01, s10, s11, x0, x1)
+            t0 -= a0
+            t1 -= a1
         u00, u01, u10, u11 = load4(_W, _IUI, j)
-        x0 = u00 * t0 + u01 * t1
-        x1 = u10 * t0 + u11 * t1
+        x0, x1 = mv(u00, u01, u10, u11, t0, t1)
         _W[_IR + 0, j] = x0
         _W[_IR + 1, j] = x1
-
 
 def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, _chk, _simpl, _maxdis, _W):
     """Steps 0 .. _steps-1 from the state ``_Y`` (2, n), updated in place.
