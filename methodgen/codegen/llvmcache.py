@@ -6,15 +6,16 @@ Python, LLVM's -O2 pipeline, code generation) -- most of a warm start once numba
 is paid.  This cache keeps the object code, so a later process adds it to its engine
 without translating or optimising anything.
 
-**What a cached object is for** (its key, SHA-256 of all of it): the text the module that
-defines the kernel was executed from (what the translator parses: the kernel, its helpers,
-its tables and constants are all in a generated module's text; recorded by methodgen's
-loader, never re-read from the file -- :mod:`methodgen.codegen.kernelsource`), the kernel's name, line and signature,
-the translation-time constants a fused loop binds (values, and for functions the text of
-their file), the C-entry flag and LLVM pipeline options; the SHA-256 of the translator and of the runtime
-(``llvmkernels.py``, ``nbruntime.py``); llvmlite's and LLVM's versions; the target triple,
-the host CPU's name and features.  Anything else a kernel could depend on makes it
-uncacheable (:func:`key` returns None: compiled as before).
+**What a cached object is for** (its key, SHA-256 of all of it): for a generated kernel, the
+digest of its kernel IR (:mod:`methodgen.codegen.kir`: the tree its machine code is printed from,
+which the module holds as data; its text is never read); for methodgen's own runtime (the
+stepper, the Wisdom–Holman flows), the text of the file it was executed from (verified against
+its code: :mod:`methodgen.codegen.kernelsource`); the kernel's name, line and signature,
+the translation-time constants a fused loop binds (values, and for functions their IR's digest
+or the text of their file), the C-entry flag and LLVM pipeline options; the SHA-256 of the
+translator, the IR's printer and the runtime (``llvmkernels.py``, ``kir.py``, ``nbruntime.py``);
+llvmlite's and LLVM's versions; the target triple, the host CPU's name and features.  Anything
+else a kernel could depend on makes it uncacheable (:func:`key` returns None: compiled as before).
 
 **Trust.** Object code is executable, so it is read only from the per-user cache
 (``$METHODGEN_CACHE`` or the XDG cache, ``llvm/`` in it) under the rules of the module
@@ -63,8 +64,8 @@ def _static(state) -> str:
         package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         parts = [llvmlite.__version__, ".".join(map(str, llvm.llvm_version_info)), state["triple"],
                  state["cpu"], state["features"]]
-        for name in ("codegen/llvmkernels.py", "codegen/ktypes.py", "runtime/nbabi.py", "runtime/nbruntime.py",
-                     "codegen/llvmcache.py"):
+        for name in ("codegen/llvmkernels.py", "codegen/kir.py", "codegen/ktypes.py", "runtime/nbabi.py",
+                     "runtime/nbruntime.py", "codegen/llvmcache.py"):
             with open(os.path.join(package, *name.split("/")), "rb") as f:
                 parts.append(hashlib.sha256(f.read()).hexdigest())
         _STATIC.append("\0".join(parts))
@@ -72,8 +73,13 @@ def _static(state) -> str:
 
 
 def _function_part(fn) -> str | None:
-    # the digest of the text the function was executed from (never a re-read file or
-    # linecache's copy): see methodgen.codegen.kernelsource
+    # a generated kernel: the digest of its kernel IR (methodgen.codegen.kir; its text is never
+    # read); methodgen's own runtime: the digest of the text the function was executed from
+    # (never a re-read file or linecache's copy): see methodgen.codegen.kernelsource
+    py = getattr(fn, "py_func", fn)
+    tree_digest = getattr(py, "__kir_digest__", None)
+    if tree_digest is not None:
+        return f"kir:{tree_digest}"
     digest = _ks.cache_digest(fn)
     return None if digest is None else f"fn:{digest}"
 

@@ -58,6 +58,8 @@ import math
 import os
 import threading
 
+from . import kir
+
 import llvmlite.binding as llvm
 import numpy as np
 from llvmlite import ir
@@ -1077,7 +1079,7 @@ class _Translator:
             fdef = _function_def(py)
             n = len(fdef.args.args)
             sig = _t.float64(*([_t.float64] * n))
-            sub = _Translator(self.module, fdef, sig, f"{self.name}.{name}", getattr(py, "__globals__", {}))
+            sub = _Translator(self.module, fdef, sig, f"{self.name}.{name}", _names_of(py))
             sub.tables = self.tables
             sub.helpers = self.helpers
             sub.run()
@@ -1151,7 +1153,7 @@ class _Translator:
             args.append(("a", arr) if arr is not None else self.any_expr(a))
         outer = self.scope
         saved_assigned = self.loop_assigned
-        self.scope = _Scope(self.f, getattr(py, "__globals__", {}))
+        self.scope = _Scope(self.f, _names_of(py))
         for p, (kind, v) in zip(params, args):
             if kind == "a":
                 self.scope.arrays[p] = v
@@ -1176,12 +1178,71 @@ class _Translator:
 
 
 def _function_def(py_func) -> ast.FunctionDef:
-    # the definition in the text the module was executed from (methodgen.codegen.kernelsource): a
-    # module regenerated at the same path is never translated from its previous text
+    """The definition a function is translated from: a generated kernel's tree
+    (:func:`attach`: built from the module's kernel IR, never from its text), else the text of
+    methodgen's own runtime file it was executed from (:mod:`methodgen.codegen.kernelsource`)."""
+    tree = getattr(py_func, KIR_ATTR, None)
+    if tree is not None:
+        got = _KIR_DEFS.get(py_func.__kir_digest__)
+        if got is None:
+            got = _KIR_DEFS[py_func.__kir_digest__] = kir.function_def(tree)
+        return got
     try:
         return _ks.function_def(py_func)
     except _ks.StaleSource as exc:
         raise Unsupported(f"no source ({exc})") from None
+
+
+#: digest -> the FunctionDef built from that tree (shared, read-only)
+_KIR_DEFS: dict = {}
+#: the attribute of a generated kernel's Python function holding its tree
+KIR_ATTR = "__kir__"
+
+
+def _names_of(py_func) -> dict:
+    """The names a function's body is translated in: a kernel-IR function's own (math, the
+    package's scalar helpers, the kernels it inlines: :func:`attach`), else its module's."""
+    names = getattr(py_func, "__kir_names__", None)
+    return names if names is not None else getattr(py_func, "__globals__", {})
+
+
+def attach(py_func, table):
+    """Give a generated kernel's Python function its kernel IR: the tree at the end of ``table``
+    (:func:`methodgen.codegen.kir.flatten`), which must be the definition of that function (its
+    name and parameters), its digest and the names its body is translated in.  The compiled
+    route then reads the tree and keys the machine code by its digest; the function's text (the
+    module's) is never read.  Returns ``py_func``.
+
+    Raises
+    ------
+    ValueError
+        The table is not a kernel-IR function of that name and those parameters.
+    """
+    import types
+
+    if not table:
+        raise ValueError(f"{py_func.__name__}: an empty kernel table")
+    tree = kir.unflatten(table, len(table) - 1)
+    code = py_func.__code__
+    params = tuple(code.co_varnames[:code.co_argcount])
+    if tree[0] != "def" or tree[1] != py_func.__name__ or tree[2] != params:
+        raise ValueError(f"{py_func.__name__}{params}: its kernel table defines {tree[0]} {tree[1:3]!r}")
+    from . import special_helpers
+
+    names = {"math": math}
+    g = py_func.__globals__
+    for name in sorted(kir.called(tree)):
+        if name.startswith("_f_"):
+            names[name] = getattr(special_helpers, name)     # the package's helper, not the module's copy
+        elif "." not in name and name not in ("abs", "min", "max", "range"):
+            other = getattr(g.get(name), "py_func", g.get(name))
+            if not isinstance(other, types.FunctionType) or getattr(other, KIR_ATTR, None) is None:
+                raise ValueError(f"{py_func.__name__} calls {name}, which is not a kernel with a table")
+            names[name] = other
+    setattr(py_func, KIR_ATTR, tree)
+    py_func.__kir_digest__ = kir.digest(tree)
+    py_func.__kir_names__ = names
+    return py_func
 
 
 def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, vectorize=True) -> "LLVMKernel":
@@ -1276,8 +1337,7 @@ def _optimised(py_func, sig, globals_, c_entry, name, options=(True, True)):
     fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
     module.triple = _STATE["triple"]
-    tr = _Translator(module, fdef, sig, name,
-                     getattr(py_func, "__globals__", {}) if globals_ is None else globals_)
+    tr = _Translator(module, fdef, sig, name, _names_of(py_func) if globals_ is None else globals_)
     tr.run()
     if c_entry:
         _add_c_entry(module, tr.f.fn, sig, name + "_c")
@@ -1380,14 +1440,17 @@ def _numba_for(py_func):
     return _nbcache.numba()
 
 
-def kernel(sig):
-    """Decorator: the kernel compiled through LLVM IR when it is straight-line code this
-    module translates (and the route is :func:`enabled`), else with numba for ``sig`` (cached
-    on disk) as every kernel was before."""
+def kernel(sig, table=None):
+    """Decorator: the kernel compiled through LLVM IR when it is code this module translates (and
+    the route is :func:`enabled`), else with numba for ``sig`` (cached on disk).  ``table``: the
+    kernel's IR (:func:`attach`), translated instead of any text, its machine code keyed by the
+    tree's digest."""
     def deco(py_func):
+        if table is not None:
+            attach(py_func, table)
         if enabled():
             try:
-                return compile_kernel(py_func, sig)
+                return compile_kernel(py_func, sig, globals_=getattr(py_func, "__kir_names__", None))
             except Unsupported:
                 pass
         numba = _numba_for(py_func)

@@ -41,6 +41,7 @@ from ..errors import InputError
 from ..symbolic.schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from ..problem.special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 from ..symbolic.timetransform import time_scale_guard
+from .kir_build import code as _code
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
 
@@ -375,12 +376,12 @@ _CSE_CACHE: dict = {}
 def _kernel(exprs: list[sp.Expr], shape: tuple[int, ...], printer, rename: dict) -> Kernel:
     exprs = tuple(sp.sympify(e).xreplace(rename) for e in exprs)
     temps, reduced = _cse(exprs)
-    tcode = tuple((str(s), printer.doprint(e)) for s, e in temps)
+    tcode = tuple((str(s), _code(printer, e)) for s, e in temps)
     outputs = []
     for flat, e in enumerate(reduced):
         if e == 0:
             continue
-        outputs.append((_unravel(flat, shape), printer.doprint(e)))
+        outputs.append((_unravel(flat, shape), _code(printer, e)))
     return Kernel(tcode, tuple(outputs), shape)
 
 
@@ -399,21 +400,21 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
     t2, r2 = (sp.cse(list(later + shared), symbols=sp.numbered_symbols("_e"), order="canonical")
               if later else ([], []))
     r2 = r2[:len(later)]
-    temps = [(str(s), printer.doprint(e)) for s, e in t1]
+    temps = [(str(s), _code(printer, e)) for s, e in t1]
     # (a link whose expression is itself -- Δq computed ahead of the loops -- is not reassigned)
-    temps += [(str(s), printer.doprint(e)) for s, e in zip(links, r1) if e != s]
-    temps += [(str(s), lp.doprint(e)) for s, e in t2]
+    temps += [(str(s), _code(printer, e)) for s, e in zip(links, r1) if e != s]
+    temps += [(str(s), _code(lp, e)) for s, e in t2]
     outputs = [((i,), str(s)) for i, s in enumerate(links)]
-    outputs += [((len(links) + j,), lp.doprint(e)) for j, e in enumerate(r2) if e != 0]
+    outputs += [((len(links) + j,), _code(lp, e)) for j, e in enumerate(r2) if e != 0]
     return Kernel(tuple(temps), tuple(outputs), (len(links) + len(later),))
 
 
 def _program_kernel(dag, printer, rename) -> Kernel:
     """Kernel of a straight-line program already reduced (:class:`methodgen.symbolic.stages.FieldDerivative`:
     f and the nonzeros of f'), printed as it is -- no second CSE over the derivative."""
-    temps = tuple((str(s), printer.doprint(sp.sympify(e).xreplace(rename))) for s, e in dag.assignments)
+    temps = tuple((str(s), _code(printer, sp.sympify(e).xreplace(rename))) for s, e in dag.assignments)
     outs = list(dag.field) + list(dag.jacobian)
-    outputs = tuple(((i,), printer.doprint(sp.sympify(e).xreplace(rename))) for i, e in enumerate(outs) if e != 0)
+    outputs = tuple(((i,), _code(printer, sp.sympify(e).xreplace(rename))) for i, e in enumerate(outs) if e != 0)
     return Kernel(temps, outputs, (len(outs),))
 
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from ..symbolic.compensate import compensate
+from .kir_build import code as _code
 
 __all__ = ["Loop", "Accumulator", "ACC_PREFIXES", "acc_symbol", "force_plan", "jacobian_row_scales", "jacobian_via_sums",
            "loop_prefix", "potential_via_sums", "sum_pattern", "table_names"]
@@ -255,8 +256,8 @@ def loop_prefix(exprs, plan, printer, dim: int, compensated: bool,
         temps, reduced, contrib, loads = _template_code(f, lf, frozenset(used), compensated, vsource)
         table, ptable = table_names(f)
         loops.append(Loop(table, ptable if fam.pslots else "", fam.size, loads,
-                          tuple((str(s), printer.doprint(e)) for s, e in temps),
-                          tuple((a, c, printer.doprint(e)) for (a, c, _), e in zip(contrib, reduced))))
+                          tuple((str(s), _code(printer, e)) for s, e in temps),
+                          tuple((a, c, _code(printer, e)) for (a, c, _), e in zip(contrib, reduced))))
     return tuple(loops), tuple(accs)
 
 

@@ -1,15 +1,15 @@
 """A compiled module regenerated at the same path runs its own machine code, never the previous one's.
 
-The compiled route translates a module's kernels from the text the module was executed
-from and keys the machine code by that text (methodgen.codegen.kernelsource).  It once read the text
-through ``linecache``, which keeps a file's first text for the life of the process: the
-second Hamiltonian generated at ``osc.py`` ran the first one's kernels (energy-momentum's H
-went 2.25 -> 2.50 under a method that keeps H exactly).
+The compiled route once translated a module's kernels from its text, read through
+``linecache``, which keeps a file's first text for the life of the process: the second
+Hamiltonian generated at ``osc.py`` ran the first one's kernels (energy-momentum's H went
+2.25 -> 2.50 under a method that keeps H exactly).  Now it prints the machine code from the
+kernel IR the module holds as data (methodgen.codegen.kir), keyed by the tree's digest.
 
 Each case generates several Hamiltonians of one shape in a row at one path, compiled, and
 compares each run with the numpy module of the same scheme (an independent route: printed
-Python, no machine code).  The negative controls put the old ``linecache`` text source
-back and show the same comparison catches the stale code.
+Python, no machine code).  The negative control keys the machine code by something other than
+the tree (the kernel's name) and shows the same comparison catches the stale code.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 import methodgen as mg
-from methodgen.codegen import kernelsource
+from methodgen.codegen import kernelsource, llvmcache, llvmkernels
 
 pytest.importorskip("numba")
 
@@ -112,16 +112,13 @@ def test_energy_kept_after_regeneration(tmp_path, private_cache):
         assert float(np.max(np.abs(e - e[0]))) < 1e-13, (k, float(np.max(np.abs(e - e[0]))))
 
 
-def _linecache_source(fn):
-    """The old text source: whatever linecache holds for the function's file."""
-    py = getattr(fn, "py_func", fn)
-    text = "".join(linecache.getlines(py.__code__.co_filename, py.__globals__))
-    return text, kernelsource._sha(text), True
+def test_negative_control_a_key_without_the_tree_runs_stale_code(tmp_path, private_cache, monkeypatch):
+    """With the machine code keyed by the kernel's name instead of its tree's digest, the same
+    comparison fails: the second Hamiltonian is served the first one's code."""
+    def by_name(fn):
+        return "fn:" + getattr(fn, "py_func", fn).__name__
 
-
-def test_negative_control_linecache_source_runs_stale_code(tmp_path, private_cache, monkeypatch):
-    """With the text read through linecache (as before the fix) the same comparison fails."""
-    monkeypatch.setattr(kernelsource, "source_of", _linecache_source)
+    monkeypatch.setattr(llvmcache, "_function_part", by_name)
     runs = _runs(tmp_path, [_osc(k) for k in (3, 5)], "energy-momentum", Y0)
     with pytest.raises(AssertionError, match="system 1 of the row"):
         _assert_fresh(runs)

@@ -1,0 +1,241 @@
+"""Lowering's half of the kernel IR: a SymPy expression -> the tree of its printed code.
+
+:func:`from_sympy` builds, for one of the code printers of :mod:`methodgen.codegen.lower`, exactly
+the tree Python makes of that printer's text for the expression -- the same decisions (SymPy's
+order of terms and factors, its rational constants, its square roots, the check printer's
+products for small powers), nodes instead of strings -- so the rounding of every generated
+kernel is the one it always had.  :func:`code` gives the lowering its :class:`~methodgen.codegen.kir.Code`.
+Kept apart from :mod:`methodgen.codegen.kir` so that the runtime, which reads trees, never
+imports SymPy.
+
+References
+----------
+SymPy's ``CodePrinter._print_Mul``, ``StrPrinter._print_Add``,
+``AbstractPythonCodePrinter._hprint_Pow`` (``sympy.printing``), whose trees this reproduces.
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+from sympy.core.mul import _keep_coeff
+from sympy.printing.precedence import PRECEDENCE, precedence
+
+from .kir import FUNCTIONS, Code, Unsupported, python
+
+__all__ = ["from_sympy", "code"]
+
+#: a transient marker of the builder: the subtree SymPy's printer wrapped in parentheses
+_PAREN = "()"
+
+
+def from_sympy(expr: sp.Expr, printer) -> tuple:
+    """The tree of ``expr`` as ``printer`` writes it (one of the code printers of
+    :mod:`methodgen.codegen.lower`: its order of terms and factors, its rational constants, its
+    powers; the ``check`` printer's products for small powers).
+
+    Parameters
+    ----------
+    expr : sympy.Expr
+        A CSE'd expression in (sanitised) symbols.
+    printer : sympy.printing.pycode.PythonCodePrinter
+        Decides the order of terms and factors and the digits of floats, as it would when
+        printing; its text is never produced.
+
+    Returns
+    -------
+    tuple
+        The tree (see the module docstring).
+
+    Raises
+    ------
+    Unsupported
+        For a node the IR does not have.
+    """
+    return _strip(_Builder(printer).build(expr))
+
+
+def _strip(node):
+    if node[0] == _PAREN:
+        return _strip(node[1])
+    if node[0] in ("n", "v"):
+        return node
+    if node[0] == "call":
+        return ("call", node[1], tuple(_strip(a) for a in node[2]))
+    return (node[0],) + tuple(_strip(a) for a in node[1:])
+
+
+def _fold(op: str, items: list) -> tuple:
+    out = items[0]
+    for x in items[1:]:
+        out = (op, out, x)
+    return out
+
+
+def _neg_leftmost(node):
+    """The tree of ``"-" + text``: Python's unary minus takes the leftmost operand of a
+    product or quotient (``-a*b/c`` is ``((-a)*b)/c``), a power or call whole, and a
+    parenthesised group whole."""
+    if node[0] in ("*", "/"):
+        return (node[0], _neg_leftmost(node[1]), node[2])
+    return ("neg", node)
+
+
+def _number(value) -> tuple:
+    return ("neg", ("n", -value)) if value < 0 else ("n", value)
+
+
+class _Builder:
+    """The trees of SymPy's ``CodePrinter`` / ``PythonCodePrinter`` / the lowering's subclasses,
+    method for method (the same decisions, nodes instead of strings)."""
+
+    def __init__(self, printer):
+        from .lower import CheckPrinter   # (lower imports this module)
+        from ..problem.special import SPECIAL_FUNCTIONS
+        from ..symbolic.compensate import grouped
+
+        self.p = printer
+        self.check = isinstance(printer, CheckPrinter)
+        self.special = SPECIAL_FUNCTIONS
+        self.grouped = grouped
+
+    def paren(self, item, level) -> tuple:
+        # CodePrinter.parenthesize(item, level, strict=False)
+        node = self.build(item)
+        return (_PAREN, node) if precedence(item) <= level else node
+
+    def build(self, e) -> tuple:
+        if isinstance(e, self.grouped):
+            return (_PAREN, self.build(e.args[0]))
+        if e.is_Symbol:
+            return ("v", self.p._print(e))
+        if e.is_Integer:
+            return _number(int(e.p))
+        if e.is_Rational:
+            return ("/", _number(int(e.p)), ("n", int(e.q)))
+        if e.is_Float:
+            text = self.p._print(e)
+            neg = text.startswith("-")
+            try:
+                v = float(text[1:] if neg else text)
+            except ValueError:
+                raise Unsupported(f"the float {text}") from None
+            return ("neg", ("n", v)) if neg else ("n", v)
+        if e.is_Add:
+            return self.add(e)
+        if e.is_Mul:
+            return self.mul(e)
+        if e.is_Pow:
+            return self.pow(e)
+        if type(e) in self.special:
+            name = "_f_" + self.special[type(e)][1:]
+            return ("call", name, tuple(self.build(a) for a in e.args))
+        known = self.p.known_functions.get(type(e).__name__)
+        if known is not None and e.args:
+            name = self.p._module_format(known)
+            if name not in FUNCTIONS:
+                raise Unsupported(f"the function {name}")
+            return ("call", name, tuple(self.build(a) for a in e.args))
+        raise Unsupported(f"{type(e).__name__} ({e})")
+
+    @staticmethod
+    def _starts_minus(term) -> bool:
+        # whether the printer's text of an Add's term starts with "-" (StrPrinter._print_Add
+        # then writes it as a subtraction)
+        if term.is_Number:
+            return bool(term < 0)
+        if term.is_Mul:
+            return bool(term.as_coeff_Mul()[0] < 0)
+        return False
+
+    def add(self, e) -> tuple:
+        # StrPrinter._print_Add
+        terms = self.p._as_ordered_terms(e, order=None)
+        prec = precedence(e)
+        out = None
+        for term in terms:
+            minus = self._starts_minus(term) and not term.is_Add
+            node = self.positive(term) if minus else self.build(term)
+            if precedence(term) < prec or term.is_Add:
+                node = (_PAREN, node)
+            if out is None:
+                out = _neg_leftmost(node) if minus else node
+            else:
+                out = ("-" if minus else "+", out, node)
+        return out
+
+    def positive(self, term) -> tuple:
+        """The tree of a negative term's text without its leading ``-``."""
+        if term.is_Number:
+            return self.build(-term)
+        return self.mul(term, signed=False)
+
+    def mul(self, e, signed=True) -> tuple:
+        # CodePrinter._print_Mul
+        prec = precedence(e)
+        c, rest = e.as_coeff_Mul()
+        sign = False
+        if c < 0:
+            e = _keep_coeff(-c, rest)
+            sign = True
+        args = e.as_ordered_factors() if self.p.order not in ("old", "none") else sp.Mul.make_args(e)
+        a, b = [], []
+        for item in args:
+            if item.is_commutative and item.is_Pow and item.exp.is_Rational and item.exp.is_negative:
+                b.append(sp.Pow(item.base, -item.exp, evaluate=False) if item.exp != -1
+                         else sp.Pow(item.base, -item.exp))
+            else:
+                a.append(item)
+        a = a or [sp.S.One]
+        if len(a) == 1 and sign:
+            anodes = [self.paren(a[0], 0.5 * (PRECEDENCE["Pow"] + PRECEDENCE["Mul"]))]
+        else:
+            anodes = [self.paren(x, prec) for x in a]
+        node = _fold("*", anodes)
+        if b:
+            bnodes = [self.paren(x, prec) for x in b]
+            node = ("/", node, bnodes[0] if len(bnodes) == 1 else (_PAREN, _fold("*", bnodes)))
+        if sign and signed:
+            node = _neg_leftmost(node)
+        return node
+
+    def pow(self, e) -> tuple:
+        b, x = e.args
+        if self.check:
+            # CheckPrinter._print_Pow
+            if b.is_Symbol and x.is_Integer and 2 <= x <= 3:
+                return (_PAREN, _fold("*", [self.build(b)] * int(x)))
+            if x.is_Integer and 2 <= x <= 4:
+                return (_PAREN, _fold("*", [self.paren(b, PRECEDENCE["Mul"])] * int(x)))
+            if b.is_Symbol and x.is_Rational and x.q == 2 and abs(x.p) == 3:
+                u = self.build(b)
+                power = (_PAREN, ("*", u, ("call", "math.sqrt", (u,))))
+                return power if x.p > 0 else (_PAREN, ("/", ("n", 1), power))
+        # ScalarPrinter._print_Pow
+        if x.is_Rational and x.q == 2 and abs(x.p) != 1:
+            root = ("call", "math.sqrt", (self.build(b),))
+            power = ("**", root, ("n", abs(int(x.p))))
+            return power if x.p > 0 else ("/", ("n", 1), power)
+        # AbstractPythonCodePrinter._hprint_Pow (rational=False)
+        prec = precedence(e)
+        if x == sp.S.Half:
+            return ("call", "math.sqrt", (self.build(b),))
+        if e.is_commutative:
+            if -x is sp.S.Half:
+                return ("/", ("n", 1), ("call", "math.sqrt", (self.build(b),)))
+            if x is sp.S.NegativeOne:
+                return ("/", ("n", 1), self.paren(b, prec))
+        return ("**", self.paren(b, prec), self.paren(x, prec))
+
+
+def code(printer, expr: sp.Expr):
+    """The printed code of ``expr``: a :class:`Code` (its tree's Python) for the scalar and check
+    printers of :mod:`methodgen.codegen.lower`, whose trees :func:`from_sympy` builds; SymPy's text
+    for any other printer (the numpy flavour) or an expression the IR has no node for."""
+    from .lower import ScalarPrinter
+
+    if isinstance(printer, ScalarPrinter):
+        try:
+            return Code(from_sympy(expr, printer))
+        except Unsupported:
+            pass
+    return printer.doprint(expr)
