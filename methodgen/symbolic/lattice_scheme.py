@@ -364,5 +364,6 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
         out.append(certify(f"midpoint keeps the quadratic invariant {name}: {{{name}, H}} sums to 0 on the "
                            f"periodic lattice (Euler operator of its site density and its value at 0)",
                            sp.Matrix(euler + [at_zero]),
-                           ref="Hairer, Lubich & Wanner, GNI (2006) IV.2; Hydon & Mansfield (2004)"))
+                           ref="Hairer, Lubich & Wanner, GNI (2006) IV.2; Hydon & Mansfield (2004)",
+                           details={"keeps": name}))
     return out
