@@ -188,8 +188,9 @@ def _scalar_kernel_paired(scheme: LatticeScheme) -> list[str]:
         for a, (f, o) in enumerate(t.slots):
             for b, (g, o2) in enumerate(t.slots):
                 ta, tb = _otag(o), _otag(o2)
-                inner.append(f"    W[2 + 4 * (h{tb} - h{ta} + 1) + 2 * f{ta} + f{tb}, k{ta}] += "
-                             f"{j_out[kk + a * kk + b]}")
+                row = (f"6 + 3 * f{ta}" if o == o2 else        # the same site: the diagonal block, (f, f)
+                       f"2 + 4 * (h{tb} - h{ta} + 1) + 2 * f{ta} + f{tb}")
+                inner.append(f"    W[{row}, k{ta}] += {j_out[kk + a * kk + b]}")
         inner.append("else:")
         inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
         body += ["    " + ln for ln in inner]
