@@ -1,4 +1,4 @@
-"""KdV on a periodic lattice as u' = S ∇H (issue 40, item 3): the built-in ``kdv`` scene's AVF
+"""KdV on a periodic lattice as u' = S ∇H: the built-in ``kdv`` scene's AVF
 module, its cold build, its step cost at several N and its energy error.  A benchmark, not a test.
 
     python benchmarks/lattice_kdv.py [--sizes 512,1024,2048] [--steps 2000]
