@@ -9,6 +9,9 @@ Format (TOML; the built-in ones are in ``methodgen/symbolic/scenes/lattice``)::
     q = "q"                       # optional field names (default q, p) and size name (N)
     p = "p"
     size = "N"
+    # or, a skew lattice (one field, u' = S ∇H with S a skew stencil on the gradient g):
+    # fields = ["u"]
+    # skew = "(g[i+1] - g[i-1])*N**2/(2*L**2)"
     [params]
     L = 6.283185307179586
     [invariants]                  # optional: monitored sums of site terms
@@ -47,7 +50,7 @@ __all__ = ["LatticeScene", "is_lattice_scene", "load_lattice_scene", "lattice_sc
 
 _TOP = {"name": str, "description": str, "lattice": dict, "params": dict, "invariants": dict, "initial": dict,
         "run": dict}
-_LATTICE = {"H": str, "q": str, "p": str, "size": str}
+_LATTICE = {"H": str, "q": str, "p": str, "size": str, "fields": list, "skew": str}
 _RUN = {"method": (str, list), "N": int, "h": (int, float), "steps": int}
 
 
@@ -107,7 +110,8 @@ class LatticeScene:
     source: str
 
     def y0(self, n: int, params: dict | None = None) -> np.ndarray:
-        """The initial state at size ``n``: ``(q[1..n], p[1..n])`` from the scene's formulas."""
+        """The initial state at size ``n``: ``(q[1..n], p[1..n])`` (a skew lattice's ``u[1..n]``) from
+        the scene's formulas."""
         import sympy as sp
 
         from ..problem.parse import parse_expr
@@ -178,9 +182,15 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
     if "i" in params or lt.get("size") == "i":
         raise SceneError(f"{where}: 'i' is the site index of the [initial] formulas; give the parameter "
                          "or the size another name")
+    if ("fields" in lt) != ("skew" in lt) or ("skew" in lt and ({"q", "p"} & set(lt))):
+        raise SceneError(f"{where} [lattice]: a skew lattice takes fields = [\"u\"] and skew = \"…\" (together, "
+                         "without q and p); a canonical one q and p (optional)")
+    if "fields" in lt and not all(isinstance(f, str) for f in lt["fields"]):
+        raise SceneError(f"{where} [lattice]: fields must be a list of names, got {lt['fields']!r}")
     try:
         lat = Lattice(lt["H"], lt.get("q", "q"), lt.get("p", "p"), size=lt.get("size", "N"), params=params,
-                      name=name, invariants=invariants)
+                      name=name, invariants=invariants,
+                      fields=tuple(lt["fields"]) if "fields" in lt else None, skew=lt.get("skew"))
     except InputError as exc:
         raise SceneError(f"{where}: {exc}") from None
     unknown = set(initial) - set(lat.fields)

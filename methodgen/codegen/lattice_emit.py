@@ -7,6 +7,10 @@ size are built by the module at run time.  Nothing in the text depends on N, so 
 derived, printed and imported once, in the time one template costs.  :func:`build_lattice` is
 the cached entry point (the module cache and its trust checks of :mod:`methodgen.codegen.store` and
 :mod:`methodgen.codegen.emit`).
+
+A skew lattice (one field u, ``u' = S ∇H``) gets the same kernels over its one field (a state
+row of N sites) and a Newton matrix paired into 2 × 2 blocks over the pairs of sites; its
+compiled kernel writes straight into the stepper's paired layout (``Y[f, k] = u_(2k + f)``).
 """
 
 from __future__ import annotations
@@ -49,7 +53,8 @@ def _sources_hash() -> str:
 def lattice_signature(lattice: Lattice, method: str, backend: str = "numpy") -> str:
     """Hash of everything the module depends on: the text, names, defaults and method, the
     versions, the printers and helpers it shares with other modules, and its own sources."""
-    parts = [lattice.text, repr(sorted(lattice.invariant_texts.items())), lattice.q_name, lattice.p_name, lattice.size.name, lattice.name,
+    parts = [lattice.text, repr(sorted(lattice.invariant_texts.items())), lattice.q_name, str(lattice.p_name),
+             lattice.structure, str(lattice.skew_text), lattice.size.name, lattice.name,
              repr(sorted(lattice.params.items())), method, __version__, sp.__version__,
              template_hash("numpy"), generator_hash(), _sources_hash()] + ([] if backend == "numpy" else [backend])
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
@@ -80,12 +85,13 @@ def _gathers(symbols, names, source: str, fields, full: bool = False) -> list[st
     return out
 
 
-def _bind(exprs, lattice: Lattice) -> list[str]:
-    """Lines binding the parameters and the size the expressions use."""
+def _bind(exprs, lattice: Lattice, size: str = "float(n)") -> list[str]:
+    """Lines binding the parameters and the size the expressions use (``size``: the size's value
+    as text in the kernel's ``n``)."""
     used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
     lines = [f"{s.name} = p[{k}]" for k, s in enumerate(lattice.param_symbols) if s in used]
     if lattice.size in used:
-        lines.append(f"{lattice.size.name} = float(n)")
+        lines.append(f"{lattice.size.name} = {size}")
     return lines
 
 
@@ -106,6 +112,8 @@ def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
     the subset :mod:`methodgen.codegen.llvmkernels` translates (:mod:`methodgen.runtime.lattice_stepper` inlines
     it).  Sites are (i + o) % n with Python's floor modulo (the translator's too)."""
     lat = scheme.lattice
+    if lat.structure == "skew":
+        return _scalar_kernel_paired(scheme)
     printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
     fields = lat.fields
     lines = ["def _grad_sites(Y0, W, n, p, jac):"]
@@ -138,6 +146,51 @@ def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
             for b, (g, o2) in enumerate(t.slots):
                 row = 2 + 4 * (o2 - o + 1) + 2 * fields.index(f) + fields.index(g)
                 inner.append(f"    W[{row}, i{_otag(o)}] += {j_out[kk + a * kk + b]}")
+        inner.append("else:")
+        inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
+        body += ["    " + ln for ln in inner]
+    return lines + ["    " + ln for ln in body]
+
+
+def _scalar_kernel_paired(scheme: LatticeScheme) -> list[str]:
+    """:func:`_scalar_kernel` for a skew lattice, in the stepper's paired layout: the u-site s
+    (0-based, of N = 2n) is the entry ``s % 2`` of the pair ``s // 2``; the derivative's entry
+    ∂∇̄H_s/∂z_s' goes to the pair block r = (s' // 2 - s // 2) + 1, computed on the sites before
+    the wrap (shifted by N to stay non-negative; N is even, so the parity is kept) -- the block
+    tridiagonal form of the pentadiagonal Newton matrix (:mod:`methodgen.runtime.lattice_stepper`)."""
+    lat = scheme.lattice
+    printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    lines = ["def _grad_sites(Y0, W, n, p, jac):"]
+    allx = [e for tp in scheme.terms for e in list(tp.pieces) + [x for row in tp.jac for x in row]]
+    body = ["nu = 2 * n"] + _bind(allx, lat, "2.0 * n")
+    for tp in scheme.terms:
+        t = tp.term
+        if not t.slots:
+            continue              # a constant: no gradient
+        body.append(f"# {_docsafe(t.source)}")
+        body.append("for i in range(nu):")          # every term of a skew lattice is over all sites
+        inner = []
+        for o in sorted({o for _, o in t.slots}):
+            tag = _otag(o)
+            inner += [f"a{tag} = i + {o} + nu", f"s{tag} = a{tag} % nu", f"f{tag} = s{tag} % 2",
+                      f"k{tag} = s{tag} // 2", f"h{tag} = a{tag} // 2"]
+        for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
+            inner.append(f"{s0.name} = Y0[f{_otag(o)}, k{_otag(o)}]")
+            inner.append(f"{s1.name} = W[14 + f{_otag(o)}, k{_otag(o)}]")
+        kk = len(tp.pieces)
+        flat_jac = [e for row in tp.jac for e in row]
+        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
+        scatter_g = lambda outs: [f"W[f{_otag(o)}, k{_otag(o)}] += {outs[a]}"  # noqa: E731
+                                  for a, (f, o) in enumerate(t.slots)]
+        inner.append("if jac != 0:")
+        inner += ["    " + ln for ln in j_pre + scatter_g(j_out[:kk])]
+        for a, (f, o) in enumerate(t.slots):
+            for b, (g, o2) in enumerate(t.slots):
+                ta, tb = _otag(o), _otag(o2)
+                row = (f"6 + 3 * f{ta}" if o == o2 else        # the same site: the diagonal block, (f, f)
+                       f"2 + 4 * (h{tb} - h{ta} + 1) + 2 * f{ta} + f{tb}")
+                inner.append(f"    W[{row}, k{ta}] += {j_out[kk + a * kk + b]}")
         inner.append("else:")
         inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
         body += ["    " + ln for ln in inner]
@@ -190,6 +243,11 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
             extra.append({**entry(t), "energy_lines": values(t, t.symbols()), "piece_lines": []})
         quantities.append((name, list(range(first, first + len(its_terms)))))
     scalar = _scalar_kernel(scheme) if backend == "compiled" else []
+    skew = lat.structure == "skew"
+    skew_lines = []
+    if skew:
+        c1 = lat.stencil[1]      # half-width 1 and skew: (S g)_i = c_1 (g_(i+1) - g_(i-1))
+        skew_lines = _bind([c1], lat) + [f"return {printer.doprint(c1)}"]
     code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t["piece_lines"]] + scalar)
     known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
     helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
@@ -199,7 +257,8 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
         special = "\n\n" + special.strip("\n") + "\n"
     defaults = "{" + ", ".join(f"{k!r}: {v!r}" for k, v in lat.params.items()) + "}"
     traits = scheme.traits
-    description = (f"{LATTICE_METHODS[scheme.method]}; "
+    description = (f"{LATTICE_METHODS[scheme.method]}" + ("" if not skew else ", for u' = S ∇H")
+                   + "; "
                    + ("keeps H exactly up to round-off." if traits["energy_preserving"] else
                       "H is not kept exactly (bounded for a symplectic method)."))
     if scheme.notes:
@@ -211,7 +270,9 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
               HEADER_SIGNATURE[2:] + sig]
     text = env.get_template(TEMPLATE).render(
         header=header, method=scheme.method, name=lat.name, source=_docsafe(lat.text), description=description,
-        q=lat.q_name, p=lat.p_name, size=lat.size.name, nmin=lat.nmin, param_names=list(lat.params),
+        q=lat.q_name, p=lat.p_name, size=lat.size.name, skew=skew, nf=len(lat.fields),
+        field_names=list(lat.fields), structure=lat.structure, skew_text=_docsafe(lat.skew_text or ""),
+        skew_lines=skew_lines, nmin=lat.nmin, param_names=list(lat.params),
         defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special, extra=extra,
         quantities=quantities, quantity_names=[q for q, _ in quantities], backend=backend, scalar=scalar)
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"

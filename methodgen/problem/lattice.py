@@ -26,6 +26,19 @@ Newton matrix is then block tridiagonal, cyclic for a periodic lattice, and solv
 (:func:`methodgen.symbolic.lattice_scheme`'s module).  Wider stencils and nested (pair) sums over a
 symbolic range are refused with a message saying so.
 
+Two structures:
+
+* *canonical* (the default): fields ``q``, ``p``, ``y' = J ∇H`` with J the canonical matrix;
+* *skew* (``Lattice(H, fields=("u",), skew="(g[i+1] - g[i-1])/(2*dx**2)")``): one field per site
+  and ``u' = S ∇H`` with S a constant periodic stencil applied to the gradient ``g = ∇H``,
+  ``(S g)_i = Σ_k c_k g_{i+k}``, e.g. the centred difference of a KdV lattice.  The stencil is
+  parsed by the same whitelist parser (``g[i + c]`` or ``g[(i + c) % N + 1]``: the site i + c,
+  cyclically), must be linear in g with coefficients free of the field, of half-width 1, and
+  *skew*: ``c_0 = 0`` and ``c_{-k} = -c_k``, checked exactly (refused otherwise, naming the
+  coefficient that fails).  Skew lattices are periodic: every term is summed over all sites
+  ``Sum(…, i, 1, N)`` with periodic neighbours, and N is even (the step's pentadiagonal Newton
+  matrix is solved as a block tridiagonal one over the pairs of sites (2k - 1, 2k)).
+
 References
 ----------
 .. [1] E. Celledoni, V. Grimm, R. I. McLachlan, D. I. McLaren, D. O'Neale, B. Owren,
@@ -47,10 +60,18 @@ from ..errors import InputError, ParseError
 from .parse import (CONSTANTS, FUNCTIONS, MAX_TEXT, RESERVED, SUM, _Builder, _check_double_range,
                     _NAME_RE, check_smooth)
 
-__all__ = ["Bound", "SiteTerm", "Lattice", "slot_symbol"]
+__all__ = ["Bound", "SiteTerm", "Lattice", "slot_symbol", "STENCIL_GRADIENT", "STENCIL_INDEX"]
 
 #: smallest size any lattice admits: with N ≥ 3 the sites i - 1, i, i + 1 are distinct
 MIN_SIZE = 3
+#: smallest size of a skew lattice: N/2 ≥ 3 pairs of sites, so that the pairs k - 1, k, k + 1
+#: of the paired Newton matrix are distinct (the block solvers' smallest cyclic system)
+MIN_SKEW_SIZE = 6
+#: the names a skew stencil's text uses: the gradient ``g`` at the row's site ``i``
+STENCIL_GRADIENT, STENCIL_INDEX = "g", "i"
+#: the widest skew stencil: half-width 1 (with nearest-neighbour terms, a pentadiagonal matrix)
+MAX_STENCIL_HALF_WIDTH = 1
+_SKEW_EXAMPLE = "(g[i+1] - g[i-1])/(2*dx)"
 
 
 def slot_symbol(field: str, offset: int) -> sp.Symbol:
@@ -245,8 +266,32 @@ class _LatticeBuilder(_Builder):
         return placeholder
 
 
+class _StencilBuilder(_LatticeBuilder):
+    """One row ``(S g)_i`` of a skew stencil: ``g[i + c]`` (or ``g[(i + c) % N + 1]``) is the
+    gradient at the site i + c, cyclically -- the row's index is fixed, there is no Sum."""
+
+    def __init__(self, symbols, size: sp.Symbol, what: str):
+        super().__init__(symbols, (STENCIL_GRADIENT,), size, what)
+        self.index_name = STENCIL_INDEX
+        self.lin_offsets = []
+
+    def subscript(self, node: ast.Subscript) -> sp.Expr:
+        if (isinstance(node.value, ast.Name) and node.value.id == STENCIL_GRADIENT
+                and not isinstance(node.slice, (ast.Slice, ast.Tuple))):
+            kind, _ = self.ivalue(node.slice, f"subscripting {ast.unparse(node)}")
+            if kind in ("int", "size"):
+                raise self.fail(node, f"{ast.unparse(node)} names a fixed site; a stencil row uses the sites "
+                                      f"relative to its own, g[i + c], e.g. {_SKEW_EXAMPLE}")
+        return super().subscript(node)
+
+    def indexed_sum(self, node: ast.Call, depth: int) -> sp.Expr:
+        raise self.fail(node, f"the skew stencil is one row (S g)_i, a combination of g[i + c] with no Sum; "
+                              f"e.g. {_SKEW_EXAMPLE}")
+
+
 class Lattice:
-    """A Hamiltonian lattice of symbolic size N: canonical fields ``q[1..N]``, ``p[1..N]``.
+    """A Hamiltonian lattice of symbolic size N: canonical fields ``q[1..N]``, ``p[1..N]``, or one
+    field ``u[1..N]`` with a constant skew stencil (``u' = S ∇H``, module docstring).
 
     Parameters
     ----------
@@ -263,6 +308,13 @@ class Lattice:
     invariants : mapping of str to str, optional
         Quantities to monitor, each a sum of site terms in the same grammar (e.g. the mass
         ``"Sum(q[i]**2 + p[i]**2, i, 1, N)"`` of a Schrödinger lattice).  ``"H"`` is always one.
+    fields : tuple of one str, optional
+        The field of a skew lattice (default ``("u",)`` when ``skew`` is given); canonical
+        lattices name theirs with ``q`` and ``p``.
+    skew : str, optional
+        The skew structure: one row ``(S g)_i`` of a periodic stencil in ``g[i + c]`` (the
+        gradient ∇H at the site i + c, cyclically), e.g. ``"(g[i+1] - g[i-1])/(2*dx**2)"``;
+        coefficients in the parameters, numbers and N.  Checked exactly to be skew.
 
     Attributes
     ----------
@@ -270,34 +322,71 @@ class Lattice:
     invariants : dict of str to tuple of SiteTerm
     nmin : int
         The smallest N at which every term's range and site is valid.
+    structure : {"canonical", "skew"}
+    stencil : dict of int to sympy.Expr
+        A skew lattice's coefficients ``c_k`` (offset k → coefficient, the nonzero ones); empty
+        for a canonical lattice.
+
+    Examples
+    --------
+    >>> kdv = Lattice("Sum(dx*(-u[i]**3 + (u[i % N + 1] - u[i])**2/(2*dx**2)), i, 1, N)",
+    ...               fields=("u",), skew="(g[i+1] - g[i-1])/(2*dx**2)", params={"dx": 0.1})
+    >>> kdv.structure, sorted(kdv.stencil)
+    ('skew', [-1, 1])
     """
 
     def __init__(self, H: str, q: str = "q", p: str = "p", *, size: str = "N",
                  params: Mapping[str, float] | None = None, name: str = "lattice",
-                 invariants: Mapping[str, str] | None = None):
+                 invariants: Mapping[str, str] | None = None, fields=None, skew: str | None = None):
         if not isinstance(H, str):
             raise InputError(f"the lattice Hamiltonian must be text, got {type(H).__name__}")
         if len(H) > MAX_TEXT:
             raise ParseError(f"Hamiltonian is longer than {MAX_TEXT} characters")
         params = dict(params or {})
-        for nm in (q, p, size, *params):
+        if skew is None and fields is not None:
+            raise InputError("fields=(…) names the one field of a skew lattice and needs its structure, "
+                             f"skew=\"{_SKEW_EXAMPLE}\"; a canonical lattice names its fields with q= and p=")
+        if skew is not None:
+            if (q, p) != ("q", "p"):
+                raise InputError("a skew lattice has one field, named by fields=(\"u\",); q= and p= name the "
+                                 "fields of a canonical lattice")
+            fields = ("u",) if fields is None else fields
+            if isinstance(fields, str) or not isinstance(fields, (tuple, list)) or len(fields) != 1:
+                raise InputError(f"a skew lattice has one field per site: fields=(\"u\",), got {fields!r} "
+                                 "(several fields with a skew stencil are not supported yet)")
+            if not isinstance(skew, str):
+                raise InputError(f"skew must be text, one row of the stencil, e.g. {_SKEW_EXAMPLE!r}; got "
+                                 f"{type(skew).__name__}")
+            names = (fields[0], size, *params)
+        else:
+            names = (q, p, size, *params)
+        for nm in names:
             if not isinstance(nm, str) or not _NAME_RE.fullmatch(nm) or nm in RESERVED or keyword.iskeyword(nm):
                 raise InputError(f"{nm!r} is not a valid name (a letter, then letters, digits, _)")
-        if len({q, p, size, *params}) != 2 + 1 + len(params):
-            raise InputError(f"the names q={q!r}, p={p!r}, size={size!r} and the parameters must differ")
-        clash = [k for k in params if k.startswith((f"{q}_", f"{p}_"))]
+        if len(set(names)) != len(names):
+            raise InputError(f"the names of the fields ({', '.join(names[:len(names) - 1 - len(params)])}), "
+                             f"the size ({size!r}) and the parameters must differ")
+        prefixes = tuple(f"{f}_" for f in names[:len(names) - 1 - len(params)])
+        clash = [k for k in params if k.startswith(prefixes)]
         if clash:
-            raise InputError(f"parameter names may not start with {q + '_'!r} or {p + '_'!r} (the site "
+            raise InputError(f"parameter names may not start with {' or '.join(map(repr, prefixes))} (the site "
                              f"symbols' names): {', '.join(clash)}")
+        if skew is not None and STENCIL_GRADIENT in names:
+            raise InputError(f"{STENCIL_GRADIENT!r} is the gradient in the skew stencil's text; give the field or "
+                             "parameter another name")
         if size in params:
             raise InputError(f"{size!r} is the size; give it as the state's length, not a parameter")
         for k, v in params.items():
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise InputError(f"parameter {k!r} must be a real number, got {v!r}")
-        self.name, self.text, self.q_name, self.p_name = name, H, q, p
+        self.name, self.text = name, H
+        self.structure = "canonical" if skew is None else "skew"
+        self.q_name, self.p_name = (q, p) if skew is None else (fields[0], None)
         self.size = sp.Symbol(size, integer=True, positive=True)
         self.params = {k: float(v) for k, v in params.items()}
         self.param_symbols = tuple(sp.Symbol(k, real=True) for k in params)
+        self.skew_text = skew
+        self.stencil = {} if skew is None else self._stencil(skew)
         self.terms = self._parse(H, "Hamiltonian")
         self.invariant_texts = dict(invariants or {})
         self.invariants = {}
@@ -308,10 +397,74 @@ class Lattice:
                 raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
             self.invariants[k] = self._parse(text, f"invariant {k}")
         self.nmin = self._nmin()
+        if skew is not None:
+            self._check_periodic()
+
+    def _stencil(self, text: str) -> dict:
+        """The coefficients ``c_k`` of one row ``(S g)_i = Σ_k c_k g[i + k]``, checked exactly: linear
+        in g, coefficients free of the field, half-width ≤ 1, skew (c_0 = 0, c_{-k} = -c_k)."""
+        what = "skew stencil"
+        if len(text) > MAX_TEXT:
+            raise ParseError(f"{what} is longer than {MAX_TEXT} characters")
+        b = _StencilBuilder({s.name: s for s in self.param_symbols}, self.size, what)
+        try:
+            tree = ast.parse(text.strip(), mode="eval")
+        except SyntaxError as exc:
+            raise ParseError(f"syntax error in {what}: {exc.msg}: {text!r}") from None
+        row = b.build(tree.body, 0)
+        if not isinstance(row, sp.Expr):
+            raise ParseError(f"{what} must be a scalar expression")
+        if b.anchors:
+            raise ParseError(f"{what}: a fixed site; write the row with g[i + c] (the site i + c, cyclically)")
+        gs = sorted((k for k in map(_parse_slot, row.free_symbols) if k and k[0] == STENCIL_GRADIENT),
+                    key=lambda k: k[1])
+        syms = [slot_symbol(STENCIL_GRADIENT, o) for _, o in gs]
+        coeffs = {o: sp.diff(row, s) for (_, o), s in zip(gs, syms)}
+        rest = sp.expand(row - sp.Add(*[c * s for (o, c), s in zip(coeffs.items(), syms)]))
+        if any(c.free_symbols & set(syms) for c in coeffs.values()) or rest != 0:
+            raise ParseError(f"{what} {text!r} is not linear in g: a stencil is Σ_k c_k g[i + k] with "
+                             f"coefficients free of g, e.g. {_SKEW_EXAMPLE}")
+        coeffs = {o: sp.factor(sp.cancel(c)) for o, c in coeffs.items()}
+        coeffs = {o: c for o, c in coeffs.items() if c != 0}
+        if not coeffs:
+            raise ParseError(f"{what} {text!r} is zero: u' = S ∇H would not move")
+        wide = [o for o in coeffs if abs(o) > MAX_STENCIL_HALF_WIDTH]
+        if wide:
+            raise ParseError(f"{what} {text!r} reaches g[i {'+' if wide[0] > 0 else '-'} {abs(wide[0])}]: stencils "
+                             f"of half-width {MAX_STENCIL_HALF_WIDTH} only (g[i - 1], g[i], g[i + 1]; the step's "
+                             "Newton matrix is then pentadiagonal)")
+        # exactly skew: each pair cancels, c_0 = 0 (reduced by cancel: rational in params and N)
+        bad = []
+        for o in sorted({abs(o) for o in coeffs}):
+            pair = sp.cancel(coeffs.get(o, sp.S.Zero) + coeffs.get(-o, sp.S.Zero))
+            if pair != 0:
+                bad.append(f"c_0 = {coeffs[0]} (must be 0)" if o == 0 else
+                           f"c_{o} = {coeffs.get(o, 0)} and c_-{o} = {coeffs.get(-o, 0)} (must be opposite)")
+        if bad:
+            raise ParseError(f"{what} {text!r} is not skew: {'; '.join(bad)}; a skew stencil has c_0 = 0 and "
+                             f"c_(-k) = -c_k, e.g. {_SKEW_EXAMPLE}")
+        for c in coeffs.values():
+            check_smooth(c, what)
+            if c.free_symbols - set(self.param_symbols) - {self.size} or c.has(sp.I, sp.zoo, sp.oo, sp.nan):
+                raise ParseError(f"{what}: the coefficient {c} is not a finite real expression in the parameters "
+                                 "and N")
+        return dict(sorted(coeffs.items()))
+
+    def _check_periodic(self) -> None:
+        """A skew lattice is periodic: every term summed over all sites 1 … N (no boundary)."""
+        for what, terms in (("Hamiltonian", self.terms), *((f"invariant {k}", v) for k, v in self.invariants.items())):
+            for t in terms:
+                if t.slots and (t.lo, t.hi) != (Bound(False, 1), Bound(True, 0)):
+                    where = (f"is a boundary term at a fixed site" if t.lo == t.hi and "Sum" not in t.source else
+                             f"is summed over i = {t.lo} … {t.hi}")
+                    raise ParseError(f"{what}: {t.source} {where}; skew lattices are periodic only (for now): "
+                                     f"write every term as Sum(…, i, 1, N) with periodic neighbours "
+                                     f"{self.q_name}[i % N + 1], {self.q_name}[(i - 2) % N + 1]")
+        self.nmin = max(self.nmin, MIN_SKEW_SIZE)
 
     def _parse(self, text: str, what: str) -> tuple[SiteTerm, ...]:
         symbols = {s.name: s for s in self.param_symbols}
-        b = _LatticeBuilder(symbols, (self.q_name, self.p_name), self.size, what)
+        b = _LatticeBuilder(symbols, self.fields, self.size, what)
         try:
             tree = ast.parse(text.strip(), mode="eval")
         except SyntaxError as exc:
@@ -377,18 +530,33 @@ class Lattice:
     # --- the pieces the derivations and the module need -------------------------------------
 
     @property
-    def fields(self) -> tuple[str, str]:
-        return (self.q_name, self.p_name)
+    def fields(self) -> tuple[str, ...]:
+        """The field names: ``(q, p)``, or ``(u,)`` for a skew lattice."""
+        return (self.q_name, self.p_name) if self.structure == "canonical" else (self.q_name,)
 
     def check_size(self, n: int) -> None:
         if isinstance(n, bool) or not isinstance(n, int) or n < self.nmin:
             raise InputError(f"the lattice {self.name!r} needs N ≥ {self.nmin} sites, got {n!r}")
+        if self.structure == "skew" and n % 2:
+            raise InputError(f"the skew lattice {self.name!r} needs an even N (its Newton matrix is solved over "
+                             f"the pairs of sites (2k - 1, 2k)), got N = {n}; use N = {n - 1} or {n + 1}")
+
+    def stencil_matrix(self, n: int) -> sp.Matrix:
+        """S at size ``n`` as an n × n matrix, ``S[i, (i + k) % n] += c_k`` (for tests at small n)."""
+        self.check_size(n)
+        S = sp.zeros(n, n)
+        for k, c in self.stencil.items():
+            for i in range(n):
+                S[i, (i + k) % n] += c.xreplace({self.size: sp.Integer(n)})
+        return S
 
     def expand(self, n: int) -> tuple[sp.Expr, list[sp.Symbol], list[sp.Symbol]]:
-        """H at size ``n`` as an expression in ``q1..qn, p1..pn`` (for tests and checks at small n)."""
+        """H at size ``n`` as an expression in ``q1..qn, p1..pn`` (for tests and checks at small n);
+        a skew lattice's in ``u1..un`` (the third item then empty)."""
         self.check_size(n)
         qs = [sp.Symbol(f"{self.q_name}{k}", real=True) for k in range(1, n + 1)]
-        ps = [sp.Symbol(f"{self.p_name}{k}", real=True) for k in range(1, n + 1)]
+        ps = ([sp.Symbol(f"{self.p_name}{k}", real=True) for k in range(1, n + 1)]
+              if self.structure == "canonical" else [])
         arrays = {self.q_name: qs, self.p_name: ps}
         out = []
         for t in self.terms:

@@ -15,8 +15,8 @@ from . import lattice_stepper as _ls
 __all__ = ["run_steps"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
-#: Y (2, n), T (rows, 2n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W
-SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M)
+#: Y (2, n), T (rows, 2n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, sk, c
+SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _i8, _f8)
 
 _LOOPS: dict = {}
 
@@ -24,7 +24,7 @@ _LOOPS: dict = {}
 def _bound(grad) -> dict:
     consts = {k: v for k, v in vars(_ls).items() if k.startswith("_I") and isinstance(v, int)}
     consts.update(math=math, grad=grad)
-    for name in ("factor", "solve", "block", "mm", "mv", "load4", "store4", "store_inverse"):
+    for name in ("factor", "solve", "block", "flow", "mm", "mv", "load4", "store4", "store_inverse"):
         consts[name] = types.FunctionType(getattr(_ls, name).__code__, consts, name)
     return consts
 
@@ -50,10 +50,12 @@ def _loop(grad, python: bool):
     return got[0], True
 
 
-def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False):
+def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False,
+              skew=0, coefficient=1.0):
     """``steps`` steps from ``Y`` (2, n), updated in place: ``(rows, its, status)`` with rows
     (steps // every + 1 + ..., 2n) (row 0 the start), Newton iterations per step, and
-    ``(code, step, iterations, value)`` of a failure (code 0: none)."""
+    ``(code, step, iterations, value)`` of a failure (code 0: none).  ``skew=1``: a skew lattice
+    in the paired layout (``Y[f, k] = u_(2k + f)``), ``coefficient`` its stencil's c."""
     n = Y.shape[1]
     nrows = steps // every + (1 if steps % every else 0) + 1
     T = numpy.zeros((nrows, 2 * n))
@@ -66,7 +68,7 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
         p = numpy.zeros(1)
     loop, compiled = _loop(grad, python)
     args = (Y, T, its, fst, p, int(n), float(h), int(steps), int(every), int(maxiter), float(tol),
-            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W)
+            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, int(skew), float(coefficient))
     if compiled:
         from .fused import _drive
         _drive(loop, *args)

@@ -24,6 +24,14 @@ Methods:
 * ``midpoint`` -- the implicit midpoint rule: ``A_{t,s} = ∂h_t/∂s((Z0 + Z1)/2)``; symplectic,
   keeps quadratic invariants, not H.
 
+A *skew* lattice (one field u, ``u' = S ∇H`` with S a constant skew stencil,
+:class:`methodgen.problem.lattice.Lattice`) takes the same pieces: its step is
+``u1 - u0 = h S ∇̄H(u0, u1)``.  With the term lemma, ``H(u1) - H(u0) = ∇̄Hᵀ(u1 - u0) =
+h ∇̄Hᵀ S ∇̄H``, and that vanishes for every N because S is skew -- proved per stencil by
+re-indexing, never expanding N terms (:func:`skew_certificates`).  Its Newton matrix
+``I - h S ∂∇̄H/∂u1`` is pentadiagonal and cyclic (S and ∂∇̄H tridiagonal), block tridiagonal
+with 2 × 2 blocks over the pairs of sites (2k - 1, 2k): the canonical lattices' solvers apply.
+
 References
 ----------
 .. [1] G. R. W. Quispel, D. I. McLaren, "A new class of energy-preserving numerical
@@ -40,7 +48,8 @@ import sympy as sp
 from ..errors import InputError
 from ..problem.lattice import Lattice, SiteTerm, slot_symbol
 
-__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "discretize_lattice", "certificates"]
+__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "discretize_lattice", "certificates",
+           "skew_certificates", "proved_invariants"]
 
 #: the methods a lattice of symbolic size can be discretised with, and what they claim
 LATTICE_METHODS = {
@@ -95,10 +104,13 @@ class LatticeScheme:
     @property
     def traits(self) -> dict:
         avf = self.method == "avf"
-        return {"order": 2, "symmetric": True, "symplectic": not avf,
+        skew = self.lattice.structure == "skew"
+        return {"order": 2, "symmetric": True, "symplectic": not avf and not skew,
                 "energy_preserving": avf and self.exact_energy,
                 "preserved": ("H",) if avf and self.exact_energy else (),
-                "solve": "newton (block tridiagonal, cyclic)"}
+                "structure": self.lattice.structure,
+                "solve": ("newton (pentadiagonal, cyclic: block tridiagonal over pairs of sites)" if skew else
+                          "newton (block tridiagonal, cyclic)")}
 
 
 def _avf_pieces(h: sp.Expr, z0, z1) -> tuple[list, list]:
@@ -177,6 +189,11 @@ def certificates(scheme: LatticeScheme) -> list:
       docstring it is energy preservation at every N.
     * both methods: symmetry, ``A_s(Z0, Z1) = A_s(Z1, Z0)`` per term and slot (the step's adjoint
       is itself: y1 = y0 + h J ∇̄H(y0, y1) read backwards is the same equation).
+    * a skew lattice: :func:`skew_certificates` (the stencil's skewness, which with the term
+      lemma is AVF's energy at every N; linear invariants kept by both methods).
+
+    Each certificate's ``details["keeps"]`` names the quantity it is part of a proof for (``"H"``,
+    an invariant's name), where it is one (:func:`proved_invariants`).
     """
     from .verify.exact import certify
 
@@ -189,13 +206,86 @@ def certificates(scheme: LatticeScheme) -> list:
         if scheme.method == "avf":
             h0, h1 = t.template, t.template.xreplace(dict(zip(tp.z0, tp.z1)))
             expr = sp.Add(*[a * (b - c) for a, b, c in zip(tp.pieces, tp.z1, tp.z0)]) - (h1 - h0)
-            out.append(certify(f"term lemma: Σ_s A_s ΔZ_s = h(Z1) - h(Z0) for {t.source}", expr, ref=ref))
+            out.append(certify(f"term lemma: Σ_s A_s ΔZ_s = h(Z1) - h(Z0) for {t.source}", expr, ref=ref,
+                               details={"keeps": "H"}))
         swap = {**dict(zip(tp.z0, tp.z1)), **dict(zip(tp.z1, tp.z0))}
         expr = sp.Matrix([a - a.xreplace(swap) for a in tp.pieces])
         out.append(certify(f"symmetric: A_s(Z0, Z1) = A_s(Z1, Z0) for {t.source}", expr, ref=ref))
-    if scheme.method == "midpoint":
+    if scheme.lattice.structure == "skew":
+        out += skew_certificates(scheme.lattice, scheme.method)
+    elif scheme.method == "midpoint":
         out += quadratic_invariant_certificates(scheme.lattice)
     return out
+
+
+def skew_certificates(lattice: Lattice, method: str = "avf") -> list:
+    """A skew lattice's structure claims, per stencil (so for every N), proved exactly.
+
+    * ``avf`` -- ``gᵀ S g = 0`` for every g and every N: the site density ``E(i) = g_i Σ_k c_k g_{i+k}``
+      summed over the periodic sites, re-indexed part by part (``i → i - k`` in the k-th part, a
+      bijection of the sites mod N), is ``Σ_i E'(i)`` with ``E'(i) = Σ_k c_k g_{i-k} g_i``; so
+      ``2 Σ_i E(i) = Σ_i (E + E')(i)``, and ``E + E' = Σ_k (c_k + c_{-k}) g_i g_{i+k}`` reduces to 0
+      exactly (the pairs c_k, c_{-k} cancel, c_0 = 0).  With the term lemma:
+      ``H(u1) - H(u0) = ∇̄Hᵀ(u1 - u0) = h ∇̄Hᵀ S ∇̄H = 0``.
+    * both methods, each monitored invariant ``Q = Σ_i Σ_o a_o u_{i+o}`` that is linear with
+      constant coefficients (a mass): ``Q(u1) - Q(u0) = h Σ_j (Σ_o a_o) (S v)_j = h (Σ_o a_o)
+      (Σ_k c_k) Σ_i v_i`` for the step's ``v`` (any: ∇̄H or ∇H at the midpoint), so Q is kept
+      when ``(Σ_o a_o)(Σ_k c_k)`` reduces to 0 (re-indexing ``j = i + k`` again).  Other
+      invariants are not decided (nothing is claimed).
+
+    Returns
+    -------
+    list of Certificate
+        Empty for a canonical lattice.
+    """
+    from .verify.exact import certify
+
+    if lattice.structure != "skew":
+        return []
+    g = "g"
+    c = lattice.stencil
+    ref = "re-indexing the periodic sum (McLachlan, Quispel & Robidoux 1999, discrete gradients for y' = S ∇H)"
+    out = []
+    if method == "avf":
+        E = sp.Add(*[ck * slot_symbol(g, 0) * slot_symbol(g, k) for k, ck in c.items()])
+        # the k-th part re-indexed i → i - k: every slot moved by -k
+        E_re = sp.Add(*[_shift(ck * slot_symbol(g, 0) * slot_symbol(g, k), -k, (g,)) for k, ck in c.items()])
+        out.append(certify("skew stencil: gᵀ S g = Σ_i g_i Σ_k c_k g_(i+k) = 0 for every N (the density plus its "
+                           "re-indexed form, Σ_k (c_k + c_(-k)) g_i g_(i+k), reduces to 0); with the term lemmas, "
+                           "AVF keeps H at every N", sp.expand(E + E_re), ref=ref, details={"keeps": "H"}))
+    csum = sp.Add(*c.values())
+    for name, terms in lattice.invariants.items():
+        a = sp.S.Zero
+        linear = True
+        for t in terms:
+            syms = t.symbols()
+            if not syms:
+                continue
+            coeffs = [sp.diff(t.template, s) for s in syms]
+            if any(x.free_symbols & set(syms) for x in coeffs):
+                linear = False
+                break
+            a += sp.Add(*coeffs)
+        if not linear:
+            continue
+        out.append(certify(f"the linear invariant {name} = Σ_i a·{lattice.q_name}_i is kept: Σ_j (S v)_j = (Σ_k c_k) "
+                           f"Σ_i v_i by re-indexing, and a·Σ_k c_k reduces to 0", sp.cancel(a * csum),
+                           ref="Hairer, Lubich & Wanner, GNI (2006) IV.1 (linear invariants)",
+                           details={"keeps": name}))
+    return out
+
+
+def proved_invariants(scheme: LatticeScheme, certs) -> list[str]:
+    """The quantities the certificates prove kept at every N: "H" where every certificate tagged
+    for H is proved (and AVF's pieces are exact), and each invariant whose certificate is."""
+    keeps: dict[str, bool] = {}
+    for c in certs:
+        k = (c.details or {}).get("keeps")
+        if k is not None:
+            keeps[k] = keeps.get(k, True) and c.status == "proved"
+    if "H" in keeps and not scheme.exact_energy:
+        keeps["H"] = False
+    return [k for k, ok in keeps.items() if ok]
 
 
 def _shift(expr: sp.Expr, k: int, fields) -> sp.Expr:
@@ -244,6 +334,8 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
     """
     from .verify.exact import certify
 
+    if lattice.structure != "canonical":
+        return []                 # the bracket below is the canonical one
     fields = lattice.fields
     q, p = fields
     allterms = list(lattice.terms) + [t for ts in lattice.invariants.values() for t in ts]
@@ -272,5 +364,6 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
         out.append(certify(f"midpoint keeps the quadratic invariant {name}: {{{name}, H}} sums to 0 on the "
                            f"periodic lattice (Euler operator of its site density and its value at 0)",
                            sp.Matrix(euler + [at_zero]),
-                           ref="Hairer, Lubich & Wanner, GNI (2006) IV.2; Hydon & Mansfield (2004)"))
+                           ref="Hairer, Lubich & Wanner, GNI (2006) IV.2; Hydon & Mansfield (2004)",
+                           details={"keeps": name}))
     return out

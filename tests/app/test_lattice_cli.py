@@ -27,7 +27,8 @@ def _run(capsys, *argv):
 def test_every_builtin_lattice_scene_runs_and_keeps_what_avf_claims(capsys, name):
     code, rep, err = _run(capsys, name, "--steps", "20", "--param", "N=40")
     assert code == 0, err
-    assert rep["N"] == 40 and rep["method"] == "avf" and len(rep["y_final"]) == 80
+    nfields = 1 if rep["traits"]["structure"] == "skew" else 2
+    assert rep["N"] == 40 and rep["method"] == "avf" and len(rep["y_final"]) == 40 * nfields
     H = rep["invariants"]["H"]
     assert H["max_abs_error"] <= 1e-13 * max(1.0, abs(H["initial"]))
 
@@ -110,3 +111,53 @@ def test_scene_files_are_checked_key_by_key(tmp_path):
         bad.write_text(text)
         with pytest.raises(SceneError, match=fragment.replace("(", r"\(")):
             load_lattice_scene(bad)
+
+
+# --- the KdV scene: a skew lattice (u' = S ∇H) ------------------------------------------------
+
+def test_kdv_runs_on_both_backends_and_keeps_energy_and_mass(capsys):
+    pytest.importorskip("llvmlite")
+    code, a, err = _run(capsys, "kdv", "--steps", "40", "--param", "N=64")
+    assert code == 0, err
+    code, b, err = _run(capsys, "kdv", "--steps", "40", "--param", "N=64", "--backend", "numba")
+    assert code == 0, err
+    assert (a["backend"], b["backend"]) == ("numpy", "compiled") and len(a["y_final"]) == 64
+    assert np.max(np.abs(np.array(a["y_final"]) - np.array(b["y_final"]))) < 1e-13
+    for rep in (a, b):
+        for k in ("H", "mass"):
+            v = rep["invariants"][k]
+            assert v["max_abs_error"] <= 1e-13 * max(1.0, abs(v["initial"]))
+    assert a["traits"]["structure"] == "skew" and a["traits"]["energy_preserving"]
+
+
+def test_kdv_refuses_an_odd_size_with_one_line(capsys):
+    code = cli.main(["run", "kdv", "--param", "N=513"])
+    out, err = capsys.readouterr()
+    assert code == 2 and "needs an even N" in err and "use N = 512 or 514" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_verify_kdv_says_which_invariants_are_proved(capsys):
+    code = cli.main(["verify", "kdv", "--json"])
+    rep = json.loads(capsys.readouterr()[0])
+    assert code == 0 and rep["all_proved"]
+    assert rep["proved_invariants"] == {"avf": ["H", "mass"], "midpoint": ["mass"]}
+    claims = [c["claim"] for c in rep["certificates"] if c["method"] == "avf"]
+    assert any(c.startswith("skew stencil") for c in claims)
+    code = cli.main(["verify", "kdv"])
+    out = capsys.readouterr()[0]
+    assert code == 0 and "avf keeps, proved at every N: H, mass" in out
+
+
+@pytest.mark.parametrize("table,fragment", [
+    ('fields = ["u"]\n', "together"),
+    ('skew = "g[i+1] - g[i-1]"\n', "together"),
+    ('fields = ["u"]\nskew = "g[i+1] - g[i-1]"\nq = "x"\n', "without q and p"),
+    ('fields = [1]\nskew = "g[i+1] - g[i-1]"\n', "list of names"),
+    ('fields = ["u"]\nskew = "g[i+1] + g[i-1]"\n', "is not skew"),
+])
+def test_skew_scene_tables_are_checked(tmp_path, table, fragment):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f'[lattice]\nH = "Sum(u[i]**2, i, 1, N)"\n{table}[run]\nN = 8\nh = 0.1\nsteps = 3\n')
+    with pytest.raises(SceneError, match=fragment):
+        load_lattice_scene(bad)

@@ -304,8 +304,8 @@ def test_bordered_block_elimination_agrees_with_a_dense_solve(sg, n, periodic):
     dense = sg._dense(*M)
     r = rng.normal(size=(n, 2))
     W[ls._IR:ls._IR + 2] = -r.T                  # solve() takes -R and leaves the update
-    assert ls.factor(W, n, h) == 0
-    ls.solve(W, n, h)
+    assert ls.factor(W, n, h, 0) == 0
+    ls.solve(W, n, h, 0)
     x = W[ls._IR:ls._IR + 2].T
     xd = np.linalg.solve(dense, r.reshape(-1)).reshape(n, 2)
     assert np.max(np.abs(x - xd)) < 1e-11 * max(1.0, np.max(np.abs(xd)))

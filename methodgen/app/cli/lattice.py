@@ -59,19 +59,24 @@ def run(args) -> int:
 def verify(args) -> int:
     """``methodgen verify LATTICE_SCENE``: the method's certificates, per site term (any N)."""
     from ..lattice_scene import load_lattice_scene
-    from ...symbolic.lattice_scheme import certificates, discretize_lattice
+    from ...symbolic.lattice_scheme import certificates, discretize_lattice, proved_invariants
 
     scene = load_lattice_scene(args.scene)
     methods = [args.method] if getattr(args, "method", None) else list(scene.methods)
-    out, ok = [], True
+    out, ok, kept = [], True, {}
     for m in methods:
-        for c in certificates(discretize_lattice(scene.lattice, m)):
+        scheme = discretize_lattice(scene.lattice, m)
+        certs = certificates(scheme)
+        for c in certs:
             out.append({"method": m, "claim": c.claim, "status": c.status, "how": c.method})
             ok &= c.status == "proved"
+        kept[m] = proved_invariants(scheme, certs)
     if getattr(args, "json", False):
-        print(dump_json({"scene": scene.name, "certificates": out, "all_proved": ok}))
+        print(dump_json({"scene": scene.name, "certificates": out, "all_proved": ok, "proved_invariants": kept}))
     else:
         print(f"lattice {scene.name}: certificates per site term (independent of N)")
         for c in out:
             print(f"  [{c['status']}] {c['method']}: {c['claim']} ({c['how']})")
+        for m, names in kept.items():
+            print(f"  {m} keeps, proved at every N: {', '.join(names) if names else 'none of the invariants'}")
     return 0 if ok else EXIT_NUMERICAL
