@@ -9,16 +9,18 @@ its Python function, and as a flat table (:func:`methodgen.codegen.kir.flatten`)
 compiled route translates to machine code (:func:`methodgen.codegen.llvmkernels.kernel`), keyed
 by the tree's digest.  The module's text is never read back.
 
+Built here: the straight-line kernels (:func:`straight_kernel`), an s-stage method's loops
+over its stages (:func:`stage_kernel`) and the lock-step block kernel (:func:`block_kernel`).
 Kernels with loops over like terms or rows (:mod:`methodgen.codegen.lower_loops`,
-:mod:`methodgen.codegen.lower_rows`) are not built here yet: :func:`straight_kernel` returns None
-and the template prints them as before.
+:mod:`methodgen.codegen.lower_rows`) are not built here yet: the template prints them as text,
+and the compiled route translates that text (:mod:`methodgen.codegen.kernelsource`).
 """
 
 from __future__ import annotations
 
 from . import kir
 
-__all__ = ["straight_kernel", "kernel_text"]
+__all__ = ["straight_kernel", "stage_kernel", "block_kernel", "kernel_text", "STACK_MAX"]
 
 
 def _load(var: str, array: str, i: int) -> tuple:
@@ -93,10 +95,11 @@ def _build(name, kern, ir, args, outs, step_alias):
     return kir.function(name, tuple(args) + tuple(outs), body)
 
 
-def kernel_text(fn, decorate: str) -> str:
-    """A module's text of a kernel-IR function: the function, then its table and the line that
-    compiles it (``decorate``: the expression binding the name anew, with ``{fn}`` and ``{table}``
-    in it, e.g. ``"_kernel(_KT['res'], {table})({fn})"``)."""
+def kernel_text(fn, decorate: str | None) -> str:
+    """A module's text of a kernel-IR function: the function, then its table (``_KIR<name>``) and
+    the line that compiles it (``decorate``: the expression binding the name anew, with ``{fn}``
+    and ``{table}`` in it, e.g. ``"_kernel(_KT['res'], {table})({fn})"``; None: no such line, the
+    module compiles it later from the table)."""
     name = fn[1]
     table, _ = kir.flatten([fn])
     lines = kir.function_lines(fn)
@@ -105,5 +108,176 @@ def kernel_text(fn, decorate: str) -> str:
               f"# table, keyed by its digest; the function above is printed from the same tree",
               f"_KIR{name} = ("]
     lines += ["    " + line for line in kir.table_text(table, 96)]
-    lines += [")", f"{name} = {decorate.format(fn=name, table='_KIR' + name)}"]
+    lines.append(")")
+    if decorate:
+        lines.append(f"{name} = {decorate.format(fn=name, table='_KIR' + name)}")
     return "\n".join(lines)
+
+
+# --- helpers of the looped kernels -------------------------------------------------------------
+
+def _v(name):
+    return ("v", name)
+
+
+def _n(value):
+    return ("n", value)
+
+
+def _el(array, *idx):
+    return ("[]", array, tuple(idx))
+
+
+def _add(a, b):
+    return ("+", a, b)
+
+
+def _mul(a, b):
+    return ("*", a, b)
+
+
+def _for(var, stop, body):
+    return ("for", var, stop, tuple(body))
+
+
+#: the largest work array kept on a compiled kernel's stack (floats); larger ones are allocated
+STACK_MAX = 32768
+
+
+def _work(shape, on_stack: bool):
+    total = 1
+    for k in shape:
+        total *= k
+    return ("buffer", tuple(shape)) if on_stack and total <= STACK_MAX else ("empty", tuple(shape))
+
+
+def stage_kernel(name: str, ir, kind: str, sig: bool = True):
+    """An s-stage method's residual (``kind`` "res") or residual and Newton matrix ("resjac") as
+    loops over the stages (:mod:`methodgen.symbolic.stages`), in the order of the numpy module's
+    ``_s_res`` / ``_s_resjac``: the stage points u_k = y + Σ_i P_ki Z_i (y + Z_k without P), f and
+    f' there (the ``_nb_field`` / ``_nb_fieldjac`` kernels, inlined), R_j = Z_j − h σ_j Σ_k Q_jk
+    f(u_k) summed from both ends, and δ_ij I − h σ_j Σ_k Q_jk P_ki f'(u_k) on f''s nonzeros.  Its
+    small work arrays live on the kernel's stack (``sig``: compiled for the runtime's kernel
+    type) up to :data:`STACK_MAX` floats, else they are allocated per call.
+
+    Returns
+    -------
+    tuple
+        The kernel-IR function, with the stage tables among its constants.
+    """
+    st = ir.stage
+    d, m, nnz, s = ir.n_state, st["m"], st["nnz"], st["s"]
+    jac = kind == "resjac"
+    DIM, NM, NS = _v("_DIM"), _v("_NM"), _v("_NS")
+    body = [("=", _v("_F"), _work((m, d), sig))]
+    if jac:
+        body += [("=", _v("_G"), _work((m, nnz), sig)), ("=", _v("_fg"), _work((d + nnz,), sig))]
+    body.append(("=", _v("_u"), _work((d,), sig)))
+    zk = _el("_z", _add(_mul(_v("_k"), DIM), _v("_l")))
+    if st["P"]:
+        point = [("=", _v("_a"), _n(0.0)),
+                 _for("_i", NS, [("+=", _v("_a"), _mul(_el("_SP", _v("_k"), _v("_i")),
+                                                       _el("_z", _add(_mul(_v("_i"), DIM), _v("_l")))))]),
+                 ("=", _el("_u", _v("_l")), _add(_el("_y", _v("_l")), _v("_a")))]
+    else:
+        point = [("=", _el("_u", _v("_l")), _add(_el("_y", _v("_l")), zk))]
+    per_point = [_for("_l", DIM, point)]
+    if jac:
+        per_point += [("expr", ("call", "_nb_fieldjac", (_v("_u"), _v("_p"), _v("_fg")))),
+                      _for("_l", DIM, [("=", _el("_F", _v("_k"), _v("_l")), _el("_fg", _v("_l")))]),
+                      _for("_e", _v("_NNZ"), [("=", _el("_G", _v("_k"), _v("_e")),
+                                                _el("_fg", _add(DIM, _v("_e"))))])]
+    else:
+        per_point.append(("expr", ("call", "_nb_field", (_v("_u"), _v("_p"), _el("_F", _v("_k"))))))
+    body.append(_for("_k", NM, per_point))
+    last = ("-", ("-", NM, _n(1)), _v("_k"))
+    half = ("//", NM, _n(2))
+    pair = _add(_mul(_el("_SQ", _v("_j"), _v("_k")), _el("_F", _v("_k"), _v("_l"))),
+                _mul(_el("_SQ", _v("_j"), last), _el("_F", last, _v("_l"))))
+    row = _add(_mul(_v("_j"), DIM), _v("_l"))
+    body.append(_for("_j", NS, [
+        ("=", _v("_hs"), _mul(_v("_h"), _el("_SG", _v("_j")))),
+        _for("_l", DIM, [
+            ("=", _v("_a"), _n(0.0)),
+            _for("_k", half, [("+=", _v("_a"), pair)]),
+            ("if", ("%", NM, _n(2)),
+             (("+=", _v("_a"), _mul(_el("_SQ", _v("_j"), half), _el("_F", half, _v("_l")))),), ()),
+            ("=", _el("_r", row), ("-", _el("_z", row), _mul(_v("_hs"), _v("_a")))),
+        ]),
+    ]))
+    if jac:
+        full = ("slice", None, None)
+        entry = _el("_J", _add(_mul(_v("_j"), DIM), _el("_JFR", _v("_e"))),
+                    _add(_mul(_v("_i"), DIM), _el("_JFC", _v("_e"))))
+        hsg = _mul(_v("_h"), _el("_SG", _v("_j")))
+        if st["P"]:
+            inner = [_for("_k", NM, [
+                ("=", _v("_w"), _mul(hsg, _mul(_el("_SQ", _v("_j"), _v("_k")), _el("_SP", _v("_k"), _v("_i"))))),
+                _for("_e", _v("_NNZ"), [("-=", entry, _mul(_v("_w"), _el("_G", _v("_k"), _v("_e"))))])])]
+        else:
+            inner = [("=", _v("_w"), _mul(hsg, _el("_SQ", _v("_j"), _v("_i")))),
+                     _for("_e", _v("_NNZ"), [("-=", entry, _mul(_v("_w"), _el("_G", _v("_i"), _v("_e"))))])]
+        body += [("=", _el("_J", full, full), _n(0.0)),
+                 _for("_j", NS, [_for("_i", NS, inner)]),
+                 _for("_l", _v("_N"), [("+=", _el("_J", _v("_l"), _v("_l")), _n(1.0))])]
+    consts = [("_DIM", d), ("_N", ir.n_unknowns), ("_NS", s), ("_NM", m), ("_NNZ", nnz),
+              kir.table_const("_SQ", st["Q"]), kir.table_const("_SG", st["sigma"]),
+              kir.table_const("_JFR", st["rows"], "i"), kir.table_const("_JFC", st["cols"], "i")]
+    if st["P"]:
+        consts.append(kir.table_const("_SP", st["P"]))
+    params = ("_z", "_y", "_c", "_h", "_p", "_r") + (("_J",) if jac else ())
+    used = kir.read_names(tuple(body))
+    return kir.function(name, params, body, [c for c in consts if c[0] in used])
+
+
+def block_kernel(name: str, kern, ir, lanes: int):
+    """The step of an explicit stage for a block of lanes (:func:`methodgen.runtime.stepper.lockstep`):
+    the one-lane ``post`` kernel's straight-line code, reading lane ``_l`` of the component-major
+    block arrays ``_y``, ``_c``, ``_g`` (component i of lane l at ``i * _BLOCK_LANES + l``), then
+    what the one-lane path does with its output: the update of y (compensated or not) and the
+    carried force in place, the check values into ``_out`` (rows from DIM + NF on).  Returns how
+    many updated components are not finite.  No branch in the lane loops and no reduction but
+    that integer count, so LLVM vectorises them; the expressions are the one-lane kernel's and
+    the runtime's update, operation for operation (the same results, bitwise).  None where the
+    post kernel is not straight-line or has an expression without a tree."""
+    if kern.loops or kern.accs or kern.pre:
+        return None
+    try:
+        return _block(name, kern, ir, lanes)
+    except kir.Unsupported:
+        return None
+
+
+def _block(name, kern, ir, lanes):
+    flat = kern.entries()
+    d, nf = ir.n_state, len(ir.fsal_vars)
+    L = _v("_BLOCK_LANES")
+
+    def at(array, i):
+        return _el(array, _add(_mul(_n(i), L), _v("_l")))
+
+    lane = [("=", _v(v), at("_y", i)) for i, v in enumerate(ir.state_vars)]
+    lane += [("=", _v(v), at("_c", i)) for i, v in enumerate(ir.comp_vars)]
+    lane += [("=", _v(v), at("_g", i)) for i, v in enumerate(ir.fsal_vars)]
+    lane += [("=", _v(var), _tree(code)) for var, code in kern.temps]
+    lane += [("=", _v(f"_bd{i}"), _tree(c)) for i, c in enumerate(flat[:d])]
+    lane += [("=", at("_g", i), _tree(c)) for i, c in enumerate(flat[d:d + nf])]
+    lane += [("=", at("_out", d + nf + i), _tree(c)) for i, c in enumerate(flat[d + nf:])]
+    bad = ("if", ("not", ("==", ("-", _v("_us"), _v("_us")), _n(0.0))), (("+=", _v("_ubad"), _n(1)),), ())
+    comp, plain = list(lane), list(lane)
+    for i, v in enumerate(ir.state_vars):
+        comp += [("=", _v("_ua"), _add(_v(f"_bd{i}"), _v(ir.comp_vars[i]))),
+                 ("=", _v("_us"), _add(_v(v), _v("_ua"))),
+                 ("=", at("_c", i), ("-", _v("_ua"), ("-", _v("_us"), _v(v)))),
+                 ("=", at("_y", i), _v("_us")),
+                 ("#", "inf - inf and NaN are NaN"), bad]
+        plain += [("=", _v("_us"), _add(_v(v), _v(f"_bd{i}"))),
+                  ("=", at("_y", i), _v("_us")), bad]
+    body = [("#", "the stage's step h·γ_k"), ("=", _v("_h"), _v("_hd"))]
+    body += [("=", _v(v), _el("_p", _n(i))) for i, v in enumerate(ir.param_vars)]
+    body += [("=", _v("_ubad"), _n(0)),
+             ("if", ("!=", _v("_comp"), _n(0)), (_for("_l", _v("_nl"), comp),), (_for("_l", _v("_nl"), plain),)),
+             ("#", "(an integer count in the loops: a float sum would not vectorise)"),
+             ("return", _mul(_n(1.0), _v("_ubad")))]
+    params = ("_y", "_c", "_g", "_ha", "_hd", "_hb", "_p", "_out", "_nl", "_comp")
+    return kir.function(name, params, body, [("_BLOCK_LANES", int(lanes))])

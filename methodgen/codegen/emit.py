@@ -223,13 +223,15 @@ def _environment_for(folder: str):
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
     from .lower_rows import row_body
     from .special_helpers import source as helper_source
-    from .compiled_kernels import kernel_text, straight_kernel
+    from .compiled_kernels import block_kernel, kernel_text, stage_kernel, straight_kernel
 
     env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.codegen.abi)
     env.globals["row_body"] = row_body   # loops over like rows in compiled kernels
     env.globals["helper_source"] = helper_source   # the scalar helpers' one source (a copy per module)
     env.globals["straight_kernel"] = straight_kernel   # compiled kernels as kernel IR
     env.globals["kernel_text"] = kernel_text
+    env.globals["stage_kernel"] = stage_kernel
+    env.globals["block_kernel"] = block_kernel
     return env
 
 

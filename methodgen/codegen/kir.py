@@ -45,7 +45,8 @@ import ast
 import hashlib
 
 __all__ = ["VERSION", "FUNCTIONS", "Unsupported", "Code", "python", "to_ast", "digest", "names", "called",
-           "function", "function_lines", "function_def", "flatten", "unflatten", "table_text"]
+           "read_names", "function", "table_const", "function_lines", "function_def", "flatten", "unflatten",
+           "table_text"]
 
 #: the IR's and its printers' version: part of every machine-code key (a change of the
 #: printers' meaning must not load code printed by the old ones)
@@ -229,12 +230,29 @@ def names(node, out=None) -> set:
 #   ("expr", e)                 a call for its effect (an inlined kernel writing into arrays)
 #   ("return", e)
 #   ("#", text)                 a comment (printed; not executed)
-# A function: ("def", name, params, body).  Index entries may be ("slice", lo, hi) (None: open).
+# A function: ("def", name, params, body, consts).  Index entries may be ("slice", lo, hi)
+# (None: open).  ``consts``: the module-level names the body reads, with their values -- part of
+# the tree (and of its digest), so its machine code depends on nothing else: ``(name, value)``
+# with value an int, a float, or a table ``("array", kind, shape, values)`` (kind "f" float64,
+# "i" int64, values flat in C order).
 
 
-def function(name: str, params, body) -> tuple:
-    """A kernel function: ``("def", name, params, body)`` (lists in ``body`` become tuples)."""
-    return ("def", name, tuple(params), _freeze(body))
+def function(name: str, params, body, consts=()) -> tuple:
+    """A kernel function: ``("def", name, params, body, consts)`` (lists in ``body`` become tuples;
+    ``consts`` sorted by name)."""
+    return ("def", name, tuple(params), _freeze(body), tuple(sorted(_freeze(consts))))
+
+
+def table_const(name: str, values, kind: str = "f") -> tuple:
+    """A constant table of a kernel (``consts`` of :func:`function`) from nested sequences of
+    numbers: ``(name, ("array", kind, shape, flat values))``, floats or ints by ``kind``."""
+    shape, flat, level = [], [], [values]
+    while isinstance(level[0], (tuple, list)):
+        shape.append(len(level[0]))
+        level = [x for row in level for x in row]
+    cast = float if kind == "f" else int
+    flat = tuple(cast(x) for x in level)
+    return (name, ("array", kind, tuple(shape), flat))
 
 
 def _freeze(x):
@@ -242,8 +260,9 @@ def _freeze(x):
 
 
 def function_lines(fn, indent: str = "") -> list[str]:
-    """The Python source lines of a kernel function (without decorators)."""
-    _, name, params, body = fn
+    """The Python source lines of a kernel function (without decorators; its constants are the
+    module's own names)."""
+    _, name, params, body, _ = fn
     lines = [f"{indent}def {name}({', '.join(params)}):"]
     _block(body, indent + "    ", lines)
     return lines
@@ -307,7 +326,7 @@ def _statements_ast(body) -> list:
 def function_def(fn) -> ast.FunctionDef:
     """The kernel function as an :class:`ast.FunctionDef` (built from the tree, never parsed):
     what the LLVM translator reads."""
-    _, name, params, body = fn
+    _, name, params, body, _ = fn
     args = ast.arguments(posonlyargs=[], args=[ast.arg(p) for p in params], vararg=None, kwonlyargs=[],
                          kw_defaults=[], kwarg=None, defaults=[])
     fdef = ast.FunctionDef(name=name, args=args, body=_statements_ast(body) or [ast.Pass()], decorator_list=[],
@@ -328,7 +347,7 @@ def function_def(fn) -> ast.FunctionDef:
 
 _FIELDS = {"n": "L", "v": "L", "neg": "N", "not": "N", "call": "L*", "[]": "L*", "slice": "oo", "buffer": "L",
            "zeros": "L", "empty": "L", "=": "NN", "+=": "NN", "-=": "NN", "for": "LN*", "if": "N**",
-           "expr": "N", "return": "N", "#": "L", "def": "LL*", "group": "*"}
+           "expr": "N", "return": "N", "#": "L", "def": "LL*L"}
 for _op in ("+", "-", "*", "/", "**", "//", "%", "==", "!=", "<", "<=", ">", ">="):
     _FIELDS[_op] = "NN"
 
@@ -431,6 +450,21 @@ def called(tree) -> set:
         n = stack.pop()
         if isinstance(n, tuple):
             if n and n[0] == "call" and len(n) == 3 and isinstance(n[1], str):
+                out.add(n[1])
+            stack.extend(x for x in n if isinstance(x, tuple))
+    return out
+
+
+def read_names(tree) -> set:
+    """Every variable and array name a tree (a function, statement or expression) mentions."""
+    out = set()
+    stack = [tree]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, tuple) and n:
+            if n[0] == "v" and len(n) == 2:
+                out.add(n[1])
+            elif n[0] == "[]" and len(n) == 3 and isinstance(n[1], str):
                 out.add(n[1])
             stack.extend(x for x in n if isinstance(x, tuple))
     return out

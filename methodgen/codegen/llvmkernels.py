@@ -1230,6 +1230,11 @@ def attach(py_func, table):
     from . import special_helpers
 
     names = {"math": math}
+    for name, value in tree[4]:
+        if isinstance(value, tuple):        # ("array", kind, shape, values)
+            _, kind, shape, flat = value
+            value = np.array(flat, dtype=np.float64 if kind == "f" else np.int64).reshape(shape)
+        names[name] = value
     g = py_func.__globals__
     for name in sorted(kir.called(tree)):
         if name.startswith("_f_"):

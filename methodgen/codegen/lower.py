@@ -41,6 +41,7 @@ from ..errors import InputError
 from ..symbolic.schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from ..problem.special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 from ..symbolic.timetransform import time_scale_guard
+from .kir import Code
 from .kir_build import code as _code
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
@@ -404,7 +405,7 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
     # (a link whose expression is itself -- Δq computed ahead of the loops -- is not reassigned)
     temps += [(str(s), _code(printer, e)) for s, e in zip(links, r1) if e != s]
     temps += [(str(s), _code(lp, e)) for s, e in t2]
-    outputs = [((i,), str(s)) for i, s in enumerate(links)]
+    outputs = [((i,), Code(("v", str(s)))) for i, s in enumerate(links)]
     outputs += [((len(links) + j,), _code(lp, e)) for j, e in enumerate(r2) if e != 0]
     return Kernel(tuple(temps), tuple(outputs), (len(links) + len(later),))
 
