@@ -9,11 +9,12 @@ its Python function, and as a flat table (:func:`methodgen.codegen.kir.flatten`)
 compiled route translates to machine code (:func:`methodgen.codegen.llvmkernels.kernel`), keyed
 by the tree's digest.  The module's text is never read back.
 
-Built here: the straight-line kernels (:func:`straight_kernel`), an s-stage method's loops
-over its stages (:func:`stage_kernel`) and the lock-step block kernel (:func:`block_kernel`).
-Kernels with loops over like terms or rows (:mod:`methodgen.codegen.lower_loops`,
-:mod:`methodgen.codegen.lower_rows`) are not built here yet: the template prints them as text,
-and the compiled route translates that text (:mod:`methodgen.codegen.kernelsource`).
+Built here: every kernel of the lowering (:func:`straight_kernel`: straight-line code, loops over
+families of like terms, :mod:`methodgen.codegen.lower_loops`, and over like rows,
+:mod:`methodgen.codegen.lower_rows`), an s-stage method's loops over its stages
+(:func:`stage_kernel`) and the lock-step block kernel (:func:`block_kernel`).  A kernel with an
+expression the IR has no node for (none of the built-in scenes has one) is printed by the
+template as text and compiled by numba.
 """
 
 from __future__ import annotations
@@ -62,37 +63,99 @@ def straight_kernel(name: str, kern, ir, args, outs, step_alias: str | None = No
     tuple or None
         ``("def", name, params, body)``.
     """
-    from .lower_rows import row_body
+    from .lower_rows import row_body_ir
 
-    if kern.loops or kern.accs or kern.pre or kern.jac_rows or row_body(kern, ir, args, outs) is not None:
-        return None
     try:
-        return _build(name, kern, ir, args, outs, step_alias)
+        return _build(name, kern, ir, args, outs, step_alias, row_body_ir(kern, ir, args, outs))
     except kir.Unsupported:
         return None
 
 
-def _build(name, kern, ir, args, outs, step_alias):
+def _build(name, kern, ir, args, outs, step_alias, rows=None):
+    """The kernel's statements: the loads (every input of a straight-line kernel; of a looped one
+    only what its code reads -- the loops load their slots themselves), the code ahead of the
+    loops (Δq of a looped Störmer–Verlet step, written as the first outputs), the accumulators
+    (in the caller's output arrays where they fit, else allocated), one loop per family of like
+    terms through its index tables (:mod:`methodgen.codegen.lower_loops`), then the accumulated
+    entries unpacked, the straight-line code and the outputs.  ``rows``: the loops over like rows
+    (:func:`methodgen.codegen.lower_rows.row_body_ir`) that replace the code after the term loops
+    (and ahead of them), loading only what the rest reads."""
     body = []
     if step_alias:
         body.append(("#", f"the stage's step h·γ_k ({step_alias}; _ha, _hd, _hb: h times KICK_A, DRIFT, KICK_B)"))
         body.append(("=", ("v", "_h"), ("v", step_alias)))
     sources = [("_y", ir.state_vars), ("_z", ir.unknown_vars), ("_c", ir.comp_vars), ("_g", ir.fsal_vars),
                ("_p", ir.param_vars)]
+    needed = rows[0] if rows else None
     for array, names in sources:
         if array in args or array == "_y":
-            body += [_load(v, array, i) for i, v in enumerate(names)]
+            # a looped kernel loads only what its straight-line code reads (the loops load their
+            # slots themselves; the carried force is always loaded); with row loops, only what
+            # the code left straight-line reads
+            body += [_load(v, array, i) for i, v in enumerate(names)
+                     if (v in needed if needed is not None else array == "_g" or not kern.loops or kern.reads(v))]
+    if rows and kern.pre:
+        body += rows[3]
+    else:
+        body += [("=", ("v", var), _tree(code)) for var, code in kern.pre]
+        body += [("=", ("[]", outs[0], (("n", i),)), ("v", v)) for i, v in enumerate(kern.pre_out)]
+    first_len = ir.n_unknowns if len(outs) == 2 else kern.shape[0]
+    off = len(kern.pre_out)
+    full = ("slice", None, None)
+    for a in kern.accs:
+        if len(a.shape) == 2 and len(outs) == 2:
+            body += [("=", ("v", a.name), ("v", outs[1])), ("=", ("[]", a.name, (full, full)), ("n", 0.0))]
+        elif len(a.shape) == 1 and outs and off + a.shape[0] <= first_len:
+            view = ("[]", outs[0], (("slice", ("n", off), ("n", off + a.shape[0])),))
+            body += [("=", ("v", a.name), view), ("=", ("[]", a.name, (full,)), ("n", 0.0))]
+            off += a.shape[0]
+        else:
+            body.append(("=", ("v", a.name), ("zeros", tuple(a.shape))))
+    consts = []
+    tables = dict(ir.loop_tables)
+    for L in kern.loops:
+        k = ("v", "_k")
+        inner = []
+        for var, s, col in L.loads:
+            if s == "p":
+                src = ("[]", "_p", (("[]", L.ptable, (k, ("n", col))),))
+            else:
+                arr = outs[0] if s == "d" else "_" + s
+                src = ("[]", arr, (("[]", L.table, (k, ("n", col))),))
+            inner.append(("=", ("v", var), src))
+        inner += [("=", ("v", var), _tree(code)) for var, code in L.temps]
+        for acc, cols, code in L.adds:
+            idx = tuple(("[]", L.table, (k, ("n", c))) for c in cols) or (("n", 0),)
+            inner.append(("+=", ("[]", acc, idx), _tree(code)))
+        body.append(("#", f"{L.size} instances of a like term (methodgen.codegen.lower_loops)"))
+        body.append(_for("_k", ("n", L.size), inner))
+        consts.append(kir.table_const(L.table, tables[L.table], "i"))
+        if L.ptable:
+            consts.append(kir.table_const(L.ptable, tables[L.ptable], "i"))
+    if rows:
+        return kir.function(name, tuple(args) + tuple(outs), body + list(rows[1]), consts)
+    for a in kern.accs:
+        body += [("=", ("v", var), ("[]", a.name, tuple(("n", i) for i in ix))) for var, ix in a.unpack]
     body += [("=", ("v", var), _tree(code)) for var, code in kern.temps]
     flat = kern.entries()
     if not outs:
         body.append(("return", _tree(flat[0])))
+    elif len(outs) == 2 and kern.jac_rows:
+        n = ir.n_unknowns
+        body += [_store(outs[0], (i,), flat[i]) for i in range(n)]
+        body.append(("#", f"Newton matrix I + diag(s) ∂A/∂Δq, A the accumulated discrete gradient (in place: _sB is {outs[1]})"))
+        for i in range(n):
+            body += [("=", ("v", "_js"), _tree(flat[n + i])),
+                     _for("_b", ("n", n), [("=", ("[]", outs[1], (("n", i), ("v", "_b"))),
+                                              ("*", ("v", "_js"), ("[]", "_sB", (("n", i), ("v", "_b")))))]),
+                     ("+=", ("[]", outs[1], (("n", i), ("n", i))), ("n", 1.0))]
     elif len(outs) == 2:
         n = ir.n_unknowns
         body += [_store(outs[0], (i,), flat[i]) for i in range(n)]
         body += [_store(outs[1], (i, j), flat[n + i * n + j]) for i in range(n) for j in range(n)]
     else:
         body += [_store(outs[0], (k,), c) for k, c in enumerate(flat)]
-    return kir.function(name, tuple(args) + tuple(outs), body)
+    return kir.function(name, tuple(args) + tuple(outs), body, consts)
 
 
 def kernel_text(fn, decorate: str | None) -> str:
@@ -136,8 +199,8 @@ def _mul(a, b):
     return ("*", a, b)
 
 
-def _for(var, stop, body):
-    return ("for", var, stop, tuple(body))
+def _for(var, stop, body, start=("n", 0)):
+    return ("for", var, start, stop, tuple(body))
 
 
 #: the largest work array kept on a compiled kernel's stack (floats); larger ones are allocated

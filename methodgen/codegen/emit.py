@@ -39,8 +39,8 @@ from typing import TYPE_CHECKING
 
 from .._version import __version__
 from .abi import STATUS
+from .kernelsource import GENERATED_ATTR
 from ..errors import GenerationError, InputError, UntrustedCacheError
-from .kernelsource import SOURCE_ATTR
 from .progress import phase
 from .store import (HEADER_KEYED, KEY_FILE, _cache_key, _check_folder, _keyed_tag, cache_dir,  # noqa: F401
                     cache_root_of, check_cache_folder, untagged, write_atomic, write_module)
@@ -221,12 +221,10 @@ def _environment_for(folder: str):
     )
     env.filters["pyrepr"] = repr
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
-    from .lower_rows import row_body
     from .special_helpers import source as helper_source
     from .compiled_kernels import block_kernel, kernel_text, stage_kernel, straight_kernel
 
     env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.codegen.abi)
-    env.globals["row_body"] = row_body   # loops over like rows in compiled kernels
     env.globals["helper_source"] = helper_source   # the scalar helpers' one source (a copy per module)
     env.globals["straight_kernel"] = straight_kernel   # compiled kernels as kernel IR
     env.globals["kernel_text"] = kernel_text
@@ -447,9 +445,8 @@ def _exec_source(path: Path, source: bytes) -> ModuleType:
         from .nbcache import defer_stamp_guard, install_stamp_guard
         guard = install_stamp_guard if b"\nimport numba\n" in source else defer_stamp_guard
         guard(str(path), hashlib.sha256(source).hexdigest(), owner=name, tag=digest)
-    # the text the compiled route translates and keys its machine code by: these bytes, not
-    # the file (read again later) nor linecache's copy (methodgen.codegen.kernelsource)
-    module.__dict__[SOURCE_ATTR] = source.decode("utf-8")
+    # generated code: the compiled route reads its kernel IR, never its text
+    module.__dict__[GENERATED_ATTR] = True
     sys.modules[name] = module
     try:
         loader.exec_module(module)

@@ -1,25 +1,21 @@
-"""The exact text a compiled kernel is translated from, and the digest its machine code is keyed by.
+"""The exact text of the hand-written functions the LLVM translator compiles (never generated code).
 
-:mod:`methodgen.codegen.llvmkernels` translates a kernel's Python source to LLVM IR, and
-:mod:`methodgen.codegen.llvmcache` keys the machine code by a digest of that source.  Both must see
-the text that was *executed* -- not whatever is on disk or in :mod:`linecache` now.
-``inspect.getsource`` reads through ``linecache``, which keeps the first text it read of a
-file for the life of the process: a module regenerated at the same path (another
-Hamiltonian, the same file name) was translated from, and keyed by, the previous text, so
-its kernels ran the previous Hamiltonian's machine code.
+:mod:`methodgen.codegen.llvmkernels` translates the runtime written in its subset of Python --
+the stepper (:mod:`methodgen.runtime.stepper`), the Wisdom–Holman flows
+(:mod:`methodgen.runtime.kepler_flow`), the lattice step loop, the scalar helpers
+(:mod:`methodgen.codegen.special_helpers`) -- from their source files, and
+:mod:`methodgen.codegen.llvmcache` keys their machine code by a digest of that text.  Generated
+code is never among them: a generated kernel is compiled from its kernel IR
+(:mod:`methodgen.codegen.kir`), which the module holds as data, and its text is never read back.
 
-Where the text comes from:
-
-* **Modules methodgen's loader imported** (:func:`methodgen.codegen.emit.load_module`): the loader
-  records the checked bytes it executed in the module's namespace (:data:`SOURCE_ATTR`).
-  That text is the source, and its SHA-256 the key's digest.
-* **Any other module** (methodgen's own runtime files; a generated file a user imported by
-  its plain name): the file is read now and accepted only if compiling it reproduces the
-  function's code object (bytecode, constants, names).  A file edited or regenerated since
-  the import fails that check: :class:`StaleSource` is raised and the caller compiles from
-  the function's bytecode (numba) instead.  Outside methodgen's own package the result is
-  not cacheable (:func:`cache_digest` is None): module-level tables of such a file are read
-  from the live module, which the file's text no longer has to describe.
+A function of a module methodgen's loader imported (:data:`GENERATED_ATTR`) is refused outright.
+For any other function, the text must be the one that was *executed*, not whatever is on disk or
+in :mod:`linecache` now (``inspect.getsource`` reads through ``linecache``, which keeps the first
+text it read of a file for the life of the process: that once ran a regenerated module's
+previous kernels).  Its file is read now and accepted only if compiling it reproduces the
+function's code object (bytecode, constants, names); a file edited since the import fails that
+check: :class:`StaleSource` is raised and the caller does not translate it.  Only methodgen's own
+files are cacheable (:func:`cache_digest`).
 
 References
 ----------
@@ -34,10 +30,11 @@ import os
 import threading
 import types
 
-__all__ = ["SOURCE_ATTR", "StaleSource", "source_of", "function_def", "cache_digest"]
+__all__ = ["GENERATED_ATTR", "StaleSource", "source_of", "function_def", "cache_digest"]
 
-#: the name under which methodgen's loader records the executed text in a module's namespace
-SOURCE_ATTR = "__methodgen_source__"
+#: the name under which methodgen's loader marks a generated module's namespace: its functions'
+#: text is never translated (their kernel IR is)
+GENERATED_ATTR = "__methodgen_generated__"
 
 #: methodgen's own folder (all its layers): its files' machine code may be cached
 _PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__))) + os.sep
@@ -63,8 +60,8 @@ def _remember(store: dict, key, value, keep: int):
 
 
 class StaleSource(Exception):
-    """No text reproducing the function's code is available (the file changed since import,
-    or there is no file)."""
+    """No text that reproduces the function's code may be translated: the file changed since
+    import, there is no file, or the function is generated code (compiled from its kernel IR)."""
 
 
 def _sha(text: str) -> str:
@@ -148,38 +145,29 @@ def source_of(fn) -> tuple[str, str, bool]:
 
     Parameters
     ----------
-    fn : function or numba dispatcher (its ``py_func``)
+    fn : function or numba dispatcher (its ``py_func``), not of a generated module
 
     Returns
     -------
     text : str
-        The whole module's text (the function, its helpers and its tables).
+        The whole file's text (the function, its helpers and its tables).
     sha256 : str
         Hex SHA-256 of ``text`` (UTF-8).
     cacheable : bool
-        Whether machine code translated from it may be stored and loaded by this digest:
-        True for text methodgen's loader executed and for methodgen's own files.
+        Whether machine code translated from it may be stored and loaded by this digest: True
+        for methodgen's own files.
 
     Raises
     ------
     StaleSource
-        No text reproduces the function (see the module docstring).
+        The function is generated code (its module was imported by methodgen's loader: it is
+        compiled from its kernel IR, never from its text), or no text reproduces it (see the
+        module docstring).
     """
     py, code = _unwrap(fn)
-    g = getattr(py, "__globals__", None) or {}
-    text = g.get(SOURCE_ATTR)
-    if isinstance(text, str) and os.path.abspath(code.co_filename) == os.path.abspath(g.get("__file__") or ""):
-        with _LOCK:
-            sha = _TEXT_SHA.get(id(text))
-        if sha is None or sha[0] is not text:
-            sha = _remember(_TEXT_SHA, id(text), (text, _sha(text)), 64)
-        return text, sha[1], True
-    text, sha, in_package = _verified_file(code)
-    return text, sha, in_package
-
-
-#: id(text) -> (text, sha256): the recorded texts' digests, computed once
-_TEXT_SHA: dict = {}
+    if (getattr(py, "__globals__", None) or {}).get(GENERATED_ATTR):
+        raise StaleSource(f"{code.co_name} is generated code: compiled from its kernel IR, never from its text")
+    return _verified_file(code)
 
 
 def cache_digest(fn) -> str | None:

@@ -45,7 +45,7 @@ import ast
 import hashlib
 
 __all__ = ["VERSION", "FUNCTIONS", "Unsupported", "Code", "python", "to_ast", "digest", "names", "called",
-           "read_names", "function", "table_const", "function_lines", "function_def", "flatten", "unflatten",
+           "read_names", "attach", "KIR_ATTR", "function", "table_const", "function_lines", "function_def", "flatten", "unflatten",
            "table_text"]
 
 #: the IR's and its printers' version: part of every machine-code key (a change of the
@@ -73,8 +73,8 @@ class Unsupported(Exception):
 # --- printing: the tree -> Python text, or -> ast nodes ----------------------------------------
 
 #: binding power of the integer, comparison and logical nodes (loops and checks of kernels)
-_BIND.update({"//": 2, "%": 2, "==": 0, "!=": 0, "<": 0, "<=": 0, ">": 0, ">=": 0, "not": -1})
-_INT_BINARY = {"//": ast.FloorDiv, "%": ast.Mod}
+_BIND.update({"//": 2, "%": 2, ">>": 0.7, "&": 0.5, "==": 0, "!=": 0, "<": 0, "<=": 0, ">": 0, ">=": 0, "not": -1})
+_INT_BINARY = {"//": ast.FloorDiv, "%": ast.Mod, ">>": ast.RShift, "&": ast.BitAnd}
 _COMPARE = {"==": ast.Eq, "!=": ast.NotEq, "<": ast.Lt, "<=": ast.LtE, ">": ast.Gt, ">=": ast.GtE}
 
 
@@ -225,7 +225,8 @@ def names(node, out=None) -> set:
 # Statements (tuples too):
 #   ("=", target, e)            target ("v", name) or ("[]", array, index)
 #   ("+=", target, e), ("-=", target, e)
-#   ("for", var, stop, body)    for var in range(stop), body a tuple of statements
+#   ("for", var, start, stop, body)   for var in range(start, stop), body a tuple of statements
+#   ("forin", var, values, body)      for var in (v0, v1, …): a constant tuple of ints (unrolled)
 #   ("if", cond, body, orelse)
 #   ("expr", e)                 a call for its effect (an inlined kernel writing into arrays)
 #   ("return", e)
@@ -282,7 +283,11 @@ def _block(body, indent: str, lines: list) -> None:
         elif op in ("+=", "-="):
             lines.append(f"{indent}{_target_text(st[1])} {op} {python(st[2])}")
         elif op == "for":
-            lines.append(f"{indent}for {st[1]} in range({python(st[2])}):")
+            bounds = python(st[3]) if st[2] == ("n", 0) else f"{python(st[2])}, {python(st[3])}"
+            lines.append(f"{indent}for {st[1]} in range({bounds}):")
+            _block(st[4], indent + "    ", lines)
+        elif op == "forin":
+            lines.append(f"{indent}for {st[1]} in ({', '.join(map(str, st[2]))},):")
             _block(st[3], indent + "    ", lines)
         elif op == "if":
             lines.append(f"{indent}if {python(st[1])}:")
@@ -310,7 +315,11 @@ def _statements_ast(body) -> list:
             out.append(ast.AugAssign(to_ast(st[1], ast.Store()), ast.Add() if op == "+=" else ast.Sub(),
                                      to_ast(st[2])))
         elif op == "for":
-            it = ast.Call(ast.Name("range", ast.Load()), [to_ast(st[2])], [])
+            bounds = [to_ast(st[3])] if st[2] == ("n", 0) else [to_ast(st[2]), to_ast(st[3])]
+            it = ast.Call(ast.Name("range", ast.Load()), bounds, [])
+            out.append(ast.For(ast.Name(st[1], ast.Store()), it, _statements_ast(st[4]) or [ast.Pass()], []))
+        elif op == "forin":
+            it = ast.Tuple([ast.Constant(int(v)) for v in st[2]], ast.Load())
             out.append(ast.For(ast.Name(st[1], ast.Store()), it, _statements_ast(st[3]) or [ast.Pass()], []))
         elif op == "if":
             out.append(ast.If(to_ast(st[1]), _statements_ast(st[2]) or [ast.Pass()], _statements_ast(st[3])))
@@ -346,9 +355,9 @@ def function_def(fn) -> ast.FunctionDef:
 # None, anything else a literal kept as it is.
 
 _FIELDS = {"n": "L", "v": "L", "neg": "N", "not": "N", "call": "L*", "[]": "L*", "slice": "oo", "buffer": "L",
-           "zeros": "L", "empty": "L", "=": "NN", "+=": "NN", "-=": "NN", "for": "LN*", "if": "N**",
+           "zeros": "L", "empty": "L", "=": "NN", "+=": "NN", "-=": "NN", "for": "LNN*", "forin": "LL*", "if": "N**",
            "expr": "N", "return": "N", "#": "L", "def": "LL*L"}
-for _op in ("+", "-", "*", "/", "**", "//", "%", "==", "!=", "<", "<=", ">", ">="):
+for _op in ("+", "-", "*", "/", "**", "//", "%", ">>", "&", "==", "!=", "<", "<=", ">", ">="):
     _FIELDS[_op] = "NN"
 
 
@@ -468,3 +477,54 @@ def read_names(tree) -> set:
                 out.add(n[1])
             stack.extend(x for x in n if isinstance(x, tuple))
     return out
+
+
+#: the attribute of a generated kernel's Python function holding its tree
+KIR_ATTR = "__kir__"
+
+
+def attach(py_func, table):
+    """Give a generated kernel's Python function its kernel IR: the tree at the end of ``table``
+    (:func:`flatten`), which must be the definition of that function (its
+    name and parameters), its digest and the names its body is translated in.  The compiled
+    route then reads the tree and keys the machine code by its digest; the function's text (the
+    module's) is never read.  Returns ``py_func``.
+
+    Raises
+    ------
+    ValueError
+        The table is not a kernel-IR function of that name and those parameters.
+    """
+    import math
+    import types
+
+    import numpy as np
+
+    from . import special_helpers
+
+    if not table:
+        raise ValueError(f"{py_func.__name__}: an empty kernel table")
+    tree = unflatten(table, len(table) - 1)
+    code = py_func.__code__
+    params = tuple(code.co_varnames[:code.co_argcount])
+    if tree[0] != "def" or tree[1] != py_func.__name__ or tree[2] != params:
+        raise ValueError(f"{py_func.__name__}{params}: its kernel table defines {tree[0]} {tree[1:3]!r}")
+    names = {"math": math}
+    for name, value in tree[4]:
+        if isinstance(value, tuple):        # ("array", kind, shape, values)
+            _, kind, shape, flat = value
+            value = np.array(flat, dtype=np.float64 if kind == "f" else np.int64).reshape(shape)
+        names[name] = value
+    g = py_func.__globals__
+    for name in sorted(called(tree)):
+        if name.startswith("_f_"):
+            names[name] = getattr(special_helpers, name)     # the package's helper, not the module's copy
+        elif "." not in name and name not in ("abs", "min", "max", "range"):
+            other = getattr(g.get(name), "py_func", g.get(name))
+            if not isinstance(other, types.FunctionType) or getattr(other, KIR_ATTR, None) is None:
+                raise ValueError(f"{py_func.__name__} calls {name}, which is not a kernel with a table")
+            names[name] = other
+    setattr(py_func, KIR_ATTR, tree)
+    py_func.__kir_digest__ = digest(tree)
+    py_func.__kir_names__ = names
+    return py_func

@@ -89,12 +89,12 @@ class _Builder:
     method for method (the same decisions, nodes instead of strings)."""
 
     def __init__(self, printer):
-        from .lower import CheckPrinter   # (lower imports this module)
         from ..problem.special import SPECIAL_FUNCTIONS
         from ..symbolic.compensate import grouped
 
         self.p = printer
-        self.check = isinstance(printer, CheckPrinter)
+        # the check printer writes small powers as products (lower.CheckPrinter: kir_flavour "check")
+        self.check = getattr(printer, "kir_flavour", None) == "check"
         self.special = SPECIAL_FUNCTIONS
         self.grouped = grouped
 
@@ -231,9 +231,7 @@ def code(printer, expr: sp.Expr):
     """The printed code of ``expr``: a :class:`Code` (its tree's Python) for the scalar and check
     printers of :mod:`methodgen.codegen.lower`, whose trees :func:`from_sympy` builds; SymPy's text
     for any other printer (the numpy flavour) or an expression the IR has no node for."""
-    from .lower import ScalarPrinter
-
-    if isinstance(printer, ScalarPrinter):
+    if getattr(printer, "kir_flavour", None) in ("scalar", "check"):
         try:
             return Code(from_sympy(expr, printer))
         except Unsupported:

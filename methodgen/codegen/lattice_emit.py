@@ -24,10 +24,12 @@ import sympy as sp
 from .._version import __version__
 from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, generator_hash, template_dir,
                    template_hash, write_and_load)
-from ..errors import InputError
+from ..errors import GenerationError, InputError
 from ..problem.lattice import Lattice
 from ..symbolic.lattice_scheme import LATTICE_METHODS, LatticeScheme, discretize_lattice
 from .lower import _HELPER_CALL, ScalarPrinter, VectorPrinter, _helper_closure
+from . import kir
+from .kir_build import code as _code
 from .progress import phase
 from ..problem.special import SPECIAL_FUNCTIONS
 from .store import cache_dir
@@ -104,55 +106,94 @@ def _bound_text(b) -> str:
     return f"n + {b.c - 1}" if b.from_end else str(b.c - 1)
 
 
-def _scalar_kernel(scheme: LatticeScheme) -> list[str]:
-    """``_grad_sites(Y0, W, n, p, jac)``: ∇̄H(y0, z) into W[0:2] (z the rows W[14:16]) and, with
-    ``jac``, its derivative's block diagonals into W[2:14] (row 2 + 4 r + 2 f + g: site j to
-    j + r - 1, entry (f, g)), a
-    loop over the sites of each term -- the scalar form of the module's vectorised kernels, in
-    the subset :mod:`methodgen.codegen.llvmkernels` translates (:mod:`methodgen.runtime.lattice_stepper` inlines
-    it).  Sites are (i + o) % n with Python's floor modulo (the translator's too)."""
+def _cse_trees(exprs, printer, prefix: str) -> tuple[list, list]:
+    """CSE ``exprs``: (assignment statements, the outputs' trees) of the kernel IR."""
+    temps, outs = sp.cse(list(exprs), symbols=sp.numbered_symbols(prefix), optimizations="basic")
+    return ([("=", ("v", s.name), _tree(printer, e)) for s, e in temps], [_tree(printer, e) for e in outs])
+
+
+def _tree(printer, e):
+    got = _code(printer, e)
+    tree = getattr(got, "tree", None)
+    if tree is None:
+        raise GenerationError(f"the lattice kernel's expression {str(e)[:60]} has no kernel-IR node")
+    return tree
+
+
+def _v(name):
+    return ("v", name)
+
+
+def _num(c: int):
+    return ("n", c) if c >= 0 else ("neg", ("n", -c))
+
+
+def _plus(a, c: int):
+    """``a + c`` for an integer c (``a`` itself for 0)."""
+    return a if c == 0 else ("+", a, ("n", c)) if c > 0 else ("-", a, ("n", -c))
+
+
+def _bind_ir(exprs, lattice: Lattice, size) -> list:
+    """Statements binding the parameters and the size (``size``: its value, a tree in ``n``) the
+    expressions use."""
+    used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
+    out = [("=", _v(s.name), ("[]", "p", (("n", k),))) for k, s in enumerate(lattice.param_symbols) if s in used]
+    if lattice.size in used:
+        out.append(("=", _v(lattice.size.name), size))
+    return out
+
+
+def _scalar_kernel(scheme: LatticeScheme) -> tuple:
+    """``_grad_sites(Y0, W, n, p, jac)`` as a kernel-IR function (:mod:`methodgen.codegen.kir`):
+    ∇̄H(y0, z) into W[0:2] (z the rows W[14:16]) and, with ``jac``, its derivative's block
+    diagonals into W[2:14] (row 2 + 4 r + 2 f + g: site j to j + r - 1, entry (f, g)), a loop over
+    the sites of each term -- the scalar form of the module's vectorised kernels.  The module
+    prints it as Python and holds it as a table; :mod:`methodgen.runtime.lattice_stepper` inlines
+    it, compiled from the tree.  Sites are (i + o) % n with Python's floor modulo (the
+    translator's too)."""
     lat = scheme.lattice
     if lat.structure == "skew":
         return _scalar_kernel_paired(scheme)
     printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
     fields = lat.fields
-    lines = ["def _grad_sites(Y0, W, n, p, jac):"]
-    body = []
+    n = _v("n")
     allx = [e for tp in scheme.terms for e in list(tp.pieces) + [x for row in tp.jac for x in row]]
-    body += _bind(allx, lat)
-    body = [ln.replace("float(n)", "n * 1.0") for ln in body]
-    for k, tp in enumerate(scheme.terms):
+    body = _bind_ir(allx, lat, ("*", n, ("n", 1.0)))
+    for tp in scheme.terms:
         t = tp.term
         if not t.slots:
             continue              # a constant: no gradient
-        body.append(f"# {_docsafe(t.source)}")
-        body.append(f"for i in range({_bound_text(t.lo)}, {_bound_text(t.hi)} + 1):")
+        lo = _plus(n, t.lo.c - 1) if t.lo.from_end else ("n", t.lo.c - 1)
+        stop = _plus(n, t.hi.c) if t.hi.from_end else ("n", t.hi.c)
         inner = []
         for o in sorted({o for _, o in t.slots}):
             # every site modulo n (floor modulo, as Python's: a range may start at 0 or end past N)
-            inner.append(f"i{_otag(o)} = (i + {o}) % n")
+            inner.append(("=", _v(f"i{_otag(o)}"), ("%", _plus(_v("i"), o), n)))
         for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
-            inner.append(f"{s0.name} = Y0[{fields.index(f)}, i{_otag(o)}]")
-            inner.append(f"{s1.name} = W[{14 + fields.index(f)}, i{_otag(o)}]")
+            site = _v(f"i{_otag(o)}")
+            inner.append(("=", _v(s0.name), ("[]", "Y0", (("n", fields.index(f)), site))))
+            inner.append(("=", _v(s1.name), ("[]", "W", (("n", 14 + fields.index(f)), site))))
         kk = len(tp.pieces)
         flat_jac = [e for row in tp.jac for e in row]
-        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
-        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
-        scatter_g = lambda outs: [f"W[{fields.index(f)}, i{_otag(o)}] += {outs[a]}"  # noqa: E731
-                                  for a, (f, o) in enumerate(t.slots)]
-        inner.append("if jac != 0:")
-        inner += ["    " + ln for ln in j_pre + scatter_g(j_out[:kk])]
+        g_pre, g_out = _cse_trees(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_trees(list(tp.pieces) + flat_jac, printer, "_j")
+
+        def scatter(outs, t=t):
+            return [("+=", ("[]", "W", (("n", fields.index(f)), _v(f"i{_otag(o)}"))), outs[a])
+                    for a, (f, o) in enumerate(t.slots)]
+
+        jac = j_pre + scatter(j_out[:kk])
         for a, (f, o) in enumerate(t.slots):
             for b, (g, o2) in enumerate(t.slots):
                 row = 2 + 4 * (o2 - o + 1) + 2 * fields.index(f) + fields.index(g)
-                inner.append(f"    W[{row}, i{_otag(o)}] += {j_out[kk + a * kk + b]}")
-        inner.append("else:")
-        inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
-        body += ["    " + ln for ln in inner]
-    return lines + ["    " + ln for ln in body]
+                jac.append(("+=", ("[]", "W", (("n", row), _v(f"i{_otag(o)}"))), j_out[kk + a * kk + b]))
+        inner.append(("if", ("!=", _v("jac"), ("n", 0)), tuple(jac), tuple(g_pre + scatter(g_out))))
+        body.append(("#", _docsafe(t.source)))
+        body.append(("for", "i", lo, stop, tuple(inner)))
+    return kir.function("_grad_sites", ("Y0", "W", "n", "p", "jac"), body)
 
 
-def _scalar_kernel_paired(scheme: LatticeScheme) -> list[str]:
+def _scalar_kernel_paired(scheme: LatticeScheme) -> tuple:
     """:func:`_scalar_kernel` for a skew lattice, in the stepper's paired layout: the u-site s
     (0-based, of N = 2n) is the entry ``s % 2`` of the pair ``s // 2``; the derivative's entry
     ∂∇̄H_s/∂z_s' goes to the pair block r = (s' // 2 - s // 2) + 1, computed on the sites before
@@ -160,41 +201,59 @@ def _scalar_kernel_paired(scheme: LatticeScheme) -> list[str]:
     tridiagonal form of the pentadiagonal Newton matrix (:mod:`methodgen.runtime.lattice_stepper`)."""
     lat = scheme.lattice
     printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
-    lines = ["def _grad_sites(Y0, W, n, p, jac):"]
+    nu = _v("nu")
     allx = [e for tp in scheme.terms for e in list(tp.pieces) + [x for row in tp.jac for x in row]]
-    body = ["nu = 2 * n"] + _bind(allx, lat, "2.0 * n")
+    body = [("=", nu, ("*", ("n", 2), _v("n")))] + _bind_ir(allx, lat, ("*", ("n", 2.0), _v("n")))
     for tp in scheme.terms:
         t = tp.term
         if not t.slots:
             continue              # a constant: no gradient
-        body.append(f"# {_docsafe(t.source)}")
-        body.append("for i in range(nu):")          # every term of a skew lattice is over all sites
         inner = []
         for o in sorted({o for _, o in t.slots}):
             tag = _otag(o)
-            inner += [f"a{tag} = i + {o} + nu", f"s{tag} = a{tag} % nu", f"f{tag} = s{tag} % 2",
-                      f"k{tag} = s{tag} // 2", f"h{tag} = a{tag} // 2"]
+            a_, s_ = _v(f"a{tag}"), _v(f"s{tag}")
+            inner += [("=", a_, ("+", _plus(_v("i"), o), nu)), ("=", s_, ("%", a_, nu)),
+                      ("=", _v(f"f{tag}"), ("%", s_, ("n", 2))), ("=", _v(f"k{tag}"), ("//", s_, ("n", 2))),
+                      ("=", _v(f"h{tag}"), ("//", a_, ("n", 2)))]
         for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
-            inner.append(f"{s0.name} = Y0[f{_otag(o)}, k{_otag(o)}]")
-            inner.append(f"{s1.name} = W[14 + f{_otag(o)}, k{_otag(o)}]")
+            ft, kt = _v(f"f{_otag(o)}"), _v(f"k{_otag(o)}")
+            inner.append(("=", _v(s0.name), ("[]", "Y0", (ft, kt))))
+            inner.append(("=", _v(s1.name), ("[]", "W", (("+", ("n", 14), ft), kt))))
         kk = len(tp.pieces)
         flat_jac = [e for row in tp.jac for e in row]
-        g_pre, g_out = _cse_lines(tp.pieces, printer, "_g")
-        j_pre, j_out = _cse_lines(list(tp.pieces) + flat_jac, printer, "_j")
-        scatter_g = lambda outs: [f"W[f{_otag(o)}, k{_otag(o)}] += {outs[a]}"  # noqa: E731
-                                  for a, (f, o) in enumerate(t.slots)]
-        inner.append("if jac != 0:")
-        inner += ["    " + ln for ln in j_pre + scatter_g(j_out[:kk])]
+        g_pre, g_out = _cse_trees(tp.pieces, printer, "_g")
+        j_pre, j_out = _cse_trees(list(tp.pieces) + flat_jac, printer, "_j")
+
+        def scatter(outs, t=t):
+            return [("+=", ("[]", "W", (_v(f"f{_otag(o)}"), _v(f"k{_otag(o)}"))), outs[a])
+                    for a, (f, o) in enumerate(t.slots)]
+
+        jac = j_pre + scatter(j_out[:kk])
         for a, (f, o) in enumerate(t.slots):
             for b, (g, o2) in enumerate(t.slots):
                 ta, tb = _otag(o), _otag(o2)
-                row = (f"6 + 3 * f{ta}" if o == o2 else        # the same site: the diagonal block, (f, f)
-                       f"2 + 4 * (h{tb} - h{ta} + 1) + 2 * f{ta} + f{tb}")
-                inner.append(f"    W[{row}, k{ta}] += {j_out[kk + a * kk + b]}")
-        inner.append("else:")
-        inner += ["    " + ln for ln in g_pre + scatter_g(g_out)]
-        body += ["    " + ln for ln in inner]
-    return lines + ["    " + ln for ln in body]
+                fa = _v(f"f{ta}")
+                if o == o2:        # the same site: the diagonal block, (f, f)
+                    row = ("+", ("n", 6), ("*", ("n", 3), fa))
+                else:
+                    blk = ("+", ("-", _v(f"h{tb}"), _v(f"h{ta}")), ("n", 1))
+                    row = ("+", ("+", ("+", ("n", 2), ("*", ("n", 4), blk)), ("*", ("n", 2), fa)), _v(f"f{tb}"))
+                jac.append(("+=", ("[]", "W", (row, _v(f"k{ta}"))), j_out[kk + a * kk + b]))
+        inner.append(("if", ("!=", _v("jac"), ("n", 0)), tuple(jac), tuple(g_pre + scatter(g_out))))
+        body.append(("#", _docsafe(t.source)))
+        body.append(("#", "every term of a skew lattice is over all sites"))
+        body.append(("for", "i", ("n", 0), nu, tuple(inner)))
+    return kir.function("_grad_sites", ("Y0", "W", "n", "p", "jac"), body)
+
+
+def _kernel_text(fn) -> list[str]:
+    """The module's lines of the scalar kernel: its Python, its table, and the line attaching the
+    table (the compiled loop reads the tree, never this text)."""
+    table, _ = kir.flatten([fn])
+    return (kir.function_lines(fn)
+            + ["", "", "# _grad_sites as data (methodgen.codegen.kir): the compiled step loop inlines this tree",
+               "_KIR_grad_sites = ("] + ["    " + ln for ln in kir.table_text(table, 96)]
+            + [")", "_grad_sites = _kir.attach(_grad_sites, _KIR_grad_sites)"])
 
 
 def _otag(o: int) -> str:
@@ -242,7 +301,7 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
         for t in its_terms:
             extra.append({**entry(t), "energy_lines": values(t, t.symbols()), "piece_lines": []})
         quantities.append((name, list(range(first, first + len(its_terms)))))
-    scalar = _scalar_kernel(scheme) if backend == "compiled" else []
+    scalar = _kernel_text(_scalar_kernel(scheme)) if backend == "compiled" else []
     skew = lat.structure == "skew"
     skew_lines = []
     if skew:

@@ -1195,8 +1195,7 @@ def _function_def(py_func) -> ast.FunctionDef:
 
 #: digest -> the FunctionDef built from that tree (shared, read-only)
 _KIR_DEFS: dict = {}
-#: the attribute of a generated kernel's Python function holding its tree
-KIR_ATTR = "__kir__"
+KIR_ATTR = kir.KIR_ATTR
 
 
 def _names_of(py_func) -> dict:
@@ -1206,48 +1205,8 @@ def _names_of(py_func) -> dict:
     return names if names is not None else getattr(py_func, "__globals__", {})
 
 
-def attach(py_func, table):
-    """Give a generated kernel's Python function its kernel IR: the tree at the end of ``table``
-    (:func:`methodgen.codegen.kir.flatten`), which must be the definition of that function (its
-    name and parameters), its digest and the names its body is translated in.  The compiled
-    route then reads the tree and keys the machine code by its digest; the function's text (the
-    module's) is never read.  Returns ``py_func``.
-
-    Raises
-    ------
-    ValueError
-        The table is not a kernel-IR function of that name and those parameters.
-    """
-    import types
-
-    if not table:
-        raise ValueError(f"{py_func.__name__}: an empty kernel table")
-    tree = kir.unflatten(table, len(table) - 1)
-    code = py_func.__code__
-    params = tuple(code.co_varnames[:code.co_argcount])
-    if tree[0] != "def" or tree[1] != py_func.__name__ or tree[2] != params:
-        raise ValueError(f"{py_func.__name__}{params}: its kernel table defines {tree[0]} {tree[1:3]!r}")
-    from . import special_helpers
-
-    names = {"math": math}
-    for name, value in tree[4]:
-        if isinstance(value, tuple):        # ("array", kind, shape, values)
-            _, kind, shape, flat = value
-            value = np.array(flat, dtype=np.float64 if kind == "f" else np.int64).reshape(shape)
-        names[name] = value
-    g = py_func.__globals__
-    for name in sorted(kir.called(tree)):
-        if name.startswith("_f_"):
-            names[name] = getattr(special_helpers, name)     # the package's helper, not the module's copy
-        elif "." not in name and name not in ("abs", "min", "max", "range"):
-            other = getattr(g.get(name), "py_func", g.get(name))
-            if not isinstance(other, types.FunctionType) or getattr(other, KIR_ATTR, None) is None:
-                raise ValueError(f"{py_func.__name__} calls {name}, which is not a kernel with a table")
-            names[name] = other
-    setattr(py_func, KIR_ATTR, tree)
-    py_func.__kir_digest__ = kir.digest(tree)
-    py_func.__kir_names__ = names
-    return py_func
+#: (the attaching itself is llvmlite-free: a module without llvmlite still carries its trees)
+attach = kir.attach
 
 
 def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, vectorize=True) -> "LLVMKernel":
@@ -1446,14 +1405,15 @@ def _numba_for(py_func):
 
 
 def kernel(sig, table=None):
-    """Decorator: the kernel compiled through LLVM IR when it is code this module translates (and
-    the route is :func:`enabled`), else with numba for ``sig`` (cached on disk).  ``table``: the
-    kernel's IR (:func:`attach`), translated instead of any text, its machine code keyed by the
-    tree's digest."""
+    """Decorator: a generated kernel compiled through LLVM IR from its kernel IR ``table``
+    (:func:`attach`: the tree, never the module's text; its machine code keyed by the tree's
+    digest) when the route is :func:`enabled`, else with numba for ``sig`` (cached on disk).  A
+    kernel without a table (an expression the IR has no node for) is compiled by numba: the
+    generated text is never translated."""
     def deco(py_func):
         if table is not None:
             attach(py_func, table)
-        if enabled():
+        if table is not None and enabled():
             try:
                 return compile_kernel(py_func, sig, globals_=getattr(py_func, "__kir_names__", None))
             except Unsupported:

@@ -75,6 +75,9 @@ def _special_printer(prefix: str):
 class ScalarPrinter(PythonCodePrinter):
     """Python floats + :mod:`math`; half-integer powers through ``math.sqrt``."""
 
+    #: the kernel IR's builder reproduces this printer's trees (methodgen.codegen.kir_build)
+    kir_flavour = "scalar"
+
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
         if e.is_Rational and e.q == 2 and abs(e.p) != 1:
@@ -90,6 +93,8 @@ class CheckPrinter(ScalarPrinter):
     which CPython evaluates faster than ``**``.  Squares to fourth powers of any other base
     are products too: a float ``**`` that overflows raises OverflowError where ``*`` gives
     inf, and a check (such as H at the step's end) must not fail where the state is finite."""
+
+    kir_flavour = "check"
 
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args

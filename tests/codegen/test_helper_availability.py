@@ -1,5 +1,8 @@
 """Every helper of templates/_special.py.j2 is available where a generated kernel calls it.
 
+The scalar helpers' text lives in ``methodgen/codegen/special_helpers.py`` (their one source);
+the template copies each into a module under its own guard, beside its numpy form.
+
 A module defines exactly the helpers its kernels call (``ModuleIR.helpers``); the numba
 module compiles exactly those.  Two ways to break this, both seen: a template block that
 defines a helper under another helper's name (``_f_dsinc`` emitted with ``sinc``, so
@@ -29,10 +32,12 @@ from methodgen.problem.special import SPECIAL_FUNCTIONS
 
 TEMPLATES = Path(__file__).resolve().parents[2] / "templates"
 DEF_RE = re.compile(r"^def _f_(\w+)\(", re.M)
+GUARD_RE = re.compile(r'^\{% if "(\w+)" in ir.helpers %\}$', re.M)
 
 
 def _template_names() -> set[str]:
-    return set(DEF_RE.findall((TEMPLATES / "_special.py.j2").read_text()))
+    """The helpers the template has a guarded block for."""
+    return set(GUARD_RE.findall((TEMPLATES / "_special.py.j2").read_text()))
 
 
 def _render(helpers, source=None) -> str:
@@ -47,8 +52,13 @@ def _defined_apart(source=None) -> dict[str, set[str]]:
 
 
 def test_template_helpers_are_the_registered_ones():
-    """The template's helpers are exactly those SymPy functions print as (none forgotten)."""
-    assert _template_names() == {v[1:] for v in SPECIAL_FUNCTIONS.values()}
+    """The template's helpers, and the scalar forms in their one source, are exactly those
+    SymPy functions print as (none forgotten)."""
+    from methodgen.codegen import special_helpers
+
+    registered = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
+    assert _template_names() == registered
+    assert set(special_helpers.HELPERS) == registered
 
 
 def test_each_helper_is_defined_under_its_own_name_only():

@@ -272,6 +272,9 @@ def test_while_break_continue_and_integer_min_max_are_bitwise_numbas(tmp_path):
     ("    _r[0] = _helper(_y[0])\n", "python-call"),
 ])
 def test_what_is_not_translated_falls_back_to_numba(tmp_path, body, why):
+    """The translator refuses what it does not know (Unsupported); a kernel without a kernel-IR
+    table is compiled by numba (its text is never translated by the decorator), with numba's
+    results.  Control: a kernel with a table takes the LLVM route."""
     src = "def _helper(x):\n    return 2.0 * x\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
     if why == "python-call":     # a helper numba can call but that is not a compiled kernel here
         src = "_helper = numba.njit(lambda x: 2.0 * x)\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
@@ -282,17 +285,38 @@ def test_what_is_not_translated_falls_back_to_numba(tmp_path, body, why):
     assert not isinstance(got, lk.LLVMKernel)          # numba compiled it
     Y = np.array([[1.5, 2.5, 3.5], [-1.0, 0.5, 0.25]])
     assert np.array_equal(_rows(got, Y, 2), _rows(_numba(mod.k), Y, 2))
-    # control: a straight-line kernel takes the LLVM route
-    ok = _load(tmp_path, f"k_ok_{why}", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] + _y[1]\n")
-    assert isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
+    fn, table = _table_kernel(tmp_path, f"k_ok_{why}")
+    assert isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
+
+
+def _table_kernel(tmp_path, name):
+    """``k(_z, _y, _c, _h, _p, _r): _r[0] = _y[0] + _y[1]`` as a generated module has it: the
+    function printed from its kernel IR, and the IR's table."""
+    from methodgen.codegen import kir
+
+    tree = kir.function("k", ("_z", "_y", "_c", "_h", "_p", "_r"),
+                        [("=", ("[]", "_r", (("n", 0),)), ("+", ("[]", "_y", (("n", 0),)), ("[]", "_y", (("n", 1),))))])
+    mod = _load(tmp_path, name, "\n".join(kir.function_lines(tree)) + "\n")
+    return mod.k, kir.flatten([tree])[0]
 
 
 def test_the_numba_route_can_be_forced(tmp_path, monkeypatch):
-    ok = _load(tmp_path, "k_forced", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] + _y[1]\n")
+    fn, table = _table_kernel(tmp_path, "k_forced")
     monkeypatch.setenv("METHODGEN_KERNELS", "numba")
-    assert not isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
+    assert not isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
     monkeypatch.setenv("METHODGEN_KERNELS", "llvm")
-    assert isinstance(lk.kernel(RES)(ok.k), lk.LLVMKernel)
+    assert isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
+
+
+def test_a_table_of_another_function_is_refused(tmp_path):
+    """A kernel table is the definition of the function it is attached to (name and parameters),
+    or it is refused: a module cannot compile one function's tree for another."""
+    from methodgen.codegen import kir
+
+    fn, table = _table_kernel(tmp_path, "k_mismatch")
+    other = kir.flatten([kir.function("j", ("_z", "_y", "_c", "_h", "_p", "_r"), [])])[0]
+    with pytest.raises(ValueError, match="its kernel table defines"):
+        lk.kernel(RES, other)(fn)
 
 
 def _chain(n):

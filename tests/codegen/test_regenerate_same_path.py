@@ -125,9 +125,10 @@ def test_negative_control_a_key_without_the_tree_runs_stale_code(tmp_path, priva
 
 
 def test_file_changed_since_import_is_not_translated(tmp_path, private_cache):
-    """A function of a module imported by Python itself (no recorded text) whose file has
-    changed since: its text is refused (StaleSource), never translated; the unchanged file is
-    accepted (control)."""
+    """A function of a module imported by Python itself (no kernel IR) whose file has changed
+    since: its text is refused (StaleSource), never translated; the unchanged file is accepted
+    (control), not cacheable outside methodgen.  A generated module's function is refused
+    outright: it is compiled from its kernel IR, never from its text."""
     path = tmp_path / "plain_mod.py"
     path.write_text("def f(x):\n    return 3.0 * x\n")
     sys.path.insert(0, str(tmp_path))
@@ -144,6 +145,9 @@ def test_file_changed_since_import_is_not_translated(tmp_path, private_cache):
     finally:
         sys.path.remove(str(tmp_path))
         sys.modules.pop("plain_mod", None)
+    gen = mg.generate(mg.discretize(_osc(3), "energy-momentum"), tmp_path / "osc.py", backend="numba")
+    with pytest.raises(kernelsource.StaleSource, match="generated code"):
+        kernelsource.source_of(gen._nb_res.py_func)
 
 
 PROBE = textwrap.dedent("""
