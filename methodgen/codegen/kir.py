@@ -16,7 +16,7 @@ Nodes (every node a tuple; equal trees are equal tuples, so they hash and compar
 
 =====================  ==============================================================
 ``("n", v)``           a number: ``v`` an ``int`` or ``float``, never negative
-``("v", name)``        a variable
+``("v", name)``        a variable (or ``math.pi``, ``math.e``)
 ``("neg", a)``         ``-a``
 ``("+", a, b)``        ``a + b``; likewise ``"-"``, ``"*"``, ``"/"`` and ``"**"``
 ``("call", f, args)``  ``f(*args)``: ``f`` one of :data:`FUNCTIONS` or a removable-singularity
@@ -178,7 +178,7 @@ def to_ast(node, ctx=None) -> ast.expr:
     if op == "n":
         return ast.Constant(node[1])
     if op == "v":
-        return ast.Name(node[1], ctx or ast.Load())
+        return _name(node[1], ctx or ast.Load())        # (math.pi, math.e: attributes)
     if op == "neg":
         return ast.UnaryOp(ast.USub(), to_ast(node[1]))
     if op == "not":

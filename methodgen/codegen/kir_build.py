@@ -120,6 +120,12 @@ class _Builder:
             except ValueError:
                 raise Unsupported(f"the float {text}") from None
             return ("neg", ("n", v)) if neg else ("n", v)
+        if e.is_NumberSymbol:
+            # pi, E: the printer's module constants (math.pi, math.e)
+            name = self.p._print(e)
+            if name not in ("math.pi", "math.e"):
+                raise Unsupported(f"the constant {name}")
+            return ("v", name)
         if e.is_Add:
             return self.add(e)
         if e.is_Mul:
