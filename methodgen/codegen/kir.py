@@ -16,11 +16,11 @@ Nodes (every node a tuple; equal trees are equal tuples, so they hash and compar
 
 =====================  ==============================================================
 ``("n", v)``           a number: ``v`` an ``int`` or ``float``, never negative
-``("v", name)``        a variable (or ``math.pi``, ``math.e``)
+``("v", name)``        a variable (or ``math.pi``, ``math.e``, ``numpy.pi``, ``numpy.e``)
 ``("neg", a)``         ``-a``
 ``("+", a, b)``        ``a + b``; likewise ``"-"``, ``"*"``, ``"/"`` and ``"**"``
 ``("call", f, args)``  ``f(*args)``: ``f`` one of :data:`FUNCTIONS` or a removable-singularity
-                       helper ``_f_<name>`` (:mod:`methodgen.problem.special`)
+                       helper ``_f_<name>`` (``_v_<name>`` on arrays; :mod:`methodgen.problem.special`)
 =====================  ==============================================================
 
 The tree is the evaluation order, operation for operation: building it from a SymPy expression
@@ -52,11 +52,16 @@ __all__ = ["VERSION", "FUNCTIONS", "Unsupported", "Code", "python", "to_ast", "d
 #: printers' meaning must not load code printed by the old ones)
 VERSION = "kir-1"
 
-#: functions a tree may call (besides the ``_f_`` helpers): SymPy's names for them in Python
+#: functions a tree may call (besides the ``_f_`` / ``_v_`` helpers): SymPy's names for them in
+#: Python, on floats (math) and on arrays (numpy: the numpy modules' batch kernels, never compiled)
 FUNCTIONS = frozenset({"abs", "min", "max", "math.acos", "math.acosh", "math.asin", "math.asinh", "math.atan",
                        "math.atan2", "math.atanh", "math.cos", "math.cosh", "math.erf", "math.erfc", "math.exp",
                        "math.expm1", "math.hypot", "math.log", "math.log10", "math.log1p", "math.log2",
-                       "math.sin", "math.sinh", "math.sqrt", "math.tan", "math.tanh"})
+                       "math.sin", "math.sinh", "math.sqrt", "math.tan", "math.tanh",
+                       "numpy.arccos", "numpy.arccosh", "numpy.arcsin", "numpy.arcsinh", "numpy.arctan",
+                       "numpy.arctan2", "numpy.arctanh", "numpy.cos", "numpy.cosh", "numpy.exp", "numpy.expm1",
+                       "numpy.hypot", "numpy.log", "numpy.log10", "numpy.log1p", "numpy.log2", "numpy.sin",
+                       "numpy.sinh", "numpy.sqrt", "numpy.tan", "numpy.tanh", "numpy.maximum"})
 
 _BINARY = {"+": ast.Add, "-": ast.Sub, "*": ast.Mult, "/": ast.Div, "**": ast.Pow}
 #: Python's binding power of each node (higher binds tighter); ``**`` binds tighter than a

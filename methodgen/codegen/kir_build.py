@@ -93,8 +93,13 @@ class _Builder:
         from ..symbolic.compensate import grouped
 
         self.p = printer
-        # the check printer writes small powers as products (lower.CheckPrinter: kir_flavour "check")
-        self.check = getattr(printer, "kir_flavour", None) == "check"
+        # the check printer writes small powers as products (lower.CheckPrinter: kir_flavour "check");
+        # the vector printer (numpy arrays) has numpy's functions and its own powers
+        flavour = getattr(printer, "kir_flavour", None)
+        self.check = flavour == "check"
+        self.vector = flavour == "vector"
+        self.sqrt = "numpy.sqrt" if self.vector else "math.sqrt"
+        self.prefix = "_v_" if self.vector else "_f_"
         self.special = SPECIAL_FUNCTIONS
         self.grouped = grouped
 
@@ -123,7 +128,7 @@ class _Builder:
         if e.is_NumberSymbol:
             # pi, E: the printer's module constants (math.pi, math.e)
             name = self.p._print(e)
-            if name not in ("math.pi", "math.e"):
+            if name not in ("math.pi", "math.e", "numpy.pi", "numpy.e"):
                 raise Unsupported(f"the constant {name}")
             return ("v", name)
         if e.is_Add:
@@ -133,8 +138,15 @@ class _Builder:
         if e.is_Pow:
             return self.pow(e)
         if type(e) in self.special:
-            name = "_f_" + self.special[type(e)][1:]
+            name = self.prefix + self.special[type(e)][1:]
             return ("call", name, tuple(self.build(a) for a in e.args))
+        if self.vector and isinstance(e, sp.Max):
+            # VectorPrinter._print_Max: numpy.maximum(a, numpy.maximum(b, …))
+            args = [self.build(a) for a in e.args]
+            out = args[-1]
+            for a in reversed(args[:-1]):
+                out = ("call", "numpy.maximum", (a, out))
+            return out
         known = self.p.known_functions.get(type(e).__name__)
         if known is not None and e.args:
             name = self.p._module_format(known)
@@ -216,28 +228,35 @@ class _Builder:
                 u = self.build(b)
                 power = (_PAREN, ("*", u, ("call", "math.sqrt", (u,))))
                 return power if x.p > 0 else (_PAREN, ("/", ("n", 1), power))
-        # ScalarPrinter._print_Pow
+        if self.vector and x == -1:
+            # VectorPrinter._print_Pow
+            return ("/", ("n", 1), self.paren(b, PRECEDENCE["Pow"]))
+        # ScalarPrinter._print_Pow, VectorPrinter._print_Pow
         if x.is_Rational and x.q == 2 and abs(x.p) != 1:
-            root = ("call", "math.sqrt", (self.build(b),))
+            root = ("call", self.sqrt, (self.build(b),))
             power = ("**", root, ("n", abs(int(x.p))))
             return power if x.p > 0 else ("/", ("n", 1), power)
+        if self.vector and x.is_integer and x.is_negative:
+            # NumPyPrinter._print_Pow: a negative integer power with a float exponent
+            e = sp.Pow(b, x.evalf(), evaluate=False)
+            x = e.exp
         # AbstractPythonCodePrinter._hprint_Pow (rational=False)
         prec = precedence(e)
         if x == sp.S.Half:
-            return ("call", "math.sqrt", (self.build(b),))
+            return ("call", self.sqrt, (self.build(b),))
         if e.is_commutative:
             if -x is sp.S.Half:
-                return ("/", ("n", 1), ("call", "math.sqrt", (self.build(b),)))
+                return ("/", ("n", 1), ("call", self.sqrt, (self.build(b),)))
             if x is sp.S.NegativeOne:
                 return ("/", ("n", 1), self.paren(b, prec))
         return ("**", self.paren(b, prec), self.paren(x, prec))
 
 
 def code(printer, expr: sp.Expr):
-    """The printed code of ``expr``: a :class:`Code` (its tree's Python) for the scalar and check
-    printers of :mod:`methodgen.codegen.lower`, whose trees :func:`from_sympy` builds; SymPy's text
-    for any other printer (the numpy flavour) or an expression the IR has no node for."""
-    if getattr(printer, "kir_flavour", None) in ("scalar", "check"):
+    """The printed code of ``expr``: a :class:`Code` (its tree's Python) for the scalar, check and
+    vector printers of :mod:`methodgen.codegen.lower`, whose trees :func:`from_sympy` builds;
+    SymPy's text for any other printer or an expression the IR has no node for."""
+    if getattr(printer, "kir_flavour", None) in ("scalar", "check", "vector"):
         try:
             return Code(from_sympy(expr, printer))
         except Unsupported:

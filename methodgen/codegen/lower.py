@@ -113,6 +113,8 @@ class CheckPrinter(ScalarPrinter):
 class VectorPrinter(NumPyPrinter):
     """numpy arrays of any leading (batch) shape."""
 
+    kir_flavour = "vector"
+
     def _print_Max(self, expr):
         args = [self._print(a) for a in expr.args]
         out = args[-1]

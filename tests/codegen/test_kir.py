@@ -3,7 +3,7 @@
 (a) The tree the lowering builds from a SymPy expression is the tree Python makes of SymPy's
     code printer's text for it (the rounding every generated kernel always had): checked on
     random expressions of the grammar and on every kernel expression of a built-in scene, for
-    the scalar and the check printers.  Control: a builder that drops the printer's order of
+    the scalar, check and vector (numpy) printers.  Control: a builder that drops the printer's order of
     factors is caught.
 (b) ``ast.parse(kir.python(t))`` is ``kir.to_ast(t)``: the Python printer and the tree the LLVM
     translator reads agree, for expressions and whole kernel functions.
@@ -21,11 +21,12 @@ import sympy as sp
 
 import methodgen as mg
 from methodgen.codegen import kir, kir_build
-from methodgen.codegen.lower import CheckPrinter, ScalarPrinter, lower
+from methodgen.codegen.lower import CheckPrinter, ScalarPrinter, VectorPrinter, lower
 from methodgen.problem.special import sinc_u
 
 SCALAR = ScalarPrinter({"fully_qualified_modules": True})
 CHECK = CheckPrinter({"fully_qualified_modules": True})
+VECTOR = VectorPrinter({"fully_qualified_modules": True})
 X = sp.symbols("x y z w", real=True)
 
 
@@ -61,7 +62,7 @@ def _same_tree(expr, printer) -> bool:
     return ast.dump(ast.parse(printer.doprint(expr), mode="eval").body) == ast.dump(kir.to_ast(tree))
 
 
-@pytest.mark.parametrize("printer", [SCALAR, CHECK], ids=["scalar", "check"])
+@pytest.mark.parametrize("printer", [SCALAR, CHECK, VECTOR], ids=["scalar", "check", "vector"])
 def test_trees_are_the_printers_trees_on_random_expressions(printer):
     rng = random.Random(7)
     n = 0
