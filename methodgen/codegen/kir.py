@@ -366,6 +366,22 @@ for _op in ("+", "-", "*", "/", "**", "//", "%", ">>", "&", "==", "!=", "<", "<=
     _FIELDS[_op] = "NN"
 
 
+def _map_fields(node: tuple, f) -> tuple:
+    """``node`` with ``f`` applied to each of its child-node fields (by :data:`_FIELDS`), literals
+    kept: children to indices in :func:`flatten`, indices to children in :func:`unflatten`."""
+    out = []
+    for kind, value in zip(_FIELDS[node[0]], node[1:]):
+        if kind == "N":
+            out.append(f(value))
+        elif kind == "*":
+            out.append(tuple(f(v) for v in value))
+        elif kind == "o":
+            out.append(None if value is None else f(value))
+        else:
+            out.append(value)
+    return (node[0],) + tuple(out)
+
+
 def flatten(roots) -> tuple[tuple, tuple]:
     """``(table, indices)``: the nodes of the trees ``roots`` as a flat table (children by index,
     shared subtrees once, children before parents) and the index of each root."""
@@ -375,20 +391,10 @@ def flatten(roots) -> tuple[tuple, tuple]:
         kinds = _FIELDS.get(node[0])
         if kinds is None or len(kinds) != len(node) - 1:
             raise ValueError(f"not a node of the kernel IR: {node[:1]!r}")
-        fields = []
-        for kind, value in zip(kinds, node[1:]):
-            if kind == "N":
-                fields.append(put(value))
-            elif kind == "*":
-                fields.append(tuple(put(v) for v in value))
-            elif kind == "o":
-                fields.append(None if value is None else put(value))
-            else:
-                fields.append(value)
-        entry = (node[0],) + tuple(fields)
-        # keyed by the literals' types and digits too: 0, 0.0 and -0.0 are equal as Python values
-        # (and would share an entry) but are different constants
-        key = (entry, tuple(type(f).__name__ + ":" + repr(f) for f in fields if not isinstance(f, tuple)))
+        entry = _map_fields(node, put)
+        # keyed by the entry's text (shallow: children are indices), which keeps 0, 0.0 and -0.0
+        # apart -- equal as Python values, so they would share an entry -- in constants too
+        key = repr(entry)
         got = memo.get(key)
         if got is None:
             got = memo[key] = len(table)
@@ -401,21 +407,9 @@ def flatten(roots) -> tuple[tuple, tuple]:
 
 def unflatten(table, index: int) -> tuple:
     """The tree at ``table[index]`` (:func:`flatten`'s inverse; children precede parents)."""
-    built: dict = {}
+    built: list = []
     for i in range(index + 1):
-        entry = table[i]
-        kinds = _FIELDS[entry[0]]
-        fields = []
-        for kind, value in zip(kinds, entry[1:]):
-            if kind == "N":
-                fields.append(built[value])
-            elif kind == "*":
-                fields.append(tuple(built[v] for v in value))
-            elif kind == "o":
-                fields.append(None if value is None else built[value])
-            else:
-                fields.append(value)
-        built[i] = (entry[0],) + tuple(fields)
+        built.append(_map_fields(table[i], built.__getitem__))
     return built[index]
 
 

@@ -407,13 +407,7 @@ class Lattice:
         if len(text) > MAX_TEXT:
             raise ParseError(f"{what} is longer than {MAX_TEXT} characters")
         b = _StencilBuilder({s.name: s for s in self.param_symbols}, self.size, what)
-        try:
-            tree = ast.parse(text.strip(), mode="eval")
-        except SyntaxError as exc:
-            raise ParseError(f"syntax error in {what}: {exc.msg}: {text!r}") from None
-        row = b.build(tree.body, 0)
-        if not isinstance(row, sp.Expr):
-            raise ParseError(f"{what} must be a scalar expression")
+        row = _build_scalar(b, text, what)
         if b.anchors:
             raise ParseError(f"{what}: a fixed site; write the row with g[i + c] (the site i + c, cyclically)")
         gs = sorted((k for k in map(_parse_slot, row.free_symbols) if k and k[0] == STENCIL_GRADIENT),
@@ -465,13 +459,7 @@ class Lattice:
     def _parse(self, text: str, what: str) -> tuple[SiteTerm, ...]:
         symbols = {s.name: s for s in self.param_symbols}
         b = _LatticeBuilder(symbols, self.fields, self.size, what)
-        try:
-            tree = ast.parse(text.strip(), mode="eval")
-        except SyntaxError as exc:
-            raise ParseError(f"syntax error in {what}: {exc.msg}: {text!r}") from None
-        top = b.build(tree.body, 0)
-        if not isinstance(top, sp.Expr):
-            raise ParseError(f"{what} must be a scalar expression")
+        top = _build_scalar(b, text, what)
         terms = []
         placeholders = [s for s, *_ in b.sums]
         for ph, template, lo, hi, src in b.sums:
@@ -566,6 +554,19 @@ class Lattice:
                 sub[self.size] = sp.Integer(n)
                 out.append(t.template.xreplace(sub))
         return sp.Add(*out), qs, ps
+
+
+def _build_scalar(builder, text: str, what: str) -> sp.Expr:
+    """``text`` parsed (:mod:`ast`, never evaluated) and built by the whitelist ``builder``: a
+    scalar expression, or ParseError naming ``what``."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError as exc:
+        raise ParseError(f"syntax error in {what}: {exc.msg}: {text!r}") from None
+    out = builder.build(tree.body, 0)
+    if not isinstance(out, sp.Expr):
+        raise ParseError(f"{what} must be a scalar expression")
+    return out
 
 
 def _parse_slot(s: sp.Symbol):
