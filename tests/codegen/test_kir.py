@@ -14,7 +14,9 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 import random
+import re
 
 import pytest
 import sympy as sp
@@ -174,3 +176,62 @@ def test_digest_changes_with_any_constant():
     v = table[i][1]
     edited[i] = ("n", v + 1 if isinstance(v, int) else v * (1 + 2 ** -52))   # one constant: one more, one ulp
     assert kir.digest(kir.unflatten(tuple(edited), root)) != kir.digest(fn)
+
+
+@pytest.mark.parametrize("scene, method, opts", [
+    ("outer-solar-system", "energy-momentum", {}),      # loops over like terms
+    ("pendulum", "rattle", {}),                         # constraints, projection
+    ("kepler", "gauss", {"stages": 2}),                 # stage loops
+    ("henon-heiles", "kahan", {}),                      # linearly implicit
+    ("kepler", "stormer-verlet", {"order": 4}),         # composition, first-same-as-last, block kernel
+])
+def test_every_compiled_kernel_is_a_tree(scene, method, opts):
+    """A compiled module's kernels all carry their tables: none is printed on the text route
+    (decorated and compiled by numba).  Control: a kernel whose expression has no tree is."""
+    from methodgen.codegen.emit import render
+
+    ir = lower(mg.discretize(mg.load_scene(scene).system, method, **opts), "s" * 64, "m")
+    text = render(ir, "numba")
+    kernels = re.findall(r"^def (_nb_\w+|_py_post_block)\(", text, re.M)
+    assert kernels
+    for name in kernels:
+        assert f"_KIR{name} = (" in text, name
+    assert not re.search(r"^@_(kernel|inline|jit)\b", text, re.M)
+    # control: the same module with one expression left as SymPy's text
+    post = ir.scalar["post"]
+    var, code = post.temps[0] if post.temps else (None, None)
+    if var is not None:
+        bad = dataclasses.replace(ir, scalar={**ir.scalar, "post": dataclasses.replace(
+            post, temps=((var, str(code)),) + post.temps[1:])})
+        assert re.search(r"^@_kernel\(_KT\['post'\]\)", render(bad, "numba"), re.M)
+
+
+@pytest.mark.parametrize("key", ["tree", "name"])
+def test_a_lattice_module_regenerated_at_one_path_runs_its_own_kernel(tmp_path, monkeypatch, key):
+    """Two lattices of one shape (another coupling) built in a row at one path, compiled: each
+    run is its numpy module's (the site kernel is compiled from its tree, keyed by its digest).
+    Control (``key="name"``): with the machine code keyed by the kernel's name instead, the
+    second lattice runs the first one's kernel and the comparison fails."""
+    pytest.importorskip("llvmlite")
+    from methodgen.codegen import llvmcache
+
+    if key == "name":
+        monkeypatch.setattr(llvmcache, "_function_part", lambda fn: "fn:" + getattr(fn, "py_func", fn).__name__)
+    import numpy as np
+
+    from methodgen.codegen.lattice_emit import build_lattice
+    from methodgen.problem.lattice import Lattice
+
+    monkeypatch.setenv("METHODGEN_CACHE", str(tmp_path / "cache"))
+    n = 16
+    y0 = np.r_[np.sin(np.arange(n) * 0.7), 0.3 * np.cos(np.arange(n) * 1.3)]
+    for k in (1, 3):
+        lat = Lattice(f"Sum(p[i]**2/2, i, 1, N) + Sum({k}*(q[i % N + 1] - q[i])**2/2, i, 1, N) "
+                      "+ Sum(1 - cos(q[i]), i, 1, N)", name="lat")
+        c = build_lattice(lat, "avf", tmp_path / "c.py", backend="compiled")
+        a = build_lattice(lat, "avf", tmp_path / f"a{k}.py")
+        err = np.max(np.abs(c.integrate(y0, 0.05, 40) - a.integrate(y0, 0.05, 40)))
+        if key == "tree" or k == 1:
+            assert err < 1e-12, (k, err)
+        else:
+            assert err > 1e-3, err           # the stale kernel: another coupling
