@@ -44,7 +44,7 @@ from __future__ import annotations
 import ast
 import hashlib
 
-__all__ = ["VERSION", "FUNCTIONS", "Unsupported", "Code", "python", "to_ast", "digest", "names", "called",
+__all__ = ["VERSION", "FUNCTIONS", "Unsupported", "Code", "python", "to_ast", "digest", "called",
            "read_names", "attach", "KIR_ATTR", "function", "table_const", "function_lines", "function_def", "flatten", "unflatten",
            "table_text"]
 
@@ -201,28 +201,6 @@ def to_ast(node, ctx=None) -> ast.expr:
         return ast.Compare(to_ast(node[1]), [_COMPARE[op]()], [to_ast(node[2])])
     cls = _BINARY.get(op) or _INT_BINARY[op]
     return ast.BinOp(to_ast(node[1]), cls(), to_ast(node[2]))
-
-
-def names(node, out=None) -> set:
-    """The variables an expression tree reads."""
-    out = set() if out is None else out
-    stack = [node]
-    while stack:
-        n = stack.pop()
-        if n is None:
-            continue
-        op = n[0]
-        if op == "v":
-            out.add(n[1])
-        elif op in ("call", "[]"):
-            if op == "[]":
-                out.add(n[1])
-            stack.extend(n[2])
-        elif op == "slice":
-            stack.extend(n[1:])
-        elif op not in ("n", "buffer", "zeros", "empty"):
-            stack.extend(n[1:])
-    return out
 
 
 # --- kernels: statements and functions ---------------------------------------------------------
@@ -450,32 +428,26 @@ class Code(str):
         return self
 
 
-def called(tree) -> set:
-    """The names of the functions a tree (an expression, a statement or a function) calls."""
-    out = set()
-    stack = [tree]
-    while stack:
-        n = stack.pop()
-        if isinstance(n, tuple):
-            if n and n[0] == "call" and len(n) == 3 and isinstance(n[1], str):
-                out.add(n[1])
-            stack.extend(x for x in n if isinstance(x, tuple))
-    return out
-
-
-def read_names(tree) -> set:
-    """Every variable and array name a tree (a function, statement or expression) mentions."""
-    out = set()
+def _nodes(tree):
+    """Every node of a tree (an expression, a statement or a function), parents first."""
     stack = [tree]
     while stack:
         n = stack.pop()
         if isinstance(n, tuple) and n:
-            if n[0] == "v" and len(n) == 2:
-                out.add(n[1])
-            elif n[0] == "[]" and len(n) == 3 and isinstance(n[1], str):
-                out.add(n[1])
+            if isinstance(n[0], str):
+                yield n
             stack.extend(x for x in n if isinstance(x, tuple))
-    return out
+
+
+def called(tree) -> set:
+    """The names of the functions a tree calls."""
+    return {n[1] for n in _nodes(tree) if n[0] == "call" and len(n) == 3 and isinstance(n[1], str)}
+
+
+def read_names(tree) -> set:
+    """Every variable and array name a tree (a function, statement or expression) mentions."""
+    return {n[1] for n in _nodes(tree) if (n[0] == "v" and len(n) == 2)
+            or (n[0] == "[]" and len(n) == 3 and isinstance(n[1], str))}
 
 
 #: the attribute of a generated kernel's Python function holding its tree
