@@ -42,8 +42,8 @@ def _tree(code):
 
 
 def straight_kernel(name: str, kern, ir, args, outs, step_alias: str | None = None):
-    """The kernel ``name`` as a kernel-IR function, or None where it is not straight-line code
-    (loops over like terms or rows, code ahead of loops) or has an expression without a tree.
+    """The kernel ``name`` as a kernel-IR function -- straight-line code, loops over like terms
+    and over like rows, code ahead of the loops -- or None where an expression has no tree.
 
     Parameters
     ----------

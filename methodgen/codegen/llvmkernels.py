@@ -4,8 +4,9 @@ numba spends seconds typing and lowering a kernel of a few hundred statements (t
 solar system's energy-momentum Newton matrix: 3.4 s of a 9.5 s first use; most of it is
 numba's type inference trying overloads per operation, not LLVM).  The kernels of a numba
 module are float arithmetic on arrays of known shape, so this module writes their LLVM IR
-directly from the kernel's Python source -- as heyoka does from its expression graph -- and
-compiles it with LLVM in milliseconds.  The result is an :class:`LLVMKernel`: machine code
+directly from the kernel's tree (:mod:`methodgen.codegen.kir`, as heyoka does from its expression
+graph), and from the hand-written runtime's Python source (the stepper, the Wisdom–Holman
+flows), and compiles it with LLVM in milliseconds.  The result is an :class:`LLVMKernel`: machine code
 with the signature of numba's C-ABI wrapper for the same kernel type, so the shared runtime
 calls it exactly as it calls a numba kernel (numba's wrapper-address protocol), and the
 fused loop (:mod:`methodgen.runtime.fused`) inlines its source.  Signatures are
@@ -44,9 +45,10 @@ comparisons but ``!=``; ``max``/``min`` as numba's ``do_minmax``; ``math.sqrt``,
 fast-math flags, so it does not reassociate.  One difference: ``x**-n`` at x = 0 is inf
 here (the modules' error model); numba's raises ``ZeroDivisionError`` inside the kernel.
 
-The kernels' source is the text the generated module was executed from (recorded by
-methodgen's loader: :mod:`methodgen.codegen.kernelsource`), parsed with :mod:`ast` -- generated
-code, never user text.
+What is translated is an :mod:`ast` definition: for a generated kernel, built from its kernel
+IR (:func:`attach`: the tree the module holds as a table; a generated module's text is never
+parsed); for the hand-written runtime, its file's executed text (:mod:`methodgen.codegen.kernelsource`),
+parsed with :mod:`ast`.  Never user text.
 """
 
 from __future__ import annotations
@@ -1179,8 +1181,9 @@ class _Translator:
 
 def _function_def(py_func) -> ast.FunctionDef:
     """The definition a function is translated from: a generated kernel's tree
-    (:func:`attach`: built from the module's kernel IR, never from its text), else the text of
-    methodgen's own runtime file it was executed from (:mod:`methodgen.codegen.kernelsource`)."""
+    (:func:`attach`: built from the module's kernel IR, never from its text), else the executed
+    text of a hand-written function's file (:mod:`methodgen.codegen.kernelsource`, which refuses
+    generated modules)."""
     tree = getattr(py_func, KIR_ATTR, None)
     if tree is not None:
         got = _KIR_DEFS.get(py_func.__kir_digest__)
