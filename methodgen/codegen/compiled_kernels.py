@@ -9,7 +9,7 @@ its Python function, and as a flat table (:func:`methodgen.codegen.kir.flatten`)
 compiled route translates to machine code (:func:`methodgen.codegen.llvmkernels.kernel`), keyed
 by the tree's digest.  The module's text is never read back.
 
-Built here: every kernel of the lowering (:func:`straight_kernel`: straight-line code, loops over
+Built here: every kernel of the lowering (:func:`kernel_function`: straight-line code, loops over
 families of like terms, :mod:`methodgen.codegen.lower_loops`, and over like rows,
 :mod:`methodgen.codegen.lower_rows`), an s-stage method's loops over its stages
 (:func:`stage_kernel`) and the lock-step block kernel (:func:`block_kernel`).  A kernel with an
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from . import kir
 
-__all__ = ["straight_kernel", "stage_kernel", "block_kernel", "kernel_text", "STACK_MAX"]
+__all__ = ["kernel_function", "stage_kernel", "block_kernel", "kernel_text", "STACK_MAX"]
 
 
 def _load(var: str, array: str, i: int) -> tuple:
@@ -41,7 +41,7 @@ def _tree(code):
     raise kir.Unsupported(f"code without a tree: {code[:40]!r}")
 
 
-def straight_kernel(name: str, kern, ir, args, outs, step_alias: str | None = None):
+def kernel_function(name: str, kern, ir, args, outs, step_alias: str | None = None):
     """The kernel ``name`` as a kernel-IR function -- straight-line code, loops over like terms
     and over like rows, code ahead of the loops -- or None where an expression has no tree.
 

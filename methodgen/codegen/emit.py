@@ -222,11 +222,11 @@ def _environment_for(folder: str):
     env.filters["pyrepr"] = repr
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
     from .special_helpers import source as helper_source
-    from .compiled_kernels import block_kernel, kernel_text, stage_kernel, straight_kernel
+    from .compiled_kernels import block_kernel, kernel_function, kernel_text, stage_kernel
 
     env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.codegen.abi)
     env.globals["helper_source"] = helper_source   # the scalar helpers' one source (a copy per module)
-    env.globals["straight_kernel"] = straight_kernel   # compiled kernels as kernel IR
+    env.globals["kernel_function"] = kernel_function   # compiled kernels as kernel IR
     env.globals["kernel_text"] = kernel_text
     env.globals["stage_kernel"] = stage_kernel
     env.globals["block_kernel"] = block_kernel

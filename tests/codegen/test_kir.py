@@ -136,14 +136,14 @@ def test_python_text_parses_to_the_tree():
 
 
 def _module_kernels():
-    from methodgen.codegen.compiled_kernels import stage_kernel, straight_kernel
+    from methodgen.codegen.compiled_kernels import kernel_function, stage_kernel
 
     out = []
     for name, method, opts in (("outer-solar-system", "energy-momentum", {}), ("kepler", "gauss", {"stages": 2}),
                                ("henon-heiles-2d", "stormer-verlet", {"order": 4})):
         ir = lower(mg.discretize(mg.load_scene(name).system, method, **opts), "s" * 64, "m")
         args = ["_z", "_y", "_c", "_g", "_ha", "_hd", "_hb", "_p"]
-        out.append(straight_kernel("_nb_post", ir.scalar["post"], ir, args, ["_out"], "_hd"))
+        out.append(kernel_function("_nb_post", ir.scalar["post"], ir, args, ["_out"], "_hd"))
         if ir.stage:
             out.append(stage_kernel("_nb_resjac", ir, "resjac"))
     return out
