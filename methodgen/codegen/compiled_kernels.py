@@ -29,16 +29,7 @@ def _load(var: str, array: str, i: int) -> tuple:
 
 
 def _store(array: str, idx: tuple, code) -> tuple:
-    return ("=", ("[]", array, tuple(("n", i) for i in idx)), _tree(code))
-
-
-def _tree(code):
-    tree = getattr(code, "tree", None)
-    if tree is not None:
-        return tree
-    if code == "0.0":           # an entry without output (Kernel.entries)
-        return ("n", 0.0)
-    raise kir.Unsupported(f"code without a tree: {code[:40]!r}")
+    return ("=", ("[]", array, tuple(("n", i) for i in idx)), kir.tree_of(code))
 
 
 def kernel_function(name: str, kern, ir, args, outs, step_alias: str | None = None):
@@ -97,7 +88,7 @@ def _build(name, kern, ir, args, outs, step_alias, rows=None):
     if rows and kern.pre:
         body += rows[3]
     else:
-        body += [("=", ("v", var), _tree(code)) for var, code in kern.pre]
+        body += [("=", ("v", var), kir.tree_of(code)) for var, code in kern.pre]
         body += [("=", ("[]", outs[0], (("n", i),)), ("v", v)) for i, v in enumerate(kern.pre_out)]
     first_len = ir.n_unknowns if len(outs) == 2 else kern.shape[0]
     off = len(kern.pre_out)
@@ -123,10 +114,10 @@ def _build(name, kern, ir, args, outs, step_alias, rows=None):
                 arr = outs[0] if s == "d" else "_" + s
                 src = ("[]", arr, (("[]", L.table, (k, ("n", col))),))
             inner.append(("=", ("v", var), src))
-        inner += [("=", ("v", var), _tree(code)) for var, code in L.temps]
+        inner += [("=", ("v", var), kir.tree_of(code)) for var, code in L.temps]
         for acc, cols, code in L.adds:
             idx = tuple(("[]", L.table, (k, ("n", c))) for c in cols) or (("n", 0),)
-            inner.append(("+=", ("[]", acc, idx), _tree(code)))
+            inner.append(("+=", ("[]", acc, idx), kir.tree_of(code)))
         body.append(("#", f"{L.size} instances of a like term (methodgen.codegen.lower_loops)"))
         body.append(_for("_k", ("n", L.size), inner))
         consts.append(kir.table_const(L.table, tables[L.table], "i"))
@@ -136,16 +127,16 @@ def _build(name, kern, ir, args, outs, step_alias, rows=None):
         return kir.function(name, tuple(args) + tuple(outs), body + list(rows[1]), consts)
     for a in kern.accs:
         body += [("=", ("v", var), ("[]", a.name, tuple(("n", i) for i in ix))) for var, ix in a.unpack]
-    body += [("=", ("v", var), _tree(code)) for var, code in kern.temps]
+    body += [("=", ("v", var), kir.tree_of(code)) for var, code in kern.temps]
     flat = kern.entries()
     if not outs:
-        body.append(("return", _tree(flat[0])))
+        body.append(("return", kir.tree_of(flat[0])))
     elif len(outs) == 2 and kern.jac_rows:
         n = ir.n_unknowns
         body += [_store(outs[0], (i,), flat[i]) for i in range(n)]
         body.append(("#", f"Newton matrix I + diag(s) ∂A/∂Δq, A the accumulated discrete gradient (in place: _sB is {outs[1]})"))
         for i in range(n):
-            body += [("=", ("v", "_js"), _tree(flat[n + i])),
+            body += [("=", ("v", "_js"), kir.tree_of(flat[n + i])),
                      _for("_b", ("n", n), [("=", ("[]", outs[1], (("n", i), ("v", "_b"))),
                                               ("*", ("v", "_js"), ("[]", "_sB", (("n", i), ("v", "_b")))))]),
                      ("+=", ("[]", outs[1], (("n", i), ("n", i))), ("n", 1.0))]
@@ -322,10 +313,10 @@ def _block(name, kern, ir, lanes):
     lane = [("=", _v(v), at("_y", i)) for i, v in enumerate(ir.state_vars)]
     lane += [("=", _v(v), at("_c", i)) for i, v in enumerate(ir.comp_vars)]
     lane += [("=", _v(v), at("_g", i)) for i, v in enumerate(ir.fsal_vars)]
-    lane += [("=", _v(var), _tree(code)) for var, code in kern.temps]
-    lane += [("=", _v(f"_bd{i}"), _tree(c)) for i, c in enumerate(flat[:d])]
-    lane += [("=", at("_g", i), _tree(c)) for i, c in enumerate(flat[d:d + nf])]
-    lane += [("=", at("_out", d + nf + i), _tree(c)) for i, c in enumerate(flat[d + nf:])]
+    lane += [("=", _v(var), kir.tree_of(code)) for var, code in kern.temps]
+    lane += [("=", _v(f"_bd{i}"), kir.tree_of(c)) for i, c in enumerate(flat[:d])]
+    lane += [("=", at("_g", i), kir.tree_of(c)) for i, c in enumerate(flat[d:d + nf])]
+    lane += [("=", at("_out", d + nf + i), kir.tree_of(c)) for i, c in enumerate(flat[d + nf:])]
     bad = ("if", ("not", ("==", ("-", _v("_us"), _v("_us")), _n(0.0))), (("+=", _v("_ubad"), _n(1)),), ())
     comp, plain = list(lane), list(lane)
     for i, v in enumerate(ir.state_vars):

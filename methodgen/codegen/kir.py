@@ -45,7 +45,7 @@ import ast
 import hashlib
 
 __all__ = ["VERSION", "FUNCTIONS", "Unsupported", "Code", "python", "to_ast", "digest", "called",
-           "read_names", "attach", "KIR_ATTR", "function", "table_const", "function_lines", "function_def", "flatten", "unflatten",
+           "read_names", "tree_of", "attach", "KIR_ATTR", "function", "table_const", "function_lines", "function_def", "flatten", "unflatten",
            "table_text"]
 
 #: the IR's and its printers' version: part of every machine-code key (a change of the
@@ -437,6 +437,17 @@ def _nodes(tree):
             if isinstance(n[0], str):
                 yield n
             stack.extend(x for x in n if isinstance(x, tuple))
+
+
+def tree_of(code) -> tuple:
+    """The tree of a kernel entry's code: a :class:`Code`'s, or ``0.0`` for an entry without
+    output (``Kernel.entries``); :class:`Unsupported` for text without a tree."""
+    tree = getattr(code, "tree", None)
+    if tree is not None:
+        return tree
+    if code == "0.0":
+        return ("n", 0.0)
+    raise Unsupported(f"code without a tree: {code[:40]!r}")
 
 
 def called(tree) -> set:

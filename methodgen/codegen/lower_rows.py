@@ -36,6 +36,8 @@ bit for bit (``tests/codegen/test_row_loops.py``).  Systems with fewer than
 
 from __future__ import annotations
 
+from .kir import Unsupported, tree_of
+
 __all__ = ["row_body_ir", "MIN_ROWS", "MIN_KERNEL_ROWS", "INLINE_MAX", "MIN_TERMS"]
 
 #: Shortest run of like rows printed as a loop.
@@ -98,19 +100,6 @@ def _order(blocks):
             order.append(B)
             left.remove(B)
     return order
-
-
-def _tree_of(code):
-    tree = getattr(code, "tree", None)
-    if tree is None:
-        if code == "0.0":
-            return ("n", 0.0)
-        raise _NoTree(code)
-    return tree
-
-
-class _NoTree(Exception):
-    pass
 
 
 def _subst(tree, repl):
@@ -218,16 +207,16 @@ def row_body_ir(kern, ir, args, outs):
     has no tree.  See the module docstring."""
     try:
         return _row_body_ir(kern, ir, args, outs)
-    except _NoTree:
+    except Unsupported:
         return None
 
 
 def _row_body_ir(kern, ir, args, outs):
     if not outs:
         return None
-    flat = [_tree_of(c) for c in kern.entries()]
+    flat = [tree_of(c) for c in kern.entries()]
     npre = len(kern.pre_out)
-    pre_assign = {v: _tree_of(c) for v, c in kern.pre}
+    pre_assign = {v: tree_of(c) for v, c in kern.pre}
     if npre and (len(outs) != 1 or any(v not in pre_assign for v in kern.pre_out)
                  or any(_key(flat[r]) != _key(("v", v)) for r, v in enumerate(kern.pre_out))):
         return None
@@ -251,7 +240,7 @@ def _row_body_ir(kern, ir, args, outs):
     pre_temps = [(v, pre_assign[v]) for v, _ in kern.pre if v not in pre_out]
     pre_rows = [pre_assign[v] for v in kern.pre_out]
 
-    temps = pre_temps + [(v, _tree_of(c)) for v, c in kern.temps]
+    temps = pre_temps + [(v, tree_of(c)) for v, c in kern.temps]
     rowtemp, expanded = set(), {}
 
     def expand(tree):
