@@ -34,40 +34,46 @@ class Stepper:
     Parameters
     ----------
     scheme : Scheme
-    h : sympy.Rational
-        The step size (exact).
+    h : sympy.Rational or sympy.Float
+        The step size (exact, or a 60-digit float: a composition's stage step).
+
+    Notes
+    -----
+    The scheme's equations are printed for mpmath once per scheme, with ``h`` an argument
+    (:func:`_functions`): a certificate that steps at many step sizes (an order ladder, a
+    composition's stages) evaluates the same functions at each.  Printing them was the cost
+    of such a certificate (a Calogero order ladder: 64 of 95 s).
     """
 
     def __init__(self, scheme, h):
         self.scheme = scheme
-        system = scheme.system
-        sub = {**param_point(system), scheme.h: h}
-        z = list(scheme.unknowns)
-        y = list(system.y)
-        prep = lambda M: [to_elementary(guarded(e.xreplace(sub))) for e in M]
-        self.n = len(z)
-        self.inc = sp.lambdify([z, y], prep(scheme.increment), modules="mpmath")
-        if self.n:
-            self.res = sp.lambdify([z, y], prep(scheme.residual), modules="mpmath")
-            self.jac = sp.lambdify([z, y], prep(scheme.jacobian), modules="mpmath")
-            self.guess = sp.lambdify([y], prep(scheme.guess), modules="mpmath")
+        self.h = h
+        self.n, self.inc, self.res, self.jac, self.guess = _functions(scheme)
+
+    def _h(self):
+        """The step size as an mpmath number at the working precision."""
+        h = self.h
+        if isinstance(h, sp.Rational):
+            return mp.mpf(int(h.p)) / int(h.q)
+        return mp.mpf(str(h))
 
     def __call__(self, y0):
         with mp.workdps(DPS):
+            h = self._h()
             y0 = [mp.mpf(v) for v in y0]
             z = []
             if self.n:
-                z = [mp.mpf(v) for v in self.guess(y0)]
+                z = [mp.mpf(v) for v in self.guess(y0, h)]
                 for _ in range(60):
-                    r = mp.matrix(self.res(z, y0))
+                    r = mp.matrix(self.res(z, y0, h))
                     if mp.norm(r) < mp.mpf(10) ** (-(DPS - 5)):
                         break
-                    J = mp.matrix(_rows(self.jac(z, y0), self.n))
+                    J = mp.matrix(_rows(self.jac(z, y0, h), self.n))
                     dz = mp.lu_solve(J, r)
                     z = [zi - dzi for zi, dzi in zip(z, dz)]
                 else:
                     raise ArithmeticError("Newton did not converge in 60-digit arithmetic")
-            d = self.inc(z, y0)
+            d = self.inc(z, y0, h)
             return [a + b for a, b in zip(y0, _flat(d))]
 
     def derivative(self, y0, v):
@@ -76,6 +82,41 @@ class Stepper:
             plus = self([a + EPS * b for a, b in zip(y0, v)])
             minus = self([a - EPS * b for a, b in zip(y0, v)])
             return [(a - b) / (2 * EPS) for a, b in zip(plus, minus)]
+
+
+#: The schemes whose mpmath functions were printed, the newest _KEEP: id(scheme) -> (scheme,
+#: functions).  The scheme is kept with its functions, so its id is not reused while the entry
+#: lives.
+_PRINTED: dict = {}
+_KEEP = 16
+
+
+def _functions(scheme):
+    """``(n, increment, residual, jacobian, guess)`` of ``scheme`` printed for mpmath, with the
+    system's parameters substituted exactly and the step size ``h`` the last argument:
+    ``increment(z, y, h)``, ``residual(z, y, h)``, ``jacobian(z, y, h)`` (n·n, row-major),
+    ``guess(y, h)``; printed once per scheme (the newest :data:`_KEEP` schemes are kept)."""
+    got = _PRINTED.get(id(scheme))
+    if got is not None and got[0] is scheme:
+        return got[1]
+    system = scheme.system
+    sub = param_point(system)
+    z = list(scheme.unknowns)
+    y = list(system.y)
+    hs = scheme.h
+    prep = lambda M: [to_elementary(guarded(e.xreplace(sub))) for e in M]
+    n = len(z)
+    inc = sp.lambdify([z, y, hs], prep(scheme.increment), modules="mpmath")
+    res = jac = guess = None
+    if n:
+        res = sp.lambdify([z, y, hs], prep(scheme.residual), modules="mpmath")
+        jac = sp.lambdify([z, y, hs], prep(scheme.jacobian), modules="mpmath")
+        guess = sp.lambdify([y, hs], prep(scheme.guess), modules="mpmath")
+    fns = (n, inc, res, jac, guess)
+    _PRINTED[id(scheme)] = (scheme, fns)
+    while len(_PRINTED) > _KEEP:
+        del _PRINTED[next(iter(_PRINTED))]
+    return fns
 
 
 def _flat(x):
