@@ -39,6 +39,12 @@ Two structures:
   ``Sum(…, i, 1, N)`` with periodic neighbours, and N is even (the step's pentadiagonal Newton
   matrix is solved as a block tridiagonal one over the pairs of sites (2k - 1, 2k)).
 
+A *2-D periodic* lattice names two sizes, ``Lattice(H, size=("N", "M"))`` (a :class:`Lattice2D`):
+terms ``Sum(Sum(body, j, 1, M), i, 1, N)`` over the N × M torus with two-index fields
+``q[i, j]``, ``q[i % N + 1, j]``, ``q[i, (j - 2) % M + 1]``, kept as templates in 2-D slots
+``q_0_0, q_p1_0, q_0_m1, …`` (:func:`slot_symbol2`); nearest neighbours, periodic both ways
+(boundaries and wider stencils refused with a message saying what is valid).
+
 References
 ----------
 .. [1] E. Celledoni, V. Grimm, R. I. McLachlan, D. I. McLaren, D. O'Neale, B. Owren,

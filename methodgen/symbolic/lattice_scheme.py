@@ -32,6 +32,13 @@ re-indexing, never expanding N terms (:func:`skew_certificates`).  Its Newton ma
 ``I - h S ∂∇̄H/∂u1`` is pentadiagonal and cyclic (S and ∂∇̄H tridiagonal), block tridiagonal
 with 2 × 2 blocks over the pairs of sites (2k - 1, 2k): the canonical lattices' solvers apply.
 
+A *2-D periodic* lattice (:class:`methodgen.problem.lattice.Lattice2D`) takes the same pieces per
+template (its slots are 2-D offsets) and the same certificates: the module adds each piece at
+the site of its slot, (i + a, j + b) on the torus, a bijection, so the term lemma summed over
+the sites is energy at every N × M.  Its Newton matrix is not block tridiagonal; the module
+iterates simplified Newton with the constant part, ``I - (h/2) J K`` for K the Hessian of H's
+quadratic part (:func:`linear_stencil`), a periodic stencil the 2-D FFT diagonalises.
+
 References
 ----------
 .. [1] G. R. W. Quispel, D. I. McLaren, "A new class of energy-preserving numerical

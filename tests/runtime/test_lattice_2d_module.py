@@ -190,3 +190,37 @@ def test_certificates_are_per_template_and_never_expand(kg_lattice, monkeypatch)
         TermPieces(tp.term, tp.z0, tp.z1, tuple(a.xreplace(dict(zip(tp.z1, tp.z0))) for a in tp.pieces), tp.jac,
                    tp.rules) for tp in scheme.terms), True)
     assert [c.status for c in certificates(one)][1] == "refuted"
+
+
+def test_a_linear_lattice_converges_in_one_iteration_and_a_singular_linear_part_is_refused(tmp_path):
+    """The wave equation (H quadratic): the linear part is the whole Newton matrix, so the first
+    update solves the step (a second one only confirms it, at round-off).  Control: with the
+    quartic term added, more iterations.  An h at which I - (h/2) J K is singular raises
+    ConvergenceError saying so."""
+    wave = Lattice("Sum(Sum(p[i, j]**2/2 + (q[i % N + 1, j] - q[i, j])**2/2 + (q[i, j % M + 1] - q[i, j])**2/2"
+                   " + q[i, j]**2/2, j, 1, M), i, 1, N)", size=("N", "M"), name="wave")
+    mod = build_lattice(wave, "avf", tmp_path / "wave.py")
+    info = {}
+    mod.integrate(state(8, 8), 0.05, 20, info=info)
+    assert np.all(info["newton_iterations"] <= 2)
+    quartic = Lattice(wave.text.replace("q[i, j]**2/2,", "q[i, j]**2/2 + q[i, j]**4,"), size=("N", "M"), name="w4")
+    info4 = {}
+    build_lattice(quartic, "avf", tmp_path / "w4.py").integrate(state(8, 8), 0.05, 20, info=info4)
+    assert info4["newton_iterations"].mean() > 2.5
+    inverted = Lattice("Sum(Sum(p[i, j]**2/2 - 2*q[i, j]**2, j, 1, M), i, 1, N)",
+                       size=("N", "M"), name="inv")
+    bad = build_lattice(inverted, "avf", tmp_path / "inv.py")       # det of each block: 1 - h² (K_qq = -4)
+    with pytest.raises(bad.ConvergenceError, match="singular"):
+        bad.integrate(state(4, 4), 1.0, 2, check_resolution=False)
+    bad.integrate(state(4, 4), 0.1, 2, check_resolution=False)      # another h: regular
+
+
+def test_monitored_invariants_are_sums_over_the_torus(tmp_path):
+    lat = Lattice(KG, size=("N", "M"), params=PARAMS, name="kgi",
+                  invariants={"charge": "Sum(Sum(q[i, j]*p[i % N + 1, j], j, 1, M), i, 1, N)"})
+    mod = build_lattice(lat, "avf", tmp_path / "kgi.py")
+    y = state(5, 4, seed=1)
+    got = mod.invariants(y)
+    assert abs(got["charge"] - np.sum(y[0] * np.roll(y[1], -1, axis=0))) < 1e-14
+    assert abs(got["charge"] - np.sum(y[0] * np.roll(y[1], -1, axis=1))) > 1e-3     # the other direction
+    assert got["H"] == mod.hamiltonian(y)
