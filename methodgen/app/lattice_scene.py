@@ -266,11 +266,8 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
 
     ``size``: N for this run (default the scene's; a 2-D lattice's (N, M), or N for N × N);
     ``params``: parameter values for this run; ``backend``: "numpy" or "compiled"
-    (:func:`methodgen.codegen.lattice_emit.build_lattice`; a 2-D lattice runs on numpy, and the
-    report's ``backend`` says so).
+    (:func:`methodgen.codegen.lattice_emit.build_lattice`).
     """
-    import warnings
-
     from ..codegen.lattice_emit import build_lattice
 
     scene = load_lattice_scene(name_or_path)
@@ -286,11 +283,7 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
         steps = max(1, math.ceil(t_final / h - 1e-12))
         h = t_final / steps
     t0 = time.perf_counter()
-    notes = []
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
-    notes += [str(w.message) for w in caught]
+    module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
     build_seconds = time.perf_counter() - t0
     y0 = scene.y0(n, params)
     # the invariant errors over ≤ ~1000 rows (≤ ~100 on a 2-D lattice: each row is a whole grid)
@@ -304,8 +297,7 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     inv = {k: {"initial": values[0][k], "final": values[-1][k],
                "max_abs_error": max(abs(v[k] - values[0][k]) for v in values)} for k in module.INVARIANT_NAMES}
     sizes = dict(N=n[0], M=n[1]) if two_d else dict(N=n)     # (the values of the sizes, whatever their names)
-    return dict(scene=scene.name, method=method, backend=getattr(module, "BACKEND", backend), dims=2 if two_d else 1,
-                **sizes, notes=notes, h=h, steps=steps, t_final=h * steps, success=True,
+    return dict(scene=scene.name, method=method, backend=backend, dims=2 if two_d else 1, **sizes, h=h, steps=steps, t_final=h * steps, success=True,
                 build_seconds=build_seconds, seconds=seconds, seconds_per_step=seconds / steps,
                 newton_iterations_mean=float(np.mean(info["newton_iterations"])), invariants=inv,
                 traits=dict(module.TRAITS), module_file=str(module.__file__), y_final=rows[-1].ravel().tolist())

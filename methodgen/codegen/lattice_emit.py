@@ -249,14 +249,14 @@ def _scalar_kernel_paired(scheme: LatticeScheme) -> tuple:
     return kir.function("_grad_sites", ("Y0", "W", "n", "p", "jac"), body)
 
 
-def _kernel_text(fn) -> list[str]:
-    """The module's lines of the scalar kernel: its Python, its table, and the line attaching the
-    table (the compiled loop reads the tree, never this text)."""
+def _kernel_text(fn, name: str = "_grad_sites", use: str = "the compiled step loop inlines this tree") -> list[str]:
+    """The module's lines of the scalar kernel ``name``: its Python, its table, and the line
+    attaching the table (the compiled code reads the tree, never this text)."""
     table, _ = kir.flatten([fn])
     return (kir.function_lines(fn)
-            + ["", "", "# _grad_sites as data (methodgen.codegen.kir): the compiled step loop inlines this tree",
-               "_KIR_grad_sites = ("] + ["    " + ln for ln in kir.table_text(table, 96)]
-            + [")", "_grad_sites = _kir.attach(_grad_sites, _KIR_grad_sites)"])
+            + ["", "", f"# {name} as data (methodgen.codegen.kir): {use}",
+               f"_KIR{name} = ("] + ["    " + ln for ln in kir.table_text(table, 96)]
+            + [")", f"{name} = _kir.attach({name}, _KIR{name})"])
 
 
 def _otag(o: int) -> str:
@@ -360,6 +360,45 @@ def _gathers2(symbols, slots, source: str, fields) -> list[str]:
     return out
 
 
+def _scalar_kernel_2d(scheme: LatticeScheme, pieces_of) -> tuple:
+    """``_grad2d(_Y0, _Z, _G, _n, _m, _p)`` as a kernel-IR function: ∇̄H(y0, z) added into ``_G``
+    (2, n·m), the states (2, n·m) with the site (i, j) at i·m + j; a loop over the sites of each
+    term, the slot (f, (a, b)) at ((i + a) % n)·m + (j + b) % m (Python's floor modulo, the
+    translator's too).  The scalar form of the numpy module's rolls; compiled through LLVM by
+    :mod:`methodgen.runtime.lattice_driver`.  Its own names start with "_" (no user name does: no
+    parameter shadows them)."""
+    lat = scheme.lattice
+    printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+    n, m = _v("_n"), _v("_m")
+    allx = [e for tp in scheme.terms for e in pieces_of(tp)]
+    used = set().union(*[e.free_symbols for e in allx]) if allx else set()
+    body = [("=", _v(s.name), ("[]", "_p", (("n", k),))) for k, s in enumerate(lat.param_symbols) if s in used]
+    body += [("=", _v(s.name), ("*", v, ("n", 1.0))) for s, v in zip(lat.sizes, (n, m)) if s in used]
+    for tp in scheme.terms:
+        t = tp.term
+        if not t.slots:
+            continue              # a constant: no gradient
+        inner = []
+        offs = sorted({o for _, o in t.slots})
+        for a in sorted({o[0] for o in offs}):
+            inner.append(("=", _v(f"_i{_otag(a)}"), ("%", _plus(_v("_i"), a), n)))
+        for b in sorted({o[1] for o in offs}):
+            inner.append(("=", _v(f"_j{_otag(b)}"), ("%", _plus(_v("_j"), b), m)))
+        site = {o: _v(f"_s{_otag(o[0])}_{_otag(o[1])}") for o in offs}
+        for o in offs:
+            inner.append(("=", site[o], ("+", ("*", _v(f"_i{_otag(o[0])}"), m), _v(f"_j{_otag(o[1])}"))))
+        for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
+            inner.append(("=", _v(s0.name), ("[]", "_Y0", (("n", fields.index(f)), site[o]))))
+            inner.append(("=", _v(s1.name), ("[]", "_Z", (("n", fields.index(f)), site[o]))))
+        pre, outs = _cse_trees(pieces_of(tp), printer, "_g")
+        inner += pre + [("+=", ("[]", "_G", (("n", fields.index(f)), site[o])), outs[k])
+                        for k, (f, o) in enumerate(t.slots)]
+        body.append(("#", _docsafe(t.source)))
+        body.append(("for", "_i", ("n", 0), n, (("for", "_j", ("n", 0), m, tuple(inner)),)))
+    return kir.function("_grad2d", ("_Y0", "_Z", "_G", "_n", "_m", "_p"), body)
+
+
 def _horner(expr: sp.Expr, slots) -> sp.Expr:
     """A piece that is a polynomial in the slots in Horner form (measured: about half the array
     operations of the derivation's expanded form on a 128 × 128 grid); any other piece as it is."""
@@ -369,11 +408,14 @@ def _horner(expr: sp.Expr, slots) -> sp.Expr:
     return sp.horner(flat, *slots)
 
 
-def render2d(scheme: LatticeScheme, sig: str) -> str:
+def render2d(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     """The module text of a 2-D periodic lattice (``templates/lattice_2d_module.py.j2``): per term its
     values and its pieces as vectorised numpy over the N × M sites (rolls), the linear part's
     stencil (:func:`methodgen.symbolic.lattice_scheme.linear_stencil`) as formulas in the sizes and
-    parameters; deterministic, imports numpy only, one module for every N × M."""
+    parameters; deterministic, one module for every N × M.  ``backend="compiled"`` adds the
+    site kernel :func:`_scalar_kernel_2d` (the residual's gradient then runs compiled through
+    LLVM, :mod:`methodgen.runtime.lattice_driver`; the FFT solve stays numpy's; the module then
+    imports methodgen), otherwise the module imports numpy only."""
     from ..symbolic.lattice_scheme import linear_stencil
 
     lat = scheme.lattice
@@ -402,11 +444,16 @@ def render2d(scheme: LatticeScheme, sig: str) -> str:
         for t in its_terms:
             extra.append({"source": _docsafe(t.source), "energy_lines": values(t, t.symbols())})
         quantities.append((name, list(range(first, first + len(its_terms)))))
+    scalar = []
+    if backend == "compiled":
+        horner = {id(tp): [_horner(x, tp.z0 + tp.z1) for x in tp.pieces] for tp in scheme.terms}
+        scalar = _kernel_text(_scalar_kernel_2d(scheme, lambda tp: horner[id(tp)]), "_grad2d",
+                              "methodgen.runtime.lattice_driver compiles this tree")
     K = linear_stencil(lat)
     stencil_lines = _bind2(list(K.values()), lat) + ["return ("] + [
         f"    ({f}, {g}, {a}, {b}, {printer.doprint(c)})," for (f, g, (a, b)), c in K.items()] + [")"]
     code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t.get("piece_lines", [])]
-                     + stencil_lines)
+                     + stencil_lines + scalar)
     known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
     helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
     env = _environment()
@@ -421,7 +468,7 @@ def render2d(scheme: LatticeScheme, sig: str) -> str:
     if scheme.notes:
         description += "\n" + "\n".join(scheme.notes)
     header = [f"Generated by methodgen {__version__} from templates/{TEMPLATE_2D} -- do not edit.",
-              f"system: {lat.name}; method: {scheme.method} (2-D periodic lattice, any N × M); backend: numpy",
+              f"system: {lat.name}; method: {scheme.method} (2-D periodic lattice, any N × M); backend: {backend}",
               f"H = {_docsafe(lat.text)}",
               f"methodgen {__version__}; sympy {sp.__version__}; templates sha256 {template_hash('numpy')[:16]}",
               HEADER_SIGNATURE[2:] + sig]
@@ -430,7 +477,8 @@ def render2d(scheme: LatticeScheme, sig: str) -> str:
         q=lat.q_name, p=lat.p_name, sizes=[s.name for s in lat.sizes], nmin=lat.nmin,
         field_names=list(lat.fields), param_names=list(lat.params), defaults_text=defaults, traits=traits,
         signature=sig, terms=terms, extra=extra, special=special, quantities=quantities,
-        quantity_names=[q for q, _ in quantities], stencil_lines=stencil_lines, linear=bool(K))
+        quantity_names=[q for q, _ in quantities], stencil_lines=stencil_lines, linear=bool(K),
+        backend=backend, scalar=scalar)
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
 
@@ -464,13 +512,6 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, backend: 
         discretize_lattice(lattice, method)     # raises with the list of methods
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r} for a lattice; backends are {', '.join(BACKENDS)}")
-    if getattr(lattice, "dims", 1) == 2 and backend != "numpy":
-        # the 2-D solve (FFT) is numpy's; the compiled step loop is the 1-D block-tridiagonal one
-        import warnings
-        warnings.warn(f"the compiled backend does not cover 2-D lattices yet: {lattice.name!r} runs on the numpy "
-                      "module (BACKEND == 'numpy'; its FFT solve and site kernels are vectorised numpy)",
-                      UserWarning, stacklevel=2)
-        backend = "numpy"
     sig = lattice_signature(lattice, method, backend)
     if path is None:
         suffix = "" if backend == "numpy" else f"_{backend}"
@@ -481,7 +522,7 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, backend: 
             scheme = discretize_lattice(lattice, method)
         with phase("render", progress):
             if getattr(lattice, "dims", 1) == 2:
-                return render2d(scheme, sig)
+                return render2d(scheme, sig, backend)
             return render(scheme, sig, backend)
 
     return write_and_load(path, sig, source, progress)

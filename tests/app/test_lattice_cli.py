@@ -179,13 +179,17 @@ def test_klein_gordon_2d_runs_at_any_size_and_keeps_energy(capsys):
     assert Hm["max_abs_error"] > 1e-9 * abs(Hm["initial"])
 
 
-def test_klein_gordon_2d_default_size_and_the_numba_backend_falls_back_saying_so(capsys):
+def test_klein_gordon_2d_default_size_and_the_numba_backend(capsys):
+    pytest.importorskip("llvmlite")
     scene = load_lattice_scene("klein-gordon-2d")
     assert scene.size == (128, 128) and scene.y0((128, 128)).shape == (2, 128, 128)
-    code = cli.main(["run", "klein-gordon-2d", "--steps", "3", "--param", "N=8", "--backend", "numba"])
-    out, err = capsys.readouterr()
-    assert code == 0 and "backend numpy" in out and "N × M = 8 × 8" in out
-    assert "the compiled backend does not cover 2-D lattices" in err
+    code = cli.main(["run", "klein-gordon-2d", "--steps", "30", "--param", "N=8", "--backend", "numba"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "backend compiled" in out and "N × M = 8 × 8" in out
+    _, a, _ = _run(capsys, "klein-gordon-2d", "--steps", "30", "--param", "N=8")
+    _, b, _ = _run(capsys, "klein-gordon-2d", "--steps", "30", "--param", "N=8", "--backend", "numba")
+    assert (a["backend"], b["backend"]) == ("numpy", "compiled")
+    assert np.max(np.abs(np.array(a["y_final"]) - np.array(b["y_final"]))) < 1e-13
 
 
 def test_verify_klein_gordon_2d_decides_per_template(capsys):

@@ -155,10 +155,31 @@ def test_bad_input_names_what_is_valid(kg):
         kg.integrate(state(4, 4), 0.01, 1, solver="newton")
 
 
-def test_the_compiled_backend_falls_back_to_numpy_saying_so(kg_lattice, tmp_path):
-    with pytest.warns(UserWarning, match="does not cover 2-D lattices"):
-        mod = build_lattice(kg_lattice, "avf", tmp_path / "c.py", backend="compiled")
-    assert mod.BACKEND == "numpy"
+@pytest.mark.parametrize("text,params", [(KG, PARAMS), (SG, {"L": 4.0})])
+def test_the_compiled_site_kernel_gives_the_numpy_modules_steps(text, params, tmp_path):
+    """backend="compiled": the residual's gradient by the site kernel compiled through LLVM (the FFT
+    solve numpy's): its gradient is the vectorised pieces' to round-off, at two sizes, and so are
+    the steps; its Python form (no LLVM) gives the compiled one's bits.  Control: the kernel of
+    another lattice (the other text) gives another gradient."""
+    from methodgen.runtime import lattice_driver
+
+    pytest.importorskip("llvmlite")
+    lat = Lattice(text, size=("N", "M"), params=params, name="c")
+    comp = build_lattice(lat, "avf", tmp_path / "c.py", backend="compiled")
+    ref = build_lattice(lat, "avf", tmp_path / "n.py")
+    assert (comp.BACKEND, ref.BACKEND) == ("compiled", "numpy")
+    for n, m in ((5, 7), (16, 12)):
+        y0 = state(n, m, seed=n)
+        z = y0 + 0.05 * np.cos(np.arange(y0.size)).reshape(y0.shape)
+        p = comp._params(None)
+        g = comp._gradient(y0, z, n, m, p)
+        assert np.max(np.abs(g - comp._gradient_numpy(y0, z, n, m, p))) < 1e-13 * max(1.0, np.max(np.abs(g)))
+        assert np.array_equal(g, lattice_driver.gradient_2d(comp._grad2d, y0, z, n, m, p, python=True))
+        a, b = comp.integrate(y0, 0.02, 20), ref.integrate(y0, 0.02, 20)
+        assert np.max(np.abs(a - b)) < 1e-13
+    other = build_lattice(Lattice(SG if text == KG else KG, size=("N", "M"), params={**PARAMS, **params}, name="o"),
+                          "avf", tmp_path / "o.py", backend="compiled")
+    assert np.max(np.abs(other._gradient(y0, z, n, m, other._params(None)) - g)) > 1e-3
 
 
 def test_module_is_deterministic_and_imports_numpy_only(kg_lattice, tmp_path):

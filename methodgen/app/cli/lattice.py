@@ -54,8 +54,6 @@ def run(args) -> int:
     if args.json:
         print(dump_json(rep))
         return 0
-    for note in rep.get("notes", ()):
-        print(f"note: {note}", file=sys.stderr)
     size = f"{' × '.join(sizes)} = {rep['N']} × {rep['M']}" if len(sizes) == 2 else f"N = {rep['N']}"
     print(f"lattice {rep['scene']}  method {rep['method']}  backend {rep['backend']}  {size}  h = {rep['h']:g}  steps = {rep['steps']}"
           f"  (t = 0 .. {rep['t_final']:g})")
