@@ -7,11 +7,12 @@ benchmark, not a test.
 Measured:
 
 * **cold build**: a fresh interpreter and a fresh ``METHODGEN_CACHE`` (a subprocess): import
-  methodgen, load the scene, derive, print, write and import the module, and take the first
-  step at 128 × 128;
+  methodgen, load the scene, derive, print, write and import the module (numpy, and compiled:
+  its site kernel compiled through LLVM at the first step), and take the first step at 128 × 128;
 * **per step** (warm, min of 3 repeats, the scene's h = 0.01 and Gaussian bump): the numpy module
-  (the 2-D module's only backend), with the mean simplified-Newton iterations, and the slope of
-  log(time) against log(sites) between successive sizes (1 is linear; the FFT adds a log factor);
+  and the compiled one (the site kernel compiled, the FFT solve numpy's), with the mean
+  simplified-Newton iterations, and the slope of log(time) against log(sites) between successive
+  sizes (1 is linear; the FFT adds a log factor);
 * **the solve, chosen by measurement**: the same steps with the linear part's FFT solve replaced
   by the identity (plain fixed-point iteration on ``z = y0 + h J ∇̄H``): iterations and time
   per step at each size, and at the first size with a 4 times longer step (``--stiff-h``), where
@@ -39,17 +40,17 @@ t0 = time.perf_counter()
 from methodgen.app.lattice_scene import load_lattice_scene
 from methodgen.codegen.lattice_emit import build_lattice
 sc = load_lattice_scene("klein-gordon-2d")
-m = build_lattice(sc.lattice, "avf")
+m = build_lattice(sc.lattice, "avf", backend={backend!r})
 m.integrate(sc.y0((128, 128)), 0.01, 1)
 print(time.perf_counter() - t0)
 """
 
 
-def cold() -> float:
+def cold(backend: str) -> float:
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "METHODGEN_CACHE": cache}
-        out = subprocess.run([sys.executable, "-c", COLD], env=env, check=True, capture_output=True,
-                             text=True).stdout
+        out = subprocess.run([sys.executable, "-c", COLD.format(backend=backend)], env=env, check=True,
+                             capture_output=True, text=True).stdout
     return float(out.split()[-1])
 
 
@@ -95,12 +96,14 @@ def main() -> None:
     from methodgen.app.lattice_scene import load_lattice_scene
     from methodgen.codegen.lattice_emit import build_lattice
 
-    out = {"load_before": os.getloadavg()[0], "cold_build_to_first_step_s": cold()}
+    out = {"load_before": os.getloadavg()[0],
+           "cold_build_to_first_step_s": {b: cold(b) for b in ("numpy", "compiled")}}
     sc = load_lattice_scene("klein-gordon-2d")
     mod = build_lattice(sc.lattice, "avf")
+    comp = build_lattice(sc.lattice, "avf", backend="compiled")
     h = sc.h
     sizes = [tuple(map(int, s.split("x"))) for s in args.sizes.split(",")]
-    prev = None
+    prev = prev_c = None
     for n, m in sizes:
         t, its = per_step(mod, sc.y0((n, m)), h, args.steps)
         row = {"sites": n * m, "per_step_ms": t * 1e3, "newton_iterations": its,
@@ -108,6 +111,11 @@ def main() -> None:
         if prev is not None:
             row["slope_vs_previous"] = math.log(t / prev[1]) / math.log(n * m / prev[0])
         prev = (n * m, t)
+        tc, itc = per_step(comp, sc.y0((n, m)), h, args.steps)
+        row["compiled"] = {"per_step_ms": tc * 1e3, "newton_iterations": itc}
+        if prev_c is not None:
+            row["compiled"]["slope_vs_previous"] = math.log(tc / prev_c[1]) / math.log(n * m / prev_c[0])
+        prev_c = (n * m, tc)
         row["fixed_point"] = fixed_point(mod, sc.y0((n, m)), h, 20)
         out[f"{n}x{m}"] = row
     n, m = sizes[0]
