@@ -477,7 +477,7 @@ def render2d(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
         q=lat.q_name, p=lat.p_name, sizes=[s.name for s in lat.sizes], nmin=lat.nmin,
         field_names=list(lat.fields), param_names=list(lat.params), defaults_text=defaults, traits=traits,
         signature=sig, terms=terms, extra=extra, special=special, quantities=quantities,
-        quantity_names=[q for q, _ in quantities], stencil_lines=stencil_lines, linear=bool(K),
+        quantity_names=[q for q, _ in quantities], stencil_lines=stencil_lines,
         backend=backend, scalar=scalar)
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
     return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text

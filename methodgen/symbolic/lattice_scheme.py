@@ -409,8 +409,9 @@ def linear_stencil(lattice) -> dict:
     (the site j is the slot o of the template at j - o).  For both lattice methods the pieces of
     a quadratic part are its gradient at the midpoint, so their derivative in the step's end
     is ``K / 2``: the module's simplified-Newton matrix is ``I - (h/2) J K``, diagonalised by the
-    2-D FFT (one 2 × 2 block per wavenumber).  The rest of the Newton matrix (the nonlinear,
-    site-local part) is left to the iteration.
+    2-D FFT (one 2 × 2 block per wavenumber).  The rest of the Newton matrix (the derivative of
+    the pieces of the non-quadratic part, e.g. a site's ``q⁴`` or ``1 - cos q``) is left to the
+    iteration.
 
     Returns
     -------

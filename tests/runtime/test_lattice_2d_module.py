@@ -198,6 +198,8 @@ def test_certificates_are_per_template_and_never_expand(kg_lattice, monkeypatch)
         raise AssertionError("expanded")
 
     monkeypatch.setattr(Lattice2D, "expand", boom)
+    with pytest.raises(AssertionError, match="expanded"):     # (the guard is armed)
+        kg_lattice.expand(3, 3)
     scheme = discretize_lattice(kg_lattice, "avf")
     certs = certificates(scheme)
     assert [c.status for c in certs] == ["proved", "proved"] and "term lemma" in certs[0].claim
