@@ -25,6 +25,11 @@ Format (TOML; the built-in ones are in ``methodgen/symbolic/scenes/lattice``)::
     h = 0.01
     steps = 1000
 
+A 2-D periodic lattice names two sizes, ``size = ["N", "M"]`` in ``[lattice]``; its ``[initial]``
+formulas are in ``i``, ``j`` (the site (i, j), 1-based), the sizes and the parameters; its ``[run]``
+table gives each size by its name (``N = 128``; the second, ``M = 128``, may be left out: it is
+then the first, a square grid, also when the first is changed by ``--param N=64``).
+
 The file is data: parsed with ``tomllib``, checked key by key, its formulas parsed by the
 whitelist parser (:func:`methodgen.problem.parse.parse_expr`) and evaluated from the parsed tree.
 """
@@ -50,7 +55,7 @@ __all__ = ["LatticeScene", "is_lattice_scene", "load_lattice_scene", "lattice_sc
 
 _TOP = {"name": str, "description": str, "lattice": dict, "params": dict, "invariants": dict, "initial": dict,
         "run": dict}
-_LATTICE = {"H": str, "q": str, "p": str, "size": str, "fields": list, "skew": str}
+_LATTICE = {"H": str, "q": str, "p": str, "size": (str, list), "fields": list, "skew": str}
 _RUN = {"method": (str, list), "N": int, "h": (int, float), "steps": int}
 
 
@@ -104,19 +109,21 @@ class LatticeScene:
     lattice: object
     initial: dict
     methods: tuple[str, ...]
-    size: int
+    size: object               # N, or (N, M) for a 2-D lattice
     h: float
     steps: int
     source: str
 
-    def y0(self, n: int, params: dict | None = None) -> np.ndarray:
+    def y0(self, n, params: dict | None = None) -> np.ndarray:
         """The initial state at size ``n``: ``(q[1..n], p[1..n])`` (a skew lattice's ``u[1..n]``) from
-        the scene's formulas."""
+        the scene's formulas; for a 2-D lattice ``n = (N, M)`` and an array (2, N, M)."""
         import sympy as sp
 
         from ..problem.parse import parse_expr
 
         lat = self.lattice
+        if getattr(lat, "dims", 1) == 2:
+            return self._y0_2d(*n, params)
         lat.check_size(n)
         values = {**lat.params, **(params or {})}
         i = sp.Symbol("i", real=True)
@@ -131,6 +138,29 @@ class LatticeScene:
         y = np.concatenate(out)
         if not np.all(np.isfinite(y)):
             raise InputError(f"the initial state of {self.name!r} at N = {n} is not finite")
+        return y
+
+    def _y0_2d(self, n: int, m: int, params: dict | None) -> np.ndarray:
+        import sympy as sp
+
+        from ..problem.parse import parse_expr
+
+        lat = self.lattice
+        lat.check_size(n, m)
+        values = {**lat.params, **(params or {})}
+        i, j = sp.Symbol("i", real=True), sp.Symbol("j", real=True)
+        N, M = (sp.Symbol(s.name, real=True) for s in lat.sizes)
+        symbols = {"i": i, "j": j, N.name: N, M.name: M, **{k: sp.Symbol(k, real=True) for k in values}}
+        ii, jj = np.meshgrid(np.arange(1, n + 1, dtype=float), np.arange(1, m + 1, dtype=float), indexing="ij")
+        out = []
+        for field in lat.fields:
+            expr = parse_expr(self.initial.get(field, "0"), symbols, what=f"[initial] {field}")
+            expr = expr.xreplace({symbols[k]: sp.Float(v) for k, v in values.items()}).xreplace({N: n, M: m})
+            f = sp.lambdify([i, j], expr, modules="numpy")   # printed from the parsed tree, not the text
+            out.append(np.broadcast_to(np.asarray(f(ii, jj), dtype=float), (n, m)))
+        y = np.stack(out)
+        if not np.all(np.isfinite(y)):
+            raise InputError(f"the initial state of {self.name!r} at {n} × {m} is not finite")
         return y
 
 
@@ -162,7 +192,19 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
             raise SceneError(f"{where}: the [{t}] table is missing")
     lt, run = data["lattice"], data["run"]
     _check(lt, _LATTICE, f"{where} [lattice]")
-    _check(run, _RUN, f"{where} [run]")
+    sizes = lt.get("size", "N")
+    two_d = isinstance(sizes, list)
+    if two_d and (len(sizes) != 2 or not all(isinstance(x, str) for x in sizes)):
+        raise SceneError(f"{where} [lattice]: size is a name, or two names for a 2-D lattice (size = [\"N\", "
+                         f"\"M\"]); got {sizes!r}")
+    if two_d:
+        # the [run] table gives each size by its name (the second may be left out: a square grid)
+        run_keys = {k: v for k, v in _RUN.items() if k != "N"}
+        run_keys.update({sizes[0]: int, sizes[1]: int})
+        _check(run, run_keys, f"{where} [run]")
+        run = {**run, "N": run.get(sizes[0])}
+    else:
+        _check(run, _RUN, f"{where} [run]")
     if "H" not in lt:
         raise SceneError(f"{where} [lattice]: H is missing")
     for k in ("N", "h", "steps"):
@@ -179,16 +221,16 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
             if not isinstance(v, str):
                 raise SceneError(f"{where} [{name}]: {k!r} must be a formula (text), got {v!r}")
     name = data.get("name", p.stem)
-    if "i" in params or lt.get("size") == "i":
-        raise SceneError(f"{where}: 'i' is the site index of the [initial] formulas; give the parameter "
-                         "or the size another name")
+    if "i" in params or lt.get("size") == "i" or (two_d and ({"i", "j"} & (set(params) | set(sizes)))):
+        raise SceneError(f"{where}: 'i'{' and j are the site indices' if two_d else ' is the site index'} of the "
+                         "[initial] formulas; give the parameter or the size another name")
     if ("fields" in lt) != ("skew" in lt) or ("skew" in lt and ({"q", "p"} & set(lt))):
         raise SceneError(f"{where} [lattice]: a skew lattice takes fields = [\"u\"] and skew = \"…\" (together, "
                          "without q and p); a canonical one q and p (optional)")
     if "fields" in lt and not all(isinstance(f, str) for f in lt["fields"]):
         raise SceneError(f"{where} [lattice]: fields must be a list of names, got {lt['fields']!r}")
     try:
-        lat = Lattice(lt["H"], lt.get("q", "q"), lt.get("p", "p"), size=lt.get("size", "N"), params=params,
+        lat = Lattice(lt["H"], lt.get("q", "q"), lt.get("p", "p"), size=sizes, params=params,
                       name=name, invariants=invariants,
                       fields=tuple(lt["fields"]) if "fields" in lt else None, skew=lt.get("skew"))
     except InputError as exc:
@@ -204,14 +246,15 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
                              f"{', '.join(LATTICE_METHODS)}")
     if run["steps"] < 1 or not (math.isfinite(run["h"]) and run["h"] > 0):
         raise SceneError(f"{where} [run]: steps must be ≥ 1 and h > 0")
+    size = (run["N"], run.get(sizes[1], run["N"])) if two_d else run["N"]
     try:
-        lat.check_size(run["N"])
+        lat.check_size(size)
     except InputError as exc:
         raise SceneError(f"{where} [run]: {exc}") from None
-    scene = LatticeScene(name, data.get("description", ""), lat, initial, tuple(methods), run["N"],
+    scene = LatticeScene(name, data.get("description", ""), lat, initial, tuple(methods), size,
                          float(run["h"]), run["steps"], where)
     try:
-        scene.y0(lat.nmin)        # the formulas parse (whitelist) and evaluate
+        scene.y0((lat.nmin, lat.nmin) if two_d else lat.nmin)  # the formulas parse (whitelist) and evaluate
     except InputError as exc:
         raise SceneError(f"{where}: {exc}") from None
     return scene
@@ -221,14 +264,18 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
                       t_final=None, solver="simplified", check_resolution=True, backend="numpy", progress=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
-    ``size``: N for this run (default the scene's); ``params``: parameter values for this run;
-    ``backend``: "numpy" or "compiled" (:func:`methodgen.codegen.lattice_emit.build_lattice`).
+    ``size``: N for this run (default the scene's; a 2-D lattice's (N, M), or N for N × N);
+    ``params``: parameter values for this run; ``backend``: "numpy" or "compiled"
+    (:func:`methodgen.codegen.lattice_emit.build_lattice`).
     """
     from ..codegen.lattice_emit import build_lattice
 
     scene = load_lattice_scene(name_or_path)
     method = method or scene.methods[0]
+    two_d = getattr(scene.lattice, "dims", 1) == 2
     n = scene.size if size is None else size
+    if two_d and not isinstance(n, (tuple, list)):
+        n = (n, n)
     scene.lattice.check_size(n)
     h = scene.h if h is None else float(h)
     steps = scene.steps if steps is None else int(steps)
@@ -239,7 +286,8 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
     build_seconds = time.perf_counter() - t0
     y0 = scene.y0(n, params)
-    every = max(1, steps // 1000)     # the invariant errors over ≤ ~1000 rows
+    # the invariant errors over ≤ ~1000 rows (≤ ~100 on a 2-D lattice: each row is a whole grid)
+    every = max(1, steps // (100 if two_d else 1000))
     t0 = time.perf_counter()
     info: dict = {}
     rows = module.integrate(y0, h, steps, params, save_every=every, info=info, solver=solver,
@@ -248,7 +296,8 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     values = [module.invariants(r, params) for r in rows]
     inv = {k: {"initial": values[0][k], "final": values[-1][k],
                "max_abs_error": max(abs(v[k] - values[0][k]) for v in values)} for k in module.INVARIANT_NAMES}
-    return dict(scene=scene.name, method=method, backend=backend, N=n, h=h, steps=steps, t_final=h * steps, success=True,
+    sizes = dict(N=n[0], M=n[1]) if two_d else dict(N=n)     # (the values of the sizes, whatever their names)
+    return dict(scene=scene.name, method=method, backend=backend, dims=2 if two_d else 1, **sizes, h=h, steps=steps, t_final=h * steps, success=True,
                 build_seconds=build_seconds, seconds=seconds, seconds_per_step=seconds / steps,
                 newton_iterations_mean=float(np.mean(info["newton_iterations"])), invariants=inv,
-                traits=dict(module.TRAITS), module_file=str(module.__file__), y_final=rows[-1].tolist())
+                traits=dict(module.TRAITS), module_file=str(module.__file__), y_final=rows[-1].ravel().tolist())

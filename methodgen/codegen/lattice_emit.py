@@ -34,9 +34,11 @@ from .progress import phase
 from ..problem.special import SPECIAL_FUNCTIONS
 from .store import cache_dir
 
-__all__ = ["render", "lattice_signature", "build_lattice"]
+__all__ = ["render", "render2d", "lattice_signature", "build_lattice"]
 
 TEMPLATE = "lattice_module.py.j2"
+#: the template of a 2-D periodic lattice's module (the FFT-preconditioned simplified Newton)
+TEMPLATE_2D = "lattice_2d_module.py.j2"
 
 
 def _sources_hash() -> str:
@@ -47,7 +49,7 @@ def _sources_hash() -> str:
     for path in (root / "problem" / "lattice.py", root / "symbolic" / "lattice_scheme.py",
                  root / "codegen" / "lattice_emit.py", root / "runtime" / "lattice_stepper.py",
                  root / "runtime" / "lattice_driver.py",
-                 template_dir() / TEMPLATE):
+                 template_dir() / TEMPLATE, template_dir() / TEMPLATE_2D):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
@@ -55,8 +57,9 @@ def _sources_hash() -> str:
 def lattice_signature(lattice: Lattice, method: str, backend: str = "numpy") -> str:
     """Hash of everything the module depends on: the text, names, defaults and method, the
     versions, the printers and helpers it shares with other modules, and its own sources."""
+    sizes = ",".join(s.name for s in getattr(lattice, "sizes", (lattice.size,)))
     parts = [lattice.text, repr(sorted(lattice.invariant_texts.items())), lattice.q_name, str(lattice.p_name),
-             lattice.structure, str(lattice.skew_text), lattice.size.name, lattice.name,
+             lattice.structure, str(lattice.skew_text), sizes, lattice.name,
              repr(sorted(lattice.params.items())), method, __version__, sp.__version__,
              template_hash("numpy"), generator_hash(), _sources_hash()] + ([] if backend == "numpy" else [backend])
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
@@ -246,14 +249,14 @@ def _scalar_kernel_paired(scheme: LatticeScheme) -> tuple:
     return kir.function("_grad_sites", ("Y0", "W", "n", "p", "jac"), body)
 
 
-def _kernel_text(fn) -> list[str]:
-    """The module's lines of the scalar kernel: its Python, its table, and the line attaching the
-    table (the compiled loop reads the tree, never this text)."""
+def _kernel_text(fn, name: str = "_grad_sites", use: str = "the compiled step loop inlines this tree") -> list[str]:
+    """The module's lines of the scalar kernel ``name``: its Python, its table, and the line
+    attaching the table (the compiled code reads the tree, never this text)."""
     table, _ = kir.flatten([fn])
     return (kir.function_lines(fn)
-            + ["", "", "# _grad_sites as data (methodgen.codegen.kir): the compiled step loop inlines this tree",
-               "_KIR_grad_sites = ("] + ["    " + ln for ln in kir.table_text(table, 96)]
-            + [")", "_grad_sites = _kir.attach(_grad_sites, _KIR_grad_sites)"])
+            + ["", "", f"# {name} as data (methodgen.codegen.kir): {use}",
+               f"_KIR{name} = ("] + ["    " + ln for ln in kir.table_text(table, 96)]
+            + [")", f"{name} = _kir.attach({name}, _KIR{name})"])
 
 
 def _otag(o: int) -> str:
@@ -338,6 +341,148 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
 
 
+def _bind2(exprs, lattice) -> list[str]:
+    """Lines binding the parameters and the two sizes (as floats of the kernel's n, m) the
+    expressions use."""
+    used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
+    # (the kernels' own names start with "_", which no user name may: no parameter shadows them)
+    lines = [f"{s.name} = _p[{k}]" for k, s in enumerate(lattice.param_symbols) if s in used]
+    lines += [f"{s.name} = float({v})" for s, v in zip(lattice.sizes, ("_n", "_m")) if s in used]
+    return lines
+
+
+def _gathers2(symbols, slots, source: str, fields) -> list[str]:
+    """The slot (f, (a, b)) at every site (i, j) is the field at (i + a, j + b), cyclically: a roll."""
+    out = []
+    for s, (f, (a, b)) in zip(symbols, slots):
+        row = f"{source}[{fields.index(f)}]"
+        out.append(f"{s.name} = {row}" if (a, b) == (0, 0) else f"{s.name} = numpy.roll({row}, ({-a}, {-b}), axis=(0, 1))")
+    return out
+
+
+def _scalar_kernel_2d(scheme: LatticeScheme, pieces_of) -> tuple:
+    """``_grad2d(_Y0, _Z, _G, _n, _m, _p)`` as a kernel-IR function: ∇̄H(y0, z) added into ``_G``
+    (2, n·m), the states (2, n·m) with the site (i, j) at i·m + j; a loop over the sites of each
+    term, the slot (f, (a, b)) at ((i + a) % n)·m + (j + b) % m (Python's floor modulo, the
+    translator's too).  The scalar form of the numpy module's rolls; compiled through LLVM by
+    :mod:`methodgen.runtime.lattice_driver`.  Its own names start with "_" (no user name does: no
+    parameter shadows them)."""
+    lat = scheme.lattice
+    printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+    n, m = _v("_n"), _v("_m")
+    allx = [e for tp in scheme.terms for e in pieces_of(tp)]
+    used = set().union(*[e.free_symbols for e in allx]) if allx else set()
+    body = [("=", _v(s.name), ("[]", "_p", (("n", k),))) for k, s in enumerate(lat.param_symbols) if s in used]
+    body += [("=", _v(s.name), ("*", v, ("n", 1.0))) for s, v in zip(lat.sizes, (n, m)) if s in used]
+    for tp in scheme.terms:
+        t = tp.term
+        if not t.slots:
+            continue              # a constant: no gradient
+        inner = []
+        offs = sorted({o for _, o in t.slots})
+        for a in sorted({o[0] for o in offs}):
+            inner.append(("=", _v(f"_i{_otag(a)}"), ("%", _plus(_v("_i"), a), n)))
+        for b in sorted({o[1] for o in offs}):
+            inner.append(("=", _v(f"_j{_otag(b)}"), ("%", _plus(_v("_j"), b), m)))
+        site = {o: _v(f"_s{_otag(o[0])}_{_otag(o[1])}") for o in offs}
+        for o in offs:
+            inner.append(("=", site[o], ("+", ("*", _v(f"_i{_otag(o[0])}"), m), _v(f"_j{_otag(o[1])}"))))
+        for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
+            inner.append(("=", _v(s0.name), ("[]", "_Y0", (("n", fields.index(f)), site[o]))))
+            inner.append(("=", _v(s1.name), ("[]", "_Z", (("n", fields.index(f)), site[o]))))
+        pre, outs = _cse_trees(pieces_of(tp), printer, "_g")
+        inner += pre + [("+=", ("[]", "_G", (("n", fields.index(f)), site[o])), outs[k])
+                        for k, (f, o) in enumerate(t.slots)]
+        body.append(("#", _docsafe(t.source)))
+        body.append(("for", "_i", ("n", 0), n, (("for", "_j", ("n", 0), m, tuple(inner)),)))
+    return kir.function("_grad2d", ("_Y0", "_Z", "_G", "_n", "_m", "_p"), body)
+
+
+def _horner(expr: sp.Expr, slots) -> sp.Expr:
+    """A piece that is a polynomial in the slots in Horner form (measured: about half the array
+    operations of the derivation's expanded form on a 128 × 128 grid); any other piece as it is."""
+    flat = sp.expand(expr)
+    if not flat.is_polynomial(*slots):
+        return expr
+    return sp.horner(flat, *slots)
+
+
+def render2d(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
+    """The module text of a 2-D periodic lattice (``templates/lattice_2d_module.py.j2``): per term its
+    values and its pieces as vectorised numpy over the N × M sites (rolls), the linear part's
+    stencil (:func:`methodgen.symbolic.lattice_scheme.linear_stencil`) as formulas in the sizes and
+    parameters; deterministic, one module for every N × M.  ``backend="compiled"`` adds the
+    site kernel :func:`_scalar_kernel_2d` (the residual's gradient then runs compiled through
+    LLVM, :mod:`methodgen.runtime.lattice_driver`; the FFT solve stays numpy's; the module then
+    imports methodgen), otherwise the module imports numpy only."""
+    from ..symbolic.lattice_scheme import linear_stencil
+
+    lat = scheme.lattice
+    printer = VectorPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+    fields = lat.fields
+
+    def values(t, z0):
+        pre, (value,) = _cse_lines([t.template], printer, "_e")
+        return (_bind2([t.template], lat) + _gathers2(z0, t.slots, "_Y", fields) + pre
+                + [f"return numpy.broadcast_to({value}, _Y.shape[1:])"])
+
+    terms = []
+    for tp in scheme.terms:
+        t = tp.term
+        pieces = [_horner(x, tp.z0 + tp.z1) for x in tp.pieces]
+        g_pre, g_out = _cse_lines(pieces, printer, "_g")
+        lines = (_bind2(pieces, lat) + _gathers2(tp.z0, t.slots, "_Y0", fields)
+                 + _gathers2(tp.z1, t.slots, "_Z", fields) + g_pre
+                 + [f"return {_tuple([f'numpy.broadcast_to({x}, _Y0.shape[1:])' for x in g_out])}"])
+        terms.append({"source": _docsafe(t.source), "index": len(terms), "slots": [(fields.index(f), o) for f, o in t.slots],
+                      "slot_names": [s.name for s in tp.z0], "energy_lines": values(t, tp.z0), "piece_lines": lines})
+    quantities = [("H", list(range(len(terms))))]
+    extra = []
+    for name, its_terms in lat.invariants.items():
+        first = len(terms) + len(extra)
+        for t in its_terms:
+            extra.append({"source": _docsafe(t.source), "energy_lines": values(t, t.symbols())})
+        quantities.append((name, list(range(first, first + len(its_terms)))))
+    scalar = []
+    if backend == "compiled":
+        horner = {id(tp): [_horner(x, tp.z0 + tp.z1) for x in tp.pieces] for tp in scheme.terms}
+        scalar = _kernel_text(_scalar_kernel_2d(scheme, lambda tp: horner[id(tp)]), "_grad2d",
+                              "methodgen.runtime.lattice_driver compiles this tree")
+    K = linear_stencil(lat)
+    stencil_lines = _bind2(list(K.values()), lat) + ["return ("] + [
+        f"    ({f}, {g}, {a}, {b}, {printer.doprint(c)})," for (f, g, (a, b)), c in K.items()] + [")"]
+    code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t.get("piece_lines", [])]
+                     + stencil_lines + scalar)
+    known = {v[1:] for v in SPECIAL_FUNCTIONS.values()}
+    helpers = _helper_closure({m for m in _HELPER_CALL.findall(code) if m in known})
+    env = _environment()
+    special = env.get_template("_special.py.j2").render(ir=type("HelperSet", (), {"helpers": helpers}))
+    if helpers:
+        special = "\n\n" + special.strip("\n") + "\n"
+    defaults = "{" + ", ".join(f"{k!r}: {v!r}" for k, v in lat.params.items()) + "}"
+    traits = scheme.traits
+    description = (f"{LATTICE_METHODS[scheme.method]}, on a periodic N × M lattice; "
+                   + ("keeps H exactly up to round-off." if traits["energy_preserving"] else
+                      "H is not kept exactly (bounded for a symplectic method)."))
+    if scheme.notes:
+        description += "\n" + "\n".join(scheme.notes)
+    header = [f"Generated by methodgen {__version__} from templates/{TEMPLATE_2D} -- do not edit.",
+              f"system: {lat.name}; method: {scheme.method} (2-D periodic lattice, any N × M); backend: {backend}",
+              f"H = {_docsafe(lat.text)}",
+              f"methodgen {__version__}; sympy {sp.__version__}; templates sha256 {template_hash('numpy')[:16]}",
+              HEADER_SIGNATURE[2:] + sig]
+    text = env.get_template(TEMPLATE_2D).render(
+        header=header, method=scheme.method, name=lat.name, source=_docsafe(lat.text), description=description,
+        q=lat.q_name, p=lat.p_name, sizes=[s.name for s in lat.sizes], nmin=lat.nmin,
+        field_names=list(lat.fields), param_names=list(lat.params), defaults_text=defaults, traits=traits,
+        signature=sig, terms=terms, extra=extra, special=special, quantities=quantities,
+        quantity_names=[q for q, _ in quantities], stencil_lines=stencil_lines,
+        backend=backend, scalar=scalar)
+    text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
+    return HEADER_CONTENT + hashlib.sha256(text.encode()).hexdigest() + "\n" + text
+
+
 BACKENDS = ("numpy", "compiled")
 
 
@@ -376,6 +521,8 @@ def build_lattice(lattice: Lattice, method: str = "avf", path=None, *, backend: 
         with phase("derive", progress):
             scheme = discretize_lattice(lattice, method)
         with phase("render", progress):
+            if getattr(lattice, "dims", 1) == 2:
+                return render2d(scheme, sig, backend)
             return render(scheme, sig, backend)
 
     return write_and_load(path, sig, source, progress)

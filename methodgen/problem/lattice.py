@@ -39,6 +39,12 @@ Two structures:
   ``Sum(…, i, 1, N)`` with periodic neighbours, and N is even (the step's pentadiagonal Newton
   matrix is solved as a block tridiagonal one over the pairs of sites (2k - 1, 2k)).
 
+A *2-D periodic* lattice names two sizes, ``Lattice(H, size=("N", "M"))`` (a :class:`Lattice2D`):
+terms ``Sum(Sum(body, j, 1, M), i, 1, N)`` over the N × M torus with two-index fields
+``q[i, j]``, ``q[i % N + 1, j]``, ``q[i, (j - 2) % M + 1]``, kept as templates in 2-D slots
+``q_0_0, q_p1_0, q_0_m1, …`` (:func:`slot_symbol2`); nearest neighbours, periodic both ways
+(boundaries and wider stencils refused with a message saying what is valid).
+
 References
 ----------
 .. [1] E. Celledoni, V. Grimm, R. I. McLachlan, D. I. McLaren, D. O'Neale, B. Owren,
@@ -60,7 +66,8 @@ from ..errors import InputError, ParseError
 from .parse import (CONSTANTS, FUNCTIONS, MAX_TEXT, RESERVED, SUM, _Builder, _check_double_range,
                     _NAME_RE, check_smooth)
 
-__all__ = ["Bound", "SiteTerm", "Lattice", "slot_symbol", "STENCIL_GRADIENT", "STENCIL_INDEX"]
+__all__ = ["Bound", "SiteTerm", "Lattice", "slot_symbol", "STENCIL_GRADIENT", "STENCIL_INDEX", "Lattice2D",
+           "SiteTerm2D", "slot_symbol2"]
 
 #: smallest size any lattice admits: with N ≥ 3 the sites i - 1, i, i + 1 are distinct
 MIN_SIZE = 3
@@ -335,6 +342,13 @@ class Lattice:
     ('skew', [-1, 1])
     """
 
+    def __new__(cls, H=None, *args, size="N", **kw):
+        # two sizes: a 2-D periodic lattice (Lattice2D, which is not a Lattice: __init__ below is
+        # not run on it)
+        if cls is Lattice and isinstance(size, (tuple, list)):
+            return Lattice2D(H, *args, size=tuple(size), **kw)
+        return super().__new__(cls)
+
     def __init__(self, H: str, q: str = "q", p: str = "p", *, size: str = "N",
                  params: Mapping[str, float] | None = None, name: str = "lattice",
                  invariants: Mapping[str, str] | None = None, fields=None, skew: str | None = None):
@@ -579,3 +593,305 @@ def _parse_slot(s: sp.Symbol):
     if tag[:1] in "pm" and tag[1:].isdigit():
         return (field, int(tag[1:]) * (1 if tag[0] == "p" else -1))
     return None
+
+
+# --- 2-D periodic lattices -------------------------------------------------------------------
+#
+# ``Lattice(H, size=("N", "M"))`` (dispatched by :meth:`Lattice.__new__`): the sites (i, j) of an
+# N × M torus, a term ``Sum(Sum(body, j, 1, M), i, 1, N)`` with ``q[i, j]``, ``q[i % N + 1, j]``,
+# ``q[i, (j - 2) % M + 1]`` … (the field at the site i + a, j + b, cyclically).  Periodic both ways
+# and nearest neighbours only: the step's linear part is then a periodic stencil that the 2-D
+# FFT diagonalises (methodgen.symbolic.lattice_scheme.linear_stencil).
+
+_EXAMPLE_2D = "Sum(Sum(p[i, j]**2/2 + (q[i % N + 1, j] - q[i, j])**2/2 + (q[i, j % M + 1] - q[i, j])**2/2, j, 1, M), i, 1, N)"
+_PERIODIC_HINT_2D = ("2-D lattices are periodic both ways: write a neighbour as q[i % N + 1, j], q[(i - 2) % N + 1, j], "
+                     "q[i, j % M + 1], q[i, (j - 2) % M + 1]")
+
+
+def _otag2(o: int) -> str:
+    return "0" if o == 0 else (f"p{o}" if o > 0 else f"m{-o}")
+
+
+def slot_symbol2(field: str, offset: tuple[int, int]) -> sp.Symbol:
+    """The symbol of ``field`` at the site ``(i + a, j + b)`` of a 2-D template (``q_0_0``, ``q_p1_0``,
+    ``p_0_m1``)."""
+    return sp.Symbol(f"{field}_{_otag2(offset[0])}_{_otag2(offset[1])}", real=True)
+
+
+def _parse_slot2(s: sp.Symbol):
+    """(field, (a, b)) of a 2-D slot symbol, or None."""
+    parts = s.name.rsplit("_", 2)
+    if len(parts) != 3 or not parts[0] or s.name.startswith("_"):
+        return None
+    offs = []
+    for tag in parts[1:]:
+        if tag == "0":
+            offs.append(0)
+        elif tag[:1] in "pm" and tag[1:].isdigit():
+            offs.append(int(tag[1:]) * (1 if tag[0] == "p" else -1))
+        else:
+            return None
+    return parts[0], tuple(offs)
+
+
+@dataclass(frozen=True)
+class SiteTerm2D:
+    """One template summed over every site (i, j) of the N × M torus.
+
+    Attributes
+    ----------
+    template : sympy.Expr
+        The summand in slot symbols (:func:`slot_symbol2`), parameters and the sizes.
+    slots : tuple of (str, (int, int))
+        The (field, (a, b)) of each slot symbol, sorted.
+    source : str
+    """
+
+    template: sp.Expr
+    slots: tuple
+    source: str
+
+    def symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(slot_symbol2(f, o) for f, o in self.slots)
+
+    def width(self) -> tuple[int, int]:
+        """The span of the offsets in each direction (0 or 1 for nearest neighbours)."""
+        if not self.slots:
+            return (0, 0)
+        return tuple(max(o[k] for _, o in self.slots) - min(o[k] for _, o in self.slots) for k in (0, 1))
+
+
+class _Lattice2DBuilder(_Builder):
+    """:class:`methodgen.problem.parse._Builder` for a 2-D periodic lattice: a term is two nested
+    Sums, one over each size, kept as a template in 2-D slots."""
+
+    def __init__(self, symbols, fields, sizes, what: str):
+        super().__init__(symbols, what)
+        self.fields, self.sizes = fields, sizes
+        self.axis_of: dict[str, int] = {}      # the enclosing Sums' indices → their axis (0: N, 1: M)
+        self.sums: list[tuple[sp.Symbol, sp.Expr, str]] = []
+
+    def _offset(self, node: ast.AST, axis: int, where: str) -> int:
+        """The periodic offset c of ``index`` along ``axis``: ``i`` (0), ``i % N + 1`` (1),
+        ``(i + c) % N + 1`` (c + 1); anything else refused naming the valid forms."""
+        size = self.sizes[axis].name
+        index = next((k for k, a in self.axis_of.items() if a == axis), None)
+
+        def lin(n):          # i + c → c, or None
+            if isinstance(n, ast.Name) and n.id == index:
+                return 0
+            if (isinstance(n, ast.BinOp) and isinstance(n.op, (ast.Add, ast.Sub))
+                    and isinstance(n.left, ast.Name) and n.left.id == index
+                    and isinstance(n.right, ast.Constant) and type(n.right.value) is int):
+                return n.right.value if isinstance(n.op, ast.Add) else -n.right.value
+            return None
+
+        c = lin(node)
+        if c == 0:
+            return 0
+        if c is not None:
+            raise self.fail(node, f"{where}: {ast.unparse(node)!r} is a site near the edge, not a periodic "
+                                  f"neighbour (2-D lattices have no boundaries); {_PERIODIC_HINT_2D}")
+        if (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add) and isinstance(node.right, ast.Constant)
+                and node.right.value == 1 and type(node.right.value) is int
+                and isinstance(node.left, ast.BinOp) and isinstance(node.left.op, ast.Mod)
+                and isinstance(node.left.right, ast.Name) and node.left.right.id == size):
+            c = lin(node.left.left)
+            if c is not None:
+                return c + 1
+        other = next((k for k, a in self.axis_of.items() if a != axis), None)
+        if isinstance(node, ast.Name) and node.id == other or other in {n.id for n in ast.walk(node)
+                                                                         if isinstance(n, ast.Name)}:
+            raise self.fail(node, f"{where}: the {'first' if axis == 0 else 'second'} index runs over "
+                                  f"{index} = 1 … {size} (the Sum over {size}), but {ast.unparse(node)!r} uses "
+                                  f"{other!r}")
+        raise self.fail(node, f"{where}: {ast.unparse(node)!r} is not a supported index; {_PERIODIC_HINT_2D}")
+
+    def subscript(self, node: ast.Subscript) -> sp.Expr:
+        where = f"subscripting {ast.unparse(node)}"
+        if not isinstance(node.value, ast.Name) or node.value.id not in self.fields:
+            raise self.fail(node, f"{where} is not allowed: write {'[…, …] or '.join(self.fields)}[…, …]")
+        if len(self.axis_of) != 2:
+            raise self.fail(node, f"{where} outside Sum(Sum(…, j, 1, {self.sizes[1]}), i, 1, {self.sizes[0]}): "
+                                  "2-D lattices have no boundary terms at fixed sites; every term is summed over "
+                                  "all sites")
+        if not isinstance(node.slice, ast.Tuple) or len(node.slice.elts) != 2:
+            raise self.fail(node, f"{where}: a field of a 2-D lattice takes two indices, "
+                                  f"{node.value.id}[i, j] (i over {self.sizes[0]}, j over {self.sizes[1]})")
+        a = self._offset(node.slice.elts[0], 0, where)
+        b = self._offset(node.slice.elts[1], 1, where)
+        return slot_symbol2(node.value.id, (a, b))
+
+    def name(self, node: ast.Name) -> sp.Expr:
+        for s in self.sizes:
+            if node.id == s.name:
+                return s
+        if node.id in self.axis_of:
+            raise self.fail(node, f"the Sum index {node.id!r} may appear only in subscripts")
+        return super().name(node)
+
+    def indexed_sum(self, node: ast.Call, depth: int) -> sp.Expr:
+        N, M = (s.name for s in self.sizes)
+        usage = f"a 2-D site term is Sum(Sum(body, j, 1, {M}), i, 1, {N})"
+        if node.keywords or len(node.args) != 4 or any(isinstance(a, ast.Starred) for a in node.args):
+            raise self.fail(node, f"Sum(body, i, lo, hi) takes the summand, an index name and its bounds; {usage}")
+        body, var, lo_node, hi_node = node.args
+        if not isinstance(var, ast.Name):
+            raise self.fail(var, "Sum(body, i, lo, hi): the second argument must be a name")
+        name = var.id
+        if (not _NAME_RE.fullmatch(name) or name in RESERVED or keyword.iskeyword(name) or name in self.symbols
+                or name in self.fields or name in (N, M) or name in self.axis_of):
+            raise self.fail(var, f"Sum index {name!r} is not a free name (a field, a size, a parameter, an "
+                                 "enclosing Sum's index or a word of the grammar): choose another, e.g. i or j")
+        if len(self.axis_of) == 2:
+            raise self.fail(node, f"three nested Sums: {usage}")
+        if not (isinstance(hi_node, ast.Name) and hi_node.id in (N, M)
+                and isinstance(lo_node, ast.Constant) and lo_node.value == 1 and type(lo_node.value) is int):
+            raise self.fail(node, f"Sum over {name} from {ast.unparse(lo_node)} to {ast.unparse(hi_node)}: 2-D "
+                                  f"lattices are periodic, every term summed over all sites ({usage}); boundaries "
+                                  f"and partial ranges are not supported")
+        axis = 0 if hi_node.id == N else 1
+        if axis in self.axis_of.values():
+            raise self.fail(node, f"two nested Sums over {hi_node.id}: {usage}")
+        if not self.axis_of and not (isinstance(body, ast.Call) and isinstance(body.func, ast.Name)
+                                     and body.func.id == SUM):
+            raise self.fail(node, f"Sum over {name} alone: {usage} (one Sum over each size, the inner one the "
+                                  "whole summand of the outer)")
+        self.axis_of[name] = axis
+        try:
+            inner = self.build(body, depth + 1)
+        finally:
+            del self.axis_of[name]
+        if self.axis_of:               # the inner Sum: the template itself
+            return inner
+        placeholder = sp.Symbol(f"_sum{len(self.sums)}", real=True)
+        self.sums.append((placeholder, inner, ast.unparse(node)))
+        return placeholder
+
+
+class Lattice2D:
+    """A periodic 2-D lattice Hamiltonian of symbolic sizes N × M (``Lattice(H, size=("N", "M"))``).
+
+    ``H`` is a sum of terms ``Sum(Sum(body, j, 1, M), i, 1, N)`` (or the Sums the other way
+    round) over the sites (i, j) of the torus, with the fields at ``q[i, j]`` and at periodic
+    neighbours ``q[(i + c) % N + 1, j]``, ``q[i, (j + c) % M + 1]``, nearest neighbours only (the
+    offsets of a term span at most 1 in each direction); canonical fields q, p.  Refused with a
+    message: boundaries (``q[i + 1, j]``, partial ranges, fixed sites), wider stencils, one-index
+    fields, a skew structure.  The state is ``(q[1..N, 1..M], p[1..N, 1..M])`` as an array
+    (2, N, M).
+
+    Examples
+    --------
+    >>> w = Lattice("Sum(Sum(p[i, j]**2/2 + (q[i % N + 1, j] - q[i, j])**2/2 + (q[i, j % M + 1] - q[i, j])**2/2"
+    ...             " + 1 - cos(q[i, j]), j, 1, M), i, 1, N)", size=("N", "M"))
+    >>> type(w).__name__, [s.name for s in w.sizes]
+    ('Lattice2D', ['N', 'M'])
+    """
+
+    dims = 2
+    structure = "canonical"
+    stencil: dict = {}
+    skew_text = None
+
+    def __init__(self, H: str, q: str = "q", p: str = "p", *, size=("N", "M"),
+                 params: Mapping[str, float] | None = None, name: str = "lattice",
+                 invariants: Mapping[str, str] | None = None, fields=None, skew: str | None = None):
+        if skew is not None or fields is not None:
+            raise InputError("2-D lattices are canonical (fields q and p, named by q= and p=); a skew structure "
+                             "(fields=, skew=) is supported on 1-D lattices only")
+        if not isinstance(H, str):
+            raise InputError(f"the lattice Hamiltonian must be text, got {type(H).__name__}")
+        if len(H) > MAX_TEXT:
+            raise ParseError(f"Hamiltonian is longer than {MAX_TEXT} characters")
+        params = dict(params or {})
+        if not isinstance(size, (tuple, list)) or len(size) != 2:
+            raise InputError(f"size of a 2-D lattice is two names, e.g. ('N', 'M'); got {size!r}")
+        names = (q, p, *size, *params)
+        for nm in names:
+            if not isinstance(nm, str) or not _NAME_RE.fullmatch(nm) or nm in RESERVED or keyword.iskeyword(nm):
+                raise InputError(f"{nm!r} is not a valid name (a letter, then letters, digits, _)")
+        if len(set(names)) != len(names):
+            raise InputError(f"the names of the fields ({q}, {p}), the sizes ({', '.join(size)}) and the parameters "
+                             "must differ")
+        clash = [k for k in params if k.startswith((f"{q}_", f"{p}_"))]
+        if clash:
+            raise InputError(f"parameter names may not start with {q + '_'!r} or {p + '_'!r} (the site symbols' "
+                             f"names): {', '.join(clash)}")
+        for k, v in params.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise InputError(f"parameter {k!r} must be a real number, got {v!r}")
+        self.name, self.text = name, H
+        self.q_name, self.p_name = q, p
+        self.sizes = tuple(sp.Symbol(s, integer=True, positive=True) for s in size)
+        self.size = self.sizes[0]      # (the first size: what 1-D code that names "the size" reads)
+        self.params = {k: float(v) for k, v in params.items()}
+        self.param_symbols = tuple(sp.Symbol(k, real=True) for k in params)
+        self.terms = self._parse(H, "Hamiltonian")
+        self.invariant_texts = dict(invariants or {})
+        self.invariants = {}
+        for k, text in self.invariant_texts.items():
+            if not isinstance(k, str) or not _NAME_RE.fullmatch(k) or k == "H":
+                raise InputError(f"invariant name {k!r} is not a valid name other than H")
+            if not isinstance(text, str):
+                raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
+            self.invariants[k] = self._parse(text, f"invariant {k}")
+        self.nmin = MIN_SIZE
+
+    @property
+    def fields(self) -> tuple[str, str]:
+        return (self.q_name, self.p_name)
+
+    def _parse(self, text: str, what: str) -> tuple[SiteTerm2D, ...]:
+        b = _Lattice2DBuilder({s.name: s for s in self.param_symbols}, self.fields, self.sizes, what)
+        top = _build_scalar(b, text, what)
+        placeholders = [s for s, *_ in b.sums]
+        terms = []
+        for ph, template, src in b.sums:
+            coeff = sp.diff(top, ph)
+            if coeff.free_symbols & set(placeholders):
+                raise ParseError(f"{what}: {src} enters non-linearly (times another sum); it must be a sum of "
+                                 "site terms")
+            template = coeff * template
+            slots = sorted({k for k in map(_parse_slot2, template.free_symbols) if k and k[0] in self.fields})
+            terms.append(SiteTerm2D(template, tuple(slots), src))
+        rest = sp.sympify(top.xreplace({ph: sp.S.Zero for ph in placeholders}))
+        if rest != 0:
+            terms.append(SiteTerm2D(rest, (), str(rest)))     # a constant: part of the value only
+        if not any(t.slots for t in terms):
+            raise ParseError(f"{what} has no term in the fields")
+        for t in terms:
+            check_smooth(t.template, what)
+            _check_double_range(t.template, what)
+            if t.template.has(sp.I) or t.template.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+                raise ParseError(f"{what} term {t.source} is not a finite real expression")
+            wide = [(ax, w) for ax, w in zip(self.sizes, t.width()) if w > 1]
+            if wide:
+                raise ParseError(f"{what} term {t.source} couples sites {wide[0][1]} apart along {wide[0][0]}; "
+                                 "2-D lattice terms may couple nearest neighbours only (offsets spanning at most "
+                                 "1 in each direction, e.g. q[i, j] and q[i % N + 1, j]; wider stencils are not "
+                                 "supported)")
+        return tuple(terms)
+
+    def check_size(self, n, m=None) -> None:
+        """Refuse sizes below :data:`MIN_SIZE` (``check_size((n, m))`` or ``check_size(n, m)``)."""
+        if m is None and isinstance(n, (tuple, list)) and len(n) == 2:
+            n, m = n
+        for s, v in zip(self.sizes, (n, m)):
+            if isinstance(v, bool) or not isinstance(v, int) or v < self.nmin:
+                raise InputError(f"the 2-D lattice {self.name!r} needs {s} ≥ {self.nmin} sites, got {v!r}")
+
+    def expand(self, n: int, m: int):
+        """H at size n × m in ``q_a_b, p_a_b`` (a = 1 … n, b = 1 … m; lists in row-major order, for
+        tests and checks at small sizes)."""
+        self.check_size(n, m)
+        qs = [sp.Symbol(f"{self.q_name}{a}_{b}", real=True) for a in range(1, n + 1) for b in range(1, m + 1)]
+        ps = [sp.Symbol(f"{self.p_name}{a}_{b}", real=True) for a in range(1, n + 1) for b in range(1, m + 1)]
+        arrays = {self.q_name: qs, self.p_name: ps}
+        sizes = {self.sizes[0]: sp.Integer(n), self.sizes[1]: sp.Integer(m)}
+        out = []
+        for t in self.terms:
+            for a in range(n):
+                for b in range(m):
+                    sub = {slot_symbol2(f, o): arrays[f][((a + o[0]) % n) * m + (b + o[1]) % m] for f, o in t.slots}
+                    out.append(t.template.xreplace({**sub, **sizes}))
+        return sp.Add(*out), qs, ps

@@ -12,7 +12,7 @@ import numpy
 from ..codegen import ktypes as _t
 from . import lattice_stepper as _ls
 
-__all__ = ["run_steps"]
+__all__ = ["run_steps", "gradient_2d"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 #: Y (2, n), T (rows, 2n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, sk, c
@@ -78,3 +78,45 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
     done = int(fst[1]) if code else steps
     kept = done // every + 1 + (1 if code == 0 and steps % every else 0)
     return T[:kept], its[:steps].astype(numpy.int64), (code, int(fst[1]), int(fst[2]), float(fst[3]))
+
+
+#: _Y0, _Z, _G (2, n·m), _n, _m, _p: a 2-D lattice module's site kernel _grad2d
+SIG_2D = _t.void(_M, _M, _M, _i8, _i8, _V)
+_KERNELS_2D: dict = {}
+
+
+def _kernel_2d(kernel, python: bool):
+    """``kernel`` compiled (cached per kernel, as :func:`_loop`), or itself (plain Python) where
+    llvmlite is missing or ``python``."""
+    if python:
+        return kernel, False
+    from ..codegen import llvmkernels as _lk
+    if not _lk.enabled():
+        return kernel, False
+    key = id(kernel.__code__)
+    got = _KERNELS_2D.get(key)
+    if got is None or got[1] is not kernel:
+        try:
+            compiled = _lk.compile_kernel(kernel, SIG_2D, c_entry=True)
+        except _lk.Unsupported as exc:        # pragma: no cover - the printed kernels are in the subset
+            raise RuntimeError(f"the 2-D lattice site kernel could not be compiled: {exc}") from None
+        _KERNELS_2D[key] = got = (compiled, kernel)
+    return got[0], True
+
+
+def gradient_2d(kernel, Y0, Z, n, m, p, *, python=False):
+    """∇̄H(y0, z) of a 2-D lattice module, (2, n, m), by its site kernel ``kernel`` (``_grad2d``):
+    compiled through LLVM and called through its C entry, or run as Python."""
+    y0 = numpy.ascontiguousarray(Y0, dtype=numpy.float64).reshape(2, n * m)
+    z = numpy.ascontiguousarray(Z, dtype=numpy.float64).reshape(2, n * m)
+    G = numpy.zeros((2, n * m))
+    p = numpy.ascontiguousarray(p, dtype=numpy.float64)
+    if p.size == 0:
+        p = numpy.zeros(1)
+    fn, compiled = _kernel_2d(kernel, python)
+    if compiled:
+        from .fused import _drive
+        _drive(fn, y0, z, G, int(n), int(m), p)
+    else:
+        fn(y0, z, G, int(n), int(m), p)
+    return G.reshape(2, n, m)

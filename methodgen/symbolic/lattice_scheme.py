@@ -32,6 +32,13 @@ re-indexing, never expanding N terms (:func:`skew_certificates`).  Its Newton ma
 ``I - h S ∂∇̄H/∂u1`` is pentadiagonal and cyclic (S and ∂∇̄H tridiagonal), block tridiagonal
 with 2 × 2 blocks over the pairs of sites (2k - 1, 2k): the canonical lattices' solvers apply.
 
+A *2-D periodic* lattice (:class:`methodgen.problem.lattice.Lattice2D`) takes the same pieces per
+template (its slots are 2-D offsets) and the same certificates: the module adds each piece at
+the site of its slot, (i + a, j + b) on the torus, a bijection, so the term lemma summed over
+the sites is energy at every N × M.  Its Newton matrix is not block tridiagonal; the module
+iterates simplified Newton with the constant part, ``I - (h/2) J K`` for K the Hessian of H's
+quadratic part (:func:`linear_stencil`), a periodic stencil the 2-D FFT diagonalises.
+
 References
 ----------
 .. [1] G. R. W. Quispel, D. I. McLaren, "A new class of energy-preserving numerical
@@ -49,7 +56,7 @@ from ..errors import InputError
 from ..problem.lattice import Lattice, SiteTerm, slot_symbol
 
 __all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "discretize_lattice", "certificates",
-           "skew_certificates", "proved_invariants"]
+           "skew_certificates", "proved_invariants", "linear_stencil"]
 
 #: the methods a lattice of symbolic size can be discretised with, and what they claim
 LATTICE_METHODS = {
@@ -109,7 +116,9 @@ class LatticeScheme:
                 "energy_preserving": avf and self.exact_energy,
                 "preserved": ("H",) if avf and self.exact_energy else (),
                 "structure": self.lattice.structure,
-                "solve": ("newton (pentadiagonal, cyclic: block tridiagonal over pairs of sites)" if skew else
+                "solve": ("simplified newton (the constant linear part, a periodic 2-D stencil, solved by the 2-D FFT)"
+                          if getattr(self.lattice, "dims", 1) == 2 else
+                          "newton (pentadiagonal, cyclic: block tridiagonal over pairs of sites)" if skew else
                           "newton (block tridiagonal, cyclic)")}
 
 
@@ -334,8 +343,8 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
     """
     from .verify.exact import certify
 
-    if lattice.structure != "canonical":
-        return []                 # the bracket below is the canonical one
+    if lattice.structure != "canonical" or getattr(lattice, "dims", 1) != 1:
+        return []                 # the bracket below is the canonical one, its densities 1-D
     fields = lattice.fields
     q, p = fields
     allterms = list(lattice.terms) + [t for ts in lattice.invariants.values() for t in ts]
@@ -367,3 +376,61 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
                            ref="Hairer, Lubich & Wanner, GNI (2006) IV.2; Hydon & Mansfield (2004)",
                            details={"keeps": name}))
     return out
+
+
+# --- 2-D periodic lattices: the step's constant linear part ----------------------------------
+
+def _quadratic_part(template: sp.Expr, syms) -> sp.Expr:
+    """The part of ``template`` that is a homogeneous quadratic form in the slots ``syms`` (its
+    additive pieces that are polynomials in the slots, their degree-2 monomials); its Hessian is
+    constant."""
+    out = sp.S.Zero
+    for part in sp.Add.make_args(template):
+        if not part.free_symbols & set(syms):
+            continue
+        try:
+            poly = sp.Poly(part, *syms)
+        except sp.PolynomialError:
+            continue
+        if poly.free_symbols_in_domain & set(syms):
+            continue
+        for monom, coeff in poly.terms():
+            if sum(monom) == 2:
+                out += coeff * sp.Mul(*[s**e for s, e in zip(syms, monom)])
+    return out
+
+
+def linear_stencil(lattice) -> dict:
+    """The constant part of a 2-D lattice step's Newton matrix, as a periodic stencil.
+
+    Each template's quadratic part (:func:`_quadratic_part`) has a constant Hessian C_t; summing
+    the templates over the sites gives the Hessian of H's quadratic part, a periodic stencil
+    ``(K x)_{f, j} = Σ_{g, d} K[f, g, d] x_{g, j + d}`` with ``K[f, g, o' - o] += C_t[(f, o), (g, o')]``
+    (the site j is the slot o of the template at j - o).  For both lattice methods the pieces of
+    a quadratic part are its gradient at the midpoint, so their derivative in the step's end
+    is ``K / 2``: the module's simplified-Newton matrix is ``I - (h/2) J K``, diagonalised by the
+    2-D FFT (one 2 × 2 block per wavenumber).  The rest of the Newton matrix (the derivative of
+    the pieces of the non-quadratic part, e.g. a site's ``q⁴`` or ``1 - cos q``) is left to the
+    iteration.
+
+    Returns
+    -------
+    dict
+        ``(f, g, (a, b)) → coefficient`` (field indices f, g; a sympy expression in the parameters
+        and the sizes), the nonzero entries.
+    """
+    fields = lattice.fields
+    K: dict = {}
+    for t in lattice.terms:
+        syms = t.symbols()
+        Q = _quadratic_part(t.template, syms)
+        if Q == 0:
+            continue
+        for (f, o), s in zip(t.slots, syms):
+            for (g, o2), s2 in zip(t.slots, syms):
+                c = sp.diff(Q, s, s2)
+                if c != 0:
+                    key = (fields.index(f), fields.index(g), (o2[0] - o[0], o2[1] - o[1]))
+                    K[key] = K.get(key, sp.S.Zero) + c
+    return {k: v for k, v in ((k, sp.cancel(v)) for k, v in sorted(K.items())) if v != 0}
+

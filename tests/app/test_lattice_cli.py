@@ -28,7 +28,8 @@ def test_every_builtin_lattice_scene_runs_and_keeps_what_avf_claims(capsys, name
     code, rep, err = _run(capsys, name, "--steps", "20", "--param", "N=40")
     assert code == 0, err
     nfields = 1 if rep["traits"]["structure"] == "skew" else 2
-    assert rep["N"] == 40 and rep["method"] == "avf" and len(rep["y_final"]) == 40 * nfields
+    # (a 2-D scene's --param N=40 is the 40 × 40 grid: its second size follows the first)
+    assert rep["N"] == 40 and rep["method"] == "avf" and len(rep["y_final"]) == 40 ** rep.get("dims", 1) * nfields
     H = rep["invariants"]["H"]
     assert H["max_abs_error"] <= 1e-13 * max(1.0, abs(H["initial"]))
 
@@ -161,3 +162,55 @@ def test_skew_scene_tables_are_checked(tmp_path, table, fragment):
     bad.write_text(f'[lattice]\nH = "Sum(u[i]**2, i, 1, N)"\n{table}[run]\nN = 8\nh = 0.1\nsteps = 3\n')
     with pytest.raises(SceneError, match=fragment):
         load_lattice_scene(bad)
+
+
+def test_klein_gordon_2d_runs_at_any_size_and_keeps_energy(capsys):
+    """The 2-D scene: --param N=12 is the 12 × 12 grid (its second size follows), M= sets the second;
+    AVF keeps H to round-off, the midpoint rule (the control) does not; one module for both sizes."""
+    code, a, err = _run(capsys, "klein-gordon-2d", "--steps", "40", "--param", "N=12")
+    assert code == 0, err
+    assert (a["N"], a["M"], a["dims"], len(a["y_final"])) == (12, 12, 2, 2 * 12 * 12)
+    H = a["invariants"]["H"]
+    assert H["max_abs_error"] <= 1e-14 * abs(H["initial"])
+    code, b, err = _run(capsys, "klein-gordon-2d", "--steps", "40", "--param", "N=12", "--param", "M=16")
+    assert code == 0 and (b["N"], b["M"]) == (12, 16) and b["module_file"] == a["module_file"]
+    _, c, _ = _run(capsys, "klein-gordon-2d", "--steps", "40", "--param", "N=12", "--method", "midpoint")
+    Hm = c["invariants"]["H"]
+    assert Hm["max_abs_error"] > 1e-9 * abs(Hm["initial"])
+
+
+def test_klein_gordon_2d_default_size_and_the_numba_backend(capsys):
+    pytest.importorskip("llvmlite")
+    scene = load_lattice_scene("klein-gordon-2d")
+    assert scene.size == (128, 128) and scene.y0((128, 128)).shape == (2, 128, 128)
+    code = cli.main(["run", "klein-gordon-2d", "--steps", "30", "--param", "N=8", "--backend", "numba"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "backend compiled" in out and "N × M = 8 × 8" in out
+    _, a, _ = _run(capsys, "klein-gordon-2d", "--steps", "30", "--param", "N=8")
+    _, b, _ = _run(capsys, "klein-gordon-2d", "--steps", "30", "--param", "N=8", "--backend", "numba")
+    assert (a["backend"], b["backend"]) == ("numpy", "compiled")
+    assert np.max(np.abs(np.array(a["y_final"]) - np.array(b["y_final"]))) < 1e-13
+
+
+def test_verify_klein_gordon_2d_decides_per_template(capsys):
+    code = cli.main(["verify", "klein-gordon-2d"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "[proved] avf: term lemma" in out
+    assert "avf keeps, proved at every N × M: H" in out
+
+
+@pytest.mark.parametrize("table,fragment", [
+    ('[lattice]\nH = "Sum(Sum(p[i, j]**2/2 + q[i + 1, j]**2, j, 1, M), i, 1, N)"\nsize = ["N", "M"]\n'
+     '[run]\nN = 8\nh = 0.1\nsteps = 2\n', "not a periodic neighbour"),
+    ('[lattice]\nH = "Sum(Sum(p[i, j]**2/2 + q[i, j]**2, j, 1, M), i, 1, N)"\nsize = ["N", "M", "K"]\n'
+     '[run]\nN = 8\nh = 0.1\nsteps = 2\n', "two names for a 2-D lattice"),
+    ('[lattice]\nH = "Sum(Sum(p[i, j]**2/2 + q[i, j]**2, j, 1, M), i, 1, N)"\nsize = ["N", "M"]\n'
+     '[run]\nN = 8\nK = 3\nh = 0.1\nsteps = 2\n', "unknown key 'K'"),
+    ('[lattice]\nH = "Sum(Sum(p[i, j]**2/2 + q[i, j]**2, j, 1, M), i, 1, N)"\nsize = ["N", "M"]\n'
+     '[run]\nN = 8\nM = 2\nh = 0.1\nsteps = 2\n', "needs M ≥ 3"),
+])
+def test_2d_scene_tables_are_checked(tmp_path, table, fragment):
+    path = tmp_path / "s.toml"
+    path.write_text(table)
+    with pytest.raises(SceneError, match=fragment):
+        load_lattice_scene(path)

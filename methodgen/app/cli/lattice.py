@@ -23,13 +23,21 @@ def run(args) -> int:
         raise InputError(f"{flags}: not available for a lattice scene; a lattice run takes --method, --h, "
                          "--steps, --t-final, --param NAME=VALUE (N=… for the size), --backend, --no-check-resolution and --json")
     scene = load_lattice_scene(args.scene)
-    names = [scene.lattice.size.name, *scene.lattice.params]
+    sizes = [s.name for s in getattr(scene.lattice, "sizes", (scene.lattice.size,))]
+    names = [*sizes, *scene.lattice.params]
     values = parse_params(args.param, names)
-    size = values.pop(scene.lattice.size.name, None)
-    if size is not None:
-        if size != int(size):
-            raise InputError(f"--param {scene.lattice.size.name}: the size must be an integer, got {size:g}")
-        size = int(size)
+    given = [values.pop(s, None) for s in sizes]
+    for s, v in zip(sizes, given):
+        if v is not None and v != int(v):
+            raise InputError(f"--param {s}: the size must be an integer, got {v:g}")
+    given = [None if v is None else int(v) for v in given]
+    if len(sizes) == 1:
+        size = given[0]
+    elif given == [None, None]:
+        size = None
+    else:   # a 2-D lattice: the second size follows the first where not given (a square grid)
+        first = scene.size[0] if given[0] is None else given[0]
+        size = (first, given[1] if given[1] is not None else (first if given[0] is not None else scene.size[1]))
     if args.method is not None and args.method not in scene.methods and args.method not in ("avf", "midpoint"):
         raise InputError(f"--method {args.method!r}: a lattice runs avf or midpoint")
     try:
@@ -46,7 +54,8 @@ def run(args) -> int:
     if args.json:
         print(dump_json(rep))
         return 0
-    print(f"lattice {rep['scene']}  method {rep['method']}  backend {rep['backend']}  N = {rep['N']}  h = {rep['h']:g}  steps = {rep['steps']}"
+    size = f"{' × '.join(sizes)} = {rep['N']} × {rep['M']}" if len(sizes) == 2 else f"N = {rep['N']}"
+    print(f"lattice {rep['scene']}  method {rep['method']}  backend {rep['backend']}  {size}  h = {rep['h']:g}  steps = {rep['steps']}"
           f"  (t = 0 .. {rep['t_final']:g})")
     print(f"{'invariant':>10} {'initial':>24} {'final':>24} {'max abs error':>14}")
     for k, v in rep["invariants"].items():
@@ -78,5 +87,6 @@ def verify(args) -> int:
         for c in out:
             print(f"  [{c['status']}] {c['method']}: {c['claim']} ({c['how']})")
         for m, names in kept.items():
-            print(f"  {m} keeps, proved at every N: {', '.join(names) if names else 'none of the invariants'}")
+            every = " × ".join(x.name for x in getattr(scene.lattice, "sizes", (scene.lattice.size,)))
+            print(f"  {m} keeps, proved at every {every}: {', '.join(names) if names else 'none of the invariants'}")
     return 0 if ok else EXIT_NUMERICAL

@@ -23,7 +23,9 @@ def cmd_scenes(args) -> int:
     for name in lattice_scene_names():
         s = load_lattice_scene(name)
         lattices.append({"name": s.name, "description": s.description, "methods": list(s.methods),
-                         "size": s.lattice.size.name, "default_size": s.size, "min_size": s.lattice.nmin,
+                         "size": " × ".join(x.name for x in getattr(s.lattice, "sizes", (s.lattice.size,))),
+                         "default_size": list(s.size) if isinstance(s.size, tuple) else s.size,
+                         "min_size": s.lattice.nmin,
                          "invariants": ["H", *s.lattice.invariants]})
     if args.json:
         print(json.dumps({"scenes": rows, "lattices": lattices}))
