@@ -1272,6 +1272,7 @@ def _compile_kernel(py_func, sig, globals_=None, c_entry=False, options=(True, T
         got = _LOADED[name] = (addr, engine.get_function_address(name + "_c") if c_entry else 0)
     addr, c_addr = got
     out = LLVMKernel(py_func, sig, addr, engine, name)
+    out._globals = globals_
     if c_entry:
         argtypes = [ctypes.c_void_p if isinstance(t, _t.Array) else
                     ctypes.c_double if t == _t.float64 else ctypes.c_int64 for t in sig.args]
@@ -1357,10 +1358,12 @@ class LLVMKernel:
     For the shared runtime it is a first-class function: it implements numba's
     wrapper-address protocol (``__wrapper_address__``, ``signature``; registered as such by
     :mod:`methodgen.runtime.nbruntime`, which imports numba -- this module does not).  The fused loop
-    (:mod:`methodgen.runtime.fused`) inlines its source instead.  Callable from Python too (through
-    numba, compiled on the first such call: tests and diagnostics; the runtime never does)."""
+    (:mod:`methodgen.runtime.fused`) inlines its source instead.  Callable from Python too: the
+    same translation with a C entry (:func:`compile_kernel` with ``c_entry``, made on the first
+    such call, its machine code cached as any other) called through ctypes -- the kernel's own
+    arithmetic, no numba (the Python stepper, tests and diagnostics; the runtime never does)."""
 
-    __slots__ = ("py_func", "engine", "_nb", "c_call", "_sig", "_addr", "_type", "symbol")
+    __slots__ = ("py_func", "engine", "_py", "c_call", "_sig", "_addr", "_type", "symbol", "_globals")
 
     def __init__(self, py_func, sig, addr, engine, symbol=""):
         self._sig = sig               # methodgen.codegen.ktypes.Signature
@@ -1368,8 +1371,9 @@ class LLVMKernel:
         self._type = None             # numba's FunctionType, made when numba asks
         self.py_func = py_func
         self.engine = engine          # owns the machine code
-        self._nb = None
+        self._py = None               # the C entry, for calls from Python (made on the first)
         self.c_call = None            # the C entry through ctypes (compile_kernel(c_entry=True))
+        self._globals = None          # the names it was translated in (compile_kernel's globals_)
         # the machine code's symbol: named by the cache key of the text it was translated
         # from (or unique in the process), so it identifies the code, as an id() cannot
         self.symbol = symbol
@@ -1389,10 +1393,39 @@ class LLVMKernel:
         return self._type
 
     def __call__(self, *args):
-        if self._nb is None:
-            numba = _numba_for(self.py_func)
-            self._nb = numba.njit(self.signature(), cache=True, error_model="numpy")(self.py_func)
-        return self._nb(*args)
+        """Call the machine code from Python: arrays (C-contiguous, of the signature's dtype) by
+        reference, so the kernel writes into the caller's arrays; ValueError for others."""
+        entry = self.c_call or self._py
+        if entry is None:
+            entry = self._py = compile_kernel(self.py_func, self._sig, globals_=self._globals, c_entry=True).c_call
+        if len(args) != len(self._sig.args):
+            raise TypeError(f"{self.py_func.__name__}() takes {len(self._sig.args)} arguments, got {len(args)}")
+        keep, vals = [], []
+        for a, t in zip(args, self._sig.args):
+            if isinstance(t, _t.Array):
+                want = np.dtype(str(t.dtype))
+                if not (isinstance(a, np.ndarray) and a.dtype == want and a.ndim == t.ndim
+                        and a.flags.c_contiguous):
+                    got = (f"{a.dtype} {a.shape} {'C-contiguous' if a.flags.c_contiguous else 'strided'}"
+                           if isinstance(a, np.ndarray) else type(a).__name__)
+                    raise ValueError(f"{self.py_func.__name__}(): a C-contiguous {t.ndim}-d {want} array is "
+                                     f"needed, got {got}")
+                buf, (addr,) = _packed(a)
+                keep.append(buf)
+                vals.append(addr)
+            else:
+                vals.append(int(a) if t == _t.int64 else float(a))
+        out = entry(*vals)
+        del keep
+        return out
+
+
+def _packed(a):
+    """:func:`packed_structs` of one array of any dtype of 8-byte items (a kernel's index
+    tables are int64)."""
+    ptr = a.__array_interface__["data"][0]
+    buf = np.array([0, 0, a.size, a.itemsize, ptr, *a.shape, *a.strides], dtype=np.int64)
+    return buf, [buf.__array_interface__["data"][0]]
 
 
 def _numba_for(py_func):

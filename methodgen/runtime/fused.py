@@ -196,9 +196,9 @@ def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, o
     interpreter's loop)."""
     consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
     consts.update(numba=_Stack, _rt=_Stack)
-    # the kernels as callables: compiled ones (numba compiles an LLVM kernel's source on its
-    # first call from Python, with the same arithmetic), so that a comparison with the compiled
-    # loop tests the stepper alone
+    # the kernels as callables: their machine code (an LLVM kernel called from Python goes
+    # through a C entry of the same translation), so that a comparison with the compiled loop
+    # tests the stepper alone
     consts.update(zip(KERNEL_NAMES, kernels))
     if block:
         consts["post_block"] = block[0]

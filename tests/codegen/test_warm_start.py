@@ -126,9 +126,14 @@ out = {"numba_after_run": "numba" in sys.modules,
 if sys.argv[2] == "plain":
     import numba   # imported by other code, not through methodgen's door: installs nothing
 else:
-    # a kernel called from Python is compiled by numba (cache=True): through the door
+    # a function of the module compiled by numba (cache=True), as the numba route
+    # (METHODGEN_KERNELS=numba, or a kernel the translator refuses) does: through the door
+    from methodgen.runtime import nbabi
+    nbabi.materialize(vars(mod))
+    numba = nbcache.numba()
     z = np.zeros(mod._N)
-    mod._nb_guess(np.array([1.0, 0.0]), 0.1, np.array([mod.DEFAULT_PARAMS[k] for k in mod.PARAM_NAMES]), z)
+    numba.njit(cache=True)(mod._nb_guess.py_func)(np.array([1.0, 0.0]), 0.1,
+                                                  np.array([mod.DEFAULT_PARAMS[k] for k in mod.PARAM_NAMES]), z)
 from numba.core import caching
 impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")
 out["guarded"] = [getattr(c, "_methodgen_path", None) for c in impl._locator_classes]
