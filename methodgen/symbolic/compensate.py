@@ -75,10 +75,20 @@ def compensation_symbols(states: Iterable[sp.Symbol]) -> dict[sp.Symbol, sp.Symb
     return {s: sp.Symbol("_c_" + s.name, real=True) for s in states}
 
 
-def _regroup(e: sp.Expr, states: frozenset, comps: frozenset) -> sp.Expr:
+def _regroup(e: sp.Expr, states: frozenset, comps: frozenset, memo: dict) -> sp.Expr:
+    # memo: each distinct subexpression once (a stage's equations share most of theirs: a
+    # tree walk visited them ~200 times each); a node whose arguments are unchanged is kept
+    # as it is, not rebuilt
     if e.is_Atom:
         return e
-    args = [_regroup(a, states, comps) for a in e.args]
+    got = memo.get(e)
+    if got is None:
+        got = memo[e] = _regroup_node(e, states, comps, memo)
+    return got
+
+
+def _regroup_node(e: sp.Expr, states: frozenset, comps: frozenset, memo: dict) -> sp.Expr:
+    args = [_regroup(a, states, comps, memo) for a in e.args]
     if isinstance(e, sp.Add):
         state_terms, rest = [], []
         for a in args:
@@ -92,6 +102,8 @@ def _regroup(e: sp.Expr, states: frozenset, comps: frozenset) -> sp.Expr:
             # states' sum and the small sum are formed apart and added once.
             head = state_terms[0] if len(state_terms) == 1 else grouped(sp.Add(*state_terms))
             return head + grouped(sp.Add(*rest))
+    if all(a is b for a, b in zip(args, e.args)):
+        return e
     return e.func(*args)
 
 
@@ -126,4 +138,5 @@ def compensate(exprs: Iterable[sp.Expr], comp: Mapping[sp.Symbol, sp.Symbol]) ->
     states = frozenset(comp)
     comps = frozenset(comp.values())
     shift = {s: s + comp[s] for s in states}
-    return [_regroup(sp.sympify(e).xreplace(shift), states, comps) for e in exprs]
+    memo: dict = {}
+    return [_regroup(sp.sympify(e).xreplace(shift), states, comps, memo) for e in exprs]
