@@ -51,7 +51,16 @@ def from_sympy(expr: sp.Expr, printer) -> tuple:
     Unsupported
         For a node the IR does not have.
     """
-    return _strip(_Builder(printer).build(expr))
+    # one builder per printer (a lowering's printer lives for that lowering): its memo builds
+    # each distinct subexpression's tree once across the lowering's expressions
+    builder = getattr(printer, "_kir_builder", None)
+    if builder is None or builder.p is not printer:
+        builder = _Builder(printer)
+        try:
+            printer._kir_builder = builder
+        except AttributeError:     # (a printer that takes no attributes: a builder per call)
+            pass
+    return _strip(builder.build(expr))
 
 
 def _strip(node):
@@ -102,6 +111,7 @@ class _Builder:
         self.prefix = "_v_" if self.vector else "_f_"
         self.special = SPECIAL_FUNCTIONS
         self.grouped = grouped
+        self.memo: dict = {}
 
     def paren(self, item, level) -> tuple:
         # CodePrinter.parenthesize(item, level, strict=False)
@@ -109,6 +119,14 @@ class _Builder:
         return (_PAREN, node) if precedence(item) <= level else node
 
     def build(self, e) -> tuple:
+        # a subexpression's tree does not depend on where it stands (its parent decides the
+        # parentheses): built once (trees are tuples, shared safely)
+        got = self.memo.get(e)
+        if got is None:
+            got = self.memo[e] = self._build(e)
+        return got
+
+    def _build(self, e) -> tuple:
         if isinstance(e, self.grouped):
             return (_PAREN, self.build(e.args[0]))
         if e.is_Symbol:

@@ -104,10 +104,12 @@ def test_negative_control_a_builder_without_the_printers_order_is_caught(monkeyp
     exprs = [_random_expr(rng) for _ in range(200)]
     monkeypatch.undo()
     trees = []
+    # a fresh printer: the builder it gets builds every tree anew (SCALAR's remembers its trees)
+    printer = ScalarPrinter({"fully_qualified_modules": True})
     monkeypatch.setattr(sp.Mul, "as_ordered_factors", lambda self, order=None: list(self.args)[::-1])
     for e in exprs:
         try:
-            trees.append((e, kir_build.from_sympy(e, SCALAR)))
+            trees.append((e, kir_build.from_sympy(e, printer)))
         except kir.Unsupported:
             pass
     monkeypatch.undo()
