@@ -403,13 +403,7 @@ class Lattice:
         self.stencil = {} if skew is None else self._stencil(skew)
         self.terms = self._parse(H, "Hamiltonian")
         self.invariant_texts = dict(invariants or {})
-        self.invariants = {}
-        for k, text in self.invariant_texts.items():
-            if not isinstance(k, str) or not _NAME_RE.fullmatch(k) or k == "H":
-                raise InputError(f"invariant name {k!r} is not a valid name other than H")
-            if not isinstance(text, str):
-                raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
-            self.invariants[k] = self._parse(text, f"invariant {k}")
+        self.invariants = _parsed_invariants(self.invariant_texts, self._parse)
         self.nmin = self._nmin()
         if skew is not None:
             self._check_periodic()
@@ -568,6 +562,20 @@ class Lattice:
                 sub[self.size] = sp.Integer(n)
                 out.append(t.template.xreplace(sub))
         return sp.Add(*out), qs, ps
+
+
+def _parsed_invariants(texts: Mapping, parse) -> dict:
+    """``{name: site terms}`` of a lattice's monitored invariants, each text parsed by ``parse``
+    (a lattice's own ``_parse``); InputError for a name that is not an identifier (or is H) or
+    a value that is not text."""
+    out = {}
+    for k, text in texts.items():
+        if not isinstance(k, str) or not _NAME_RE.fullmatch(k) or k == "H":
+            raise InputError(f"invariant name {k!r} is not a valid name other than H")
+        if not isinstance(text, str):
+            raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
+        out[k] = parse(text, f"invariant {k}")
+    return out
 
 
 def _build_scalar(builder, text: str, what: str) -> sp.Expr:
@@ -828,13 +836,7 @@ class Lattice2D:
         self.param_symbols = tuple(sp.Symbol(k, real=True) for k in params)
         self.terms = self._parse(H, "Hamiltonian")
         self.invariant_texts = dict(invariants or {})
-        self.invariants = {}
-        for k, text in self.invariant_texts.items():
-            if not isinstance(k, str) or not _NAME_RE.fullmatch(k) or k == "H":
-                raise InputError(f"invariant name {k!r} is not a valid name other than H")
-            if not isinstance(text, str):
-                raise InputError(f"invariant {k!r} must be text, got {type(text).__name__}")
-            self.invariants[k] = self._parse(text, f"invariant {k}")
+        self.invariants = _parsed_invariants(self.invariant_texts, self._parse)
         self.nmin = MIN_SIZE
 
     @property
