@@ -487,10 +487,7 @@ class Lattice:
         if not any(t.slots for t in terms):
             raise ParseError(f"{what} has no term in the fields")
         for t in terms:
-            check_smooth(t.template, what)
-            _check_double_range(t.template, what)
-            if t.template.has(sp.I) or t.template.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
-                raise ParseError(f"{what} term {t.source} is not a finite real expression")
+            _check_term(t, what)
             if t.width() > 1:
                 raise ParseError(f"{what} term {t.source} couples sites {t.width()} apart; lattice terms "
                                  "may couple nearest neighbours only (wider stencils are not supported yet)")
@@ -562,6 +559,15 @@ class Lattice:
                 sub[self.size] = sp.Integer(n)
                 out.append(t.template.xreplace(sub))
         return sp.Add(*out), qs, ps
+
+
+def _check_term(t, what: str) -> None:
+    """ParseError unless a site term's template (1-D or 2-D) is smooth, has no nested range over
+    the size, and is a finite real expression."""
+    check_smooth(t.template, what)
+    _check_double_range(t.template, what)
+    if t.template.has(sp.I) or t.template.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+        raise ParseError(f"{what} term {t.source} is not a finite real expression")
 
 
 def _parsed_invariants(texts: Mapping, parse) -> dict:
@@ -862,10 +868,7 @@ class Lattice2D:
         if not any(t.slots for t in terms):
             raise ParseError(f"{what} has no term in the fields")
         for t in terms:
-            check_smooth(t.template, what)
-            _check_double_range(t.template, what)
-            if t.template.has(sp.I) or t.template.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
-                raise ParseError(f"{what} term {t.source} is not a finite real expression")
+            _check_term(t, what)
             wide = [(ax, w) for ax, w in zip(self.sizes, t.width()) if w > 1]
             if wide:
                 raise ParseError(f"{what} term {t.source} couples sites {wide[0][1]} apart along {wide[0][0]}; "

@@ -38,16 +38,22 @@ def _loop(grad, python: bool):
     from ..codegen import llvmkernels as _lk
     if not _lk.enabled():
         return fn, False
-    key = id(grad.__code__)
-    got = _LOOPS.get(key)
-    if got is None or got[1] is not grad:
+    return _compiled(_LOOPS, grad, fn, SIG, consts, "the lattice step loop"), True
+
+
+def _compiled(cache: dict, kernel, fn, sig, globals_, what: str):
+    """``fn`` compiled for ``sig`` with a C entry, cached in ``cache`` per module kernel
+    ``kernel`` (kept with it, so its code's id is not reused while the entry lives)."""
+    from ..codegen import llvmkernels as _lk
+    key = id(kernel.__code__)
+    got = cache.get(key)
+    if got is None or got[1] is not kernel:
         try:
-            loop = _lk.compile_kernel(fn, SIG, globals_=consts, c_entry=True)
+            compiled = _lk.compile_kernel(fn, sig, globals_=globals_, c_entry=True)
         except _lk.Unsupported as exc:        # pragma: no cover - the printed kernels are in the subset
-            raise RuntimeError(f"the lattice step loop could not be compiled: {exc}") from None
-        # (the kernel is kept with its loop, so its code's id is not reused while the entry lives)
-        _LOOPS[key] = got = (loop, grad)
-    return got[0], True
+            raise RuntimeError(f"{what} could not be compiled: {exc}") from None
+        cache[key] = got = (compiled, kernel)
+    return got[0]
 
 
 def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False,
@@ -93,15 +99,7 @@ def _kernel_2d(kernel, python: bool):
     from ..codegen import llvmkernels as _lk
     if not _lk.enabled():
         return kernel, False
-    key = id(kernel.__code__)
-    got = _KERNELS_2D.get(key)
-    if got is None or got[1] is not kernel:
-        try:
-            compiled = _lk.compile_kernel(kernel, SIG_2D, c_entry=True)
-        except _lk.Unsupported as exc:        # pragma: no cover - the printed kernels are in the subset
-            raise RuntimeError(f"the 2-D lattice site kernel could not be compiled: {exc}") from None
-        _KERNELS_2D[key] = got = (compiled, kernel)
-    return got[0], True
+    return _compiled(_KERNELS_2D, kernel, kernel, SIG_2D, None, "the 2-D lattice site kernel"), True
 
 
 def gradient_2d(kernel, Y0, Z, n, m, p, *, python=False):
