@@ -32,7 +32,7 @@ from . import kir
 from .emit import (HEADER_CONTENT, HEADER_SIGNATURE, _docsafe, _environment, generator_hash, template_dir,
                    template_hash, write_and_load)
 from .lattice_emit import _cse_lines, _cse_trees, _kernel_text, _tuple, _v
-from .lower import _HELPER_CALL, ScalarPrinter, VectorPrinter, _helper_closure
+from .lower import _HELPER_CALL, CheckPrinter, VectorPrinter, _helper_closure
 from .progress import phase
 from .store import cache_dir
 
@@ -120,6 +120,25 @@ def _scalar_bind(exprs, fam, roles_at, sources) -> list:
     return out
 
 
+def _cse_bases(exprs, printer, prefix: str = "_t") -> tuple[list, list]:
+    """:func:`methodgen.codegen.lattice_emit._cse_trees` with the base of every half-integer power
+    bound to a name first, so that the check printer writes ``u**(3/2)`` as ``u*math.sqrt(u)``
+    (products and square roots: the same bits compiled and in CPython)."""
+    bases = []
+    for e in exprs:
+        for x in sp.preorder_traversal(e):
+            if (x.is_Pow and x.exp.is_Rational and x.exp.q == 2 and not x.base.is_Symbol
+                    and x.base not in bases):
+                bases.append(x.base)
+    if not bases:
+        return _cse_trees(exprs, printer, prefix)
+    names = [sp.Symbol(f"{prefix}u{k}", real=True) for k in range(len(bases))]
+    pre, trees = _cse_trees(bases, printer, f"{prefix}b")
+    sub = dict(zip(bases, names))
+    body, outs = _cse_trees([e.xreplace(sub) for e in exprs], printer, prefix)
+    return pre + [("=", _v(u.name), t) for u, t in zip(names, trees)] + body, outs
+
+
 def _kernels(scheme: ParticleScheme, printer) -> list:
     """The scalar kernels the compiled stepper inlines (:mod:`methodgen.runtime.particle_stepper`):
     ``_vel(_P, _V, _a, _M, _p)`` (∇T at the particle a into ``_V[_a]``), and either
@@ -129,21 +148,21 @@ def _kernels(scheme: ParticleScheme, printer) -> list:
     fam = scheme.family
     d = fam.dim
     fns = []
-    pre, outs = _cse_trees(scheme.velocity, printer, "_t")
+    pre, outs = _cse_bases(scheme.velocity, printer, "_t")
     body = (_scalar_bind(list(scheme.velocity), fam, {"a": "_a"}, {"q": "_Q", "p": "_P"}) + pre
             + [("=", ("[]", "_V", (_v("_a"), ("n", k))), outs[k]) for k in range(d)])
     fns.append(kir.function("_vel", ("_P", "_V", "_a", "_M", "_p"), body))
     if scheme.method == "stormer-verlet":
         fa, fb = scheme.pair_force
         exprs = list(fa) + list(fb)
-        pre, outs = _cse_trees(exprs, printer, "_t")
+        pre, outs = _cse_bases(exprs, printer, "_t")
         body = (_scalar_bind(exprs, fam, {"a": "_a", "b": "_b"}, {"q": "_Q", "p": "_P"}) + pre
                 + [("+=", ("[]", "_F", (_v("_a"), ("n", k))), outs[k]) for k in range(d)]
                 + [("+=", ("[]", "_F", (_v("_b"), ("n", k))), outs[d + k]) for k in range(d)])
         fns.append(kir.function("_fpair", ("_Q", "_F", "_a", "_b", "_M", "_p"), body))
         ext = list(scheme.external_force)
         if any(e != 0 for e in ext):
-            pre, outs = _cse_trees(ext, printer, "_t")
+            pre, outs = _cse_bases(ext, printer, "_t")
             body = (_scalar_bind(ext, fam, {"a": "_a"}, {"q": "_Q", "p": "_P"}) + pre
                     + [("+=", ("[]", "_F", (_v("_a"), ("n", k))), outs[k]) for k in range(d)])
         else:       # (the stepper does not call it: HAS_EXTERNAL is 0)
@@ -163,7 +182,7 @@ def _kernels(scheme: ParticleScheme, printer) -> list:
             acc = ("+", acc, ("*", _v(f"_r{which}{k}"), _v(f"_r{which}{k}")))
         body.append(("=", _v(f"s{which}"), acc))
     g = scheme.g
-    pre, (gt,) = _cse_trees([g], printer, "_t")
+    pre, (gt,) = _cse_bases([g], printer, "_t")
     body += _scalar_bind([g], fam, {"a": "_a", "b": "_b"}, {"q": "_Q", "p": "_P"}) + pre
     body.append(("=", _v("_g"), gt))
     for k in range(d):
@@ -198,7 +217,10 @@ def render(scheme: ParticleScheme, sig: str, backend: str = "numpy") -> str:
         lines["pair"] = _vector_fn(list(fa) + list(fb), fam, "ab", "Q", "I.shape", printer, "_t")
     scalar = []
     if backend == "compiled":
-        sprinter = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+        # small powers as products and u**(3/2) as u*sqrt(u) (the check flavour): the compiled code and
+        # CPython then do the same operations (CPython's float ** is libm's pow, the compiled
+        # code's integer powers repeated squaring), so the Python run is the compiled run's bits
+        sprinter = CheckPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
         for fn in _kernels(scheme, sprinter):
             scalar += _kernel_text(fn, fn[1], "methodgen.runtime.particle_driver inlines this tree") + ["", ""]
     code = "\n".join([ln for v in lines.values() for ln in v] + scalar)
