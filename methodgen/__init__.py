@@ -23,6 +23,9 @@ load_scene(name_or_path) -> Scene
 Lattice(H, q="q", p="p", size="N", params=None, invariants=None)   (site sums of symbolic size N)
 build_lattice(lattice, "avf" | "midpoint", path=None) -> module     (one module for every N)
 load_lattice_scene(name_or_path) -> LatticeScene
+Particles(H, q=[...], p=[...], size="N", arrays=["m"], params=None)   (one-body and pair sums of symbolic N)
+build_particles(fam, "stormer-verlet" | "energy-momentum", order=2, backend="numpy") -> module  (every N)
+verify_particles(fam, method, order=2) -> list of Certificate      (exact, per template: every N)
 wisdom_holman(scene, "sbab4") -> WisdomHolman  (Wisdom–Holman splittings of [nbody] scenes)
 methods() / scenes()
 
@@ -42,6 +45,7 @@ __all__ = [
     "verify", "MethodgenError", "InputError", "ParseError", "SceneError", "MethodNotApplicable",
     "GenerationError", "time_transform", "autonomise", "wisdom_holman", "cite", "event", "section_event",
     "poincare", "save_trajectory", "read_trajectory", "Lattice", "build_lattice", "load_lattice_scene",
+    "Particles", "build_particles", "verify_particles",
 ]
 
 
@@ -61,6 +65,8 @@ def _lazy_names():
         "save_trajectory": ".runtime.trajfile", "read_trajectory": ".runtime.trajfile",
         "Lattice": ".problem.lattice", "build_lattice": ".codegen.lattice_emit",
         "load_lattice_scene": ".app.lattice_scene",
+        "Particles": ".problem.particles", "build_particles": ".codegen.particle_emit",
+        "verify_particles": ".symbolic.particle_scheme",
     }
     found: list[frozenset] = []
 

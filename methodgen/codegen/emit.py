@@ -83,8 +83,8 @@ def template_hash(backend: str = "numpy") -> str:
     _check_backend(backend)
     h = hashlib.sha256()
     for path in sorted(template_dir().glob("*.j2")):
-        if (backend == "numpy" and path.name.startswith("numba_")) or path.name.startswith("lattice_"):
-            continue      # (the lattice modules' own template: methodgen.lattice_emit hashes it)
+        if (backend == "numpy" and path.name.startswith("numba_")) or path.name.startswith(("lattice_", "particles_")):
+            continue      # (the lattice and particle modules' own templates: their emitters hash them)
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
@@ -101,6 +101,9 @@ _NOT_GENERATOR = frozenset({
     # the lattice modules of symbolic size: their signatures hash these files themselves
     "problem/lattice.py", "symbolic/lattice_scheme.py", "codegen/lattice_emit.py",
     "runtime/lattice_stepper.py", "runtime/lattice_driver.py",
+    # the particle families of symbolic size: likewise (methodgen.codegen.particle_emit)
+    "problem/particles.py", "symbolic/particle_scheme.py", "codegen/particle_emit.py",
+    "runtime/particle_stepper.py", "runtime/particle_driver.py",
 })
 _NOT_GENERATOR_DIRS = frozenset({"app", "symbolic/verify", "symbolic/scenes"})
 

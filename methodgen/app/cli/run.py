@@ -643,10 +643,14 @@ def _cli_overrides(args):
 
 def cmd_run(args) -> int:
     from ..lattice_scene import is_lattice_scene
+    from ..particles_scene import is_particles_scene
 
     if is_lattice_scene(args.scene):
         from . import lattice
         return lattice.run(args)
+    if is_particles_scene(args.scene):
+        from . import particles
+        return particles.run(args)
     try:
         y0, params = _cli_overrides(args)
         rep = run_scene(args.scene, args.method, args.h, args.steps, save=args.save, chunk=args.chunk,

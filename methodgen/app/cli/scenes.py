@@ -27,13 +27,24 @@ def cmd_scenes(args) -> int:
                          "default_size": list(s.size) if isinstance(s.size, tuple) else s.size,
                          "min_size": s.lattice.nmin,
                          "invariants": ["H", *s.lattice.invariants]})
+    from ..particles_scene import load_particles_scene, particles_scene_names
+
+    particles = []
+    for name in particles_scene_names():
+        s = load_particles_scene(name)
+        particles.append({"name": s.name, "description": s.description, "methods": list(s.methods),
+                          "size": s.family.size.name, "default_size": s.size, "min_size": s.family.nmin,
+                          "order": s.order})
     if args.json:
-        print(json.dumps({"scenes": rows, "lattices": lattices}))
+        print(json.dumps({"scenes": rows, "lattices": lattices, "particles": particles}))
     else:
         for r in rows:
             print(f"{r['name']:<20} {', '.join(r['methods']):<32} {r['description']}")
         print("\nlattices of any size (methodgen run NAME --param N=…; one module for every N):")
         for r in lattices:
+            print(f"{r['name']:<20} {', '.join(r['methods']):<32} {r['description']}")
+        print("\nparticles of any number N (methodgen run NAME --param N=…; one module for every N):")
+        for r in particles:
             print(f"{r['name']:<20} {', '.join(r['methods']):<32} {r['description']}")
     return 0
 

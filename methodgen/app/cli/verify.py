@@ -44,6 +44,11 @@ def cmd_verify(args) -> int:
     if is_lattice_scene(args.scene):
         from . import lattice
         return lattice.verify(args)
+    from ..particles_scene import is_particles_scene
+
+    if is_particles_scene(args.scene):
+        from . import particles
+        return particles.verify(args)
     # Imported here: the verification layer is not needed by the other commands.
     from .common import (dump_json, effective_stages, resolve_order, resolve_stages, resolve_time_transform,
                          transformed_context)
