@@ -37,19 +37,13 @@ whitelist parser (:func:`methodgen.problem.parse.parse_expr`) and evaluated from
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
-
 from ..errors import InputError, SceneError
+from . import scene_files as _files
 
 __all__ = ["LatticeScene", "is_lattice_scene", "load_lattice_scene", "lattice_scene_names", "run_lattice_scene"]
 
@@ -59,45 +53,14 @@ _LATTICE = {"H": str, "q": str, "p": str, "size": (str, list), "fields": list, "
 _RUN = {"method": (str, list), "N": int, "h": (int, float), "steps": int}
 
 
-def lattice_scene_dir() -> Path:
-    from ..symbolic.scene import builtin_scene_dir
-
-    return builtin_scene_dir() / "lattice"
-
-
 def lattice_scene_names() -> list[str]:
     """Names of the built-in lattice scenes, sorted."""
-    return sorted(p.stem for p in lattice_scene_dir().glob("*.toml"))
-
-
-def _path_of(name_or_path) -> Path | None:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" and p.is_file():
-        return p
-    if str(name_or_path) in lattice_scene_names():
-        return lattice_scene_dir() / f"{name_or_path}.toml"
-    return None
+    return _files.names("lattice")
 
 
 def is_lattice_scene(name_or_path) -> bool:
     """True for a built-in lattice scene's name or a TOML file with a ``[lattice]`` table."""
-    p = _path_of(name_or_path)
-    if p is None:
-        return False
-    try:
-        with open(p, "rb") as fh:
-            return "lattice" in tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError):
-        return False      # load_scene reports what is wrong with the file
-
-
-def _check(table: dict, allowed: dict, where: str) -> None:
-    for k, v in table.items():
-        if k not in allowed:
-            raise SceneError(f"{where}: unknown key {k!r}; valid keys are {', '.join(allowed)}")
-        if not isinstance(v, allowed[k]) or isinstance(v, bool):
-            kinds = allowed[k] if isinstance(allowed[k], tuple) else (allowed[k],)
-            raise SceneError(f"{where}: {k!r} must be {' or '.join(t.__name__ for t in kinds)}, got {v!r}")
+    return _files.is_kind("lattice", name_or_path)
 
 
 @dataclass(frozen=True)
@@ -175,23 +138,10 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
     from ..problem.lattice import Lattice
     from ..symbolic.lattice_scheme import LATTICE_METHODS
 
-    p = _path_of(name_or_path)
-    if p is None:
-        raise SceneError(f"no lattice scene {name_or_path!r}; built-in: {', '.join(lattice_scene_names())}")
-    try:
-        with open(p, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise SceneError(f"cannot read {p}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{p}: not valid TOML: {exc}") from None
-    where = str(p)
-    _check(data, _TOP, where)
-    for t in ("lattice", "run"):
-        if t not in data:
-            raise SceneError(f"{where}: the [{t}] table is missing")
+    data, path = _files.read("lattice", name_or_path, _TOP, "lattice")
+    where = str(path)
     lt, run = data["lattice"], data["run"]
-    _check(lt, _LATTICE, f"{where} [lattice]")
+    _files.check_keys(lt, _LATTICE, f"{where} [lattice]")
     sizes = lt.get("size", "N")
     two_d = isinstance(sizes, list)
     if two_d and (len(sizes) != 2 or not all(isinstance(x, str) for x in sizes)):
@@ -201,10 +151,10 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
         # the [run] table gives each size by its name (the second may be left out: a square grid)
         run_keys = {k: v for k, v in _RUN.items() if k != "N"}
         run_keys.update({sizes[0]: int, sizes[1]: int})
-        _check(run, run_keys, f"{where} [run]")
+        _files.check_keys(run, run_keys, f"{where} [run]")
         run = {**run, "N": run.get(sizes[0])}
     else:
-        _check(run, _RUN, f"{where} [run]")
+        _files.check_keys(run, _RUN, f"{where} [run]")
     if "H" not in lt:
         raise SceneError(f"{where} [lattice]: H is missing")
     for k in ("N", "h", "steps"):
@@ -220,7 +170,7 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
         for k, v in table.items():
             if not isinstance(v, str):
                 raise SceneError(f"{where} [{name}]: {k!r} must be a formula (text), got {v!r}")
-    name = data.get("name", p.stem)
+    name = data.get("name", path.stem)
     if "i" in params or lt.get("size") == "i" or (two_d and ({"i", "j"} & (set(params) | set(sizes)))):
         raise SceneError(f"{where}: 'i'{' and j are the site indices' if two_d else ' is the site index'} of the "
                          "[initial] formulas; give the parameter or the size another name")

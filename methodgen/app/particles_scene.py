@@ -31,20 +31,13 @@ whitelist parser (:func:`methodgen.problem.parse.parse_expr`) and evaluated from
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
-
 from ..errors import InputError, SceneError
-from .lattice_scene import _check as _check_typed
+from . import scene_files as _files
 
 __all__ = ["ParticleScene", "is_particles_scene", "load_particles_scene", "particles_scene_names",
            "run_particles_scene"]
@@ -54,45 +47,14 @@ _PARTICLES = {"H": str, "q": list, "p": list, "arrays": list, "size": str}
 _RUN = {"method": (str, list), "order": int, "N": int, "h": (int, float), "steps": int, "barycentric": bool}
 
 
-def _check(table: dict, allowed: dict, where: str) -> None:
-    """The lattice scenes' key check, with true/false where a key is a bool (``barycentric``)."""
-    flags = {k for k, v in allowed.items() if v is bool}
-    _check_typed({k: v for k, v in table.items() if k not in flags}, allowed, where)
-    for k in flags & set(table):
-        if not isinstance(table[k], bool):
-            raise SceneError(f"{where}: {k!r} must be true or false, got {table[k]!r}")
-
-
-def particles_scene_dir() -> Path:
-    from ..symbolic.scene import builtin_scene_dir
-
-    return builtin_scene_dir() / "particles"
-
-
 def particles_scene_names() -> list[str]:
     """Names of the built-in particle scenes, sorted."""
-    return sorted(p.stem for p in particles_scene_dir().glob("*.toml"))
-
-
-def _path_of(name_or_path) -> Path | None:
-    p = Path(name_or_path)
-    if p.suffix == ".toml" and p.is_file():
-        return p
-    if str(name_or_path) in particles_scene_names():
-        return particles_scene_dir() / f"{name_or_path}.toml"
-    return None
+    return _files.names("particles")
 
 
 def is_particles_scene(name_or_path) -> bool:
     """True for a built-in particle scene's name or a TOML file with a ``[particles]`` table."""
-    p = _path_of(name_or_path)
-    if p is None:
-        return False
-    try:
-        with open(p, "rb") as fh:
-            return "particles" in tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError):
-        return False
+    return _files.is_kind("particles", name_or_path)
 
 
 @dataclass(frozen=True)
@@ -166,24 +128,11 @@ def load_particles_scene(name_or_path) -> ParticleScene:
     from ..problem.particles import Particles
     from ..symbolic.particle_scheme import PARTICLE_METHODS, SV_ORDERS
 
-    p = _path_of(name_or_path)
-    if p is None:
-        raise SceneError(f"no particle scene {name_or_path!r}; built-in: {', '.join(particles_scene_names())}")
-    try:
-        with open(p, "rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise SceneError(f"cannot read {p}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{p}: not valid TOML: {exc}") from None
-    where = str(p)
-    _check(data, _TOP, where)
-    for t in ("particles", "run"):
-        if t not in data:
-            raise SceneError(f"{where}: the [{t}] table is missing")
+    data, path = _files.read("particles", name_or_path, _TOP, "particle")
+    where = str(path)
     pt, run = data["particles"], data["run"]
-    _check(pt, _PARTICLES, f"{where} [particles]")
-    _check(run, _RUN, f"{where} [run]")
+    _files.check_keys(pt, _PARTICLES, f"{where} [particles]")
+    _files.check_keys(run, _RUN, f"{where} [run]")
     for k in ("H", "q", "p"):
         if k not in pt:
             raise SceneError(f"{where} [particles]: {k} is missing")
@@ -205,7 +154,7 @@ def load_particles_scene(name_or_path) -> ParticleScene:
     if "i" in params or pt.get("size") == "i":
         raise SceneError(f"{where}: 'i' is the particle index of the [initial] formulas; give the parameter or "
                          "the size another name")
-    name = data.get("name", p.stem)
+    name = data.get("name", path.stem)
     try:
         fam = Particles(pt["H"], pt["q"], pt["p"], size=pt.get("size", "N"), arrays=pt.get("arrays", []),
                         params=params, name=name)

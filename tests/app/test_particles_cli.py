@@ -55,7 +55,7 @@ def test_compiled_backend_gives_the_numpy_run(capsys):
 def test_verify_and_scenes(capsys):
     assert cli.main(["verify", "nbody-ring", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert rep["all_proved"] and set(rep["proved"]["energy-momentum"]) == {"H", "P", "L"}
+    assert rep["all_proved"] and set(rep["proved_invariants"]["energy-momentum"]) == {"H", "P", "L"}
     assert cli.main(["scenes", "--json"]) == 0
     assert "nbody-ring" in [r["name"] for r in json.loads(capsys.readouterr().out)["particles"]]
 

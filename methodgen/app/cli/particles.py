@@ -84,7 +84,7 @@ def verify(args) -> int:
             ok &= c.status == "proved"
         kept[m] = proved_invariants(scheme, certs)
     if getattr(args, "json", False):
-        print(dump_json({"scene": scene.name, "certificates": out, "all_proved": ok, "proved": kept}))
+        print(dump_json({"scene": scene.name, "certificates": out, "all_proved": ok, "proved_invariants": kept}))
     else:
         print(f"particles {scene.name}: certificates per one-body and pair template (independent of N)")
         for c in out:
