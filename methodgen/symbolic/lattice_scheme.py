@@ -297,36 +297,52 @@ def proved_invariants(scheme: LatticeScheme, certs) -> list[str]:
     return [k for k, ok in keeps.items() if ok]
 
 
-def _shift(expr: sp.Expr, k: int, fields) -> sp.Expr:
-    """``expr`` in slots relative to the site i, rewritten relative to the site i - k (every
-    slot (f, o) becomes (f, o + k))."""
-    from ..problem.lattice import _parse_slot
+def _geometry(lattice):
+    """``(parse, make, add)`` of the lattice's slots: a slot symbol's (field, offset) or None, the
+    symbol of (field, offset), and the sum of two offsets (ints in 1-D, pairs in 2-D)."""
+    from ..problem.lattice import _parse_slot, _parse_slot2, slot_symbol2
 
+    if getattr(lattice, "dims", 1) == 2:
+        return _parse_slot2, slot_symbol2, lambda a, b: (a[0] + b[0], a[1] + b[1])
+    return _parse_slot, slot_symbol, lambda a, b: a + b
+
+
+def _neg(o):
+    return tuple(-x for x in o) if isinstance(o, tuple) else -o
+
+
+def _shift(expr: sp.Expr, k, fields, geometry=None) -> sp.Expr:
+    """``expr`` in slots relative to the site i, rewritten relative to the site i - k (every
+    slot (f, o) becomes (f, o + k)); ``geometry`` from :func:`_geometry` (default 1-D)."""
+    parse, make, add = geometry or _geometry(None)
     sub = {}
     for s in expr.free_symbols:
-        got = _parse_slot(s)
+        got = parse(s)
         if got and got[0] in fields:
-            sub[s] = slot_symbol(got[0], got[1] + k)
+            sub[s] = make(got[0], add(got[1], k))
     return expr.xreplace(sub)
 
 
-def _site_gradient(terms, field: str, fields) -> sp.Expr:
+def _site_gradient(terms, field: str, fields, geometry=None) -> sp.Expr:
     """∂/∂field_j of Σ_t Σ_i t(i) as an expression in slots relative to j (full-range terms)."""
+    parse, make, add = geometry or _geometry(None)
     out = sp.S.Zero
     for t in terms:
         for f, o in t.slots:
             if f == field:
-                out += _shift(sp.diff(t.template, slot_symbol(f, o)), -o, fields)
+                out += _shift(sp.diff(t.template, make(f, o)), _neg(o), fields, geometry)
     return out
 
 
 def _full_periodic(t) -> bool:
-    return (t.lo.from_end, t.lo.c, t.hi.from_end, t.hi.c) == (False, 1, True, 0)
+    """The term is summed over every site of a periodic lattice (a 2-D term always is)."""
+    return not hasattr(t, "lo") or (t.lo.from_end, t.lo.c, t.hi.from_end, t.hi.c) == (False, 1, True, 0)
 
 
 def quadratic_invariant_certificates(lattice: Lattice) -> list:
     """The midpoint rule keeps each monitored invariant Q that is quadratic and in involution
-    with H, on a periodic lattice -- decided per template, without expanding in N.
+    with H, on a periodic lattice (1-D, or 2-D: the same with offsets in both directions) --
+    decided per template, without expanding in N (or N × M).
 
     For quadratic Q, Q(y1) - Q(y0) = ∇Q(ȳ)ᵀ(y1 - y0) exactly, and the midpoint step is
     y1 - y0 = h J ∇H(ȳ), so the change is h {Q, H}(ȳ) = h Σ_j E(j) with the bracket's site
@@ -343,8 +359,10 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
     """
     from .verify.exact import certify
 
-    if lattice.structure != "canonical" or getattr(lattice, "dims", 1) != 1:
-        return []                 # the bracket below is the canonical one, its densities 1-D
+    if lattice.structure != "canonical":
+        return []                 # the bracket below is the canonical one
+    geometry = _geometry(lattice)
+    parse, make, _ = geometry
     fields = lattice.fields
     q, p = fields
     allterms = list(lattice.terms) + [t for ts in lattice.invariants.values() for t in ts]
@@ -362,14 +380,13 @@ def quadratic_invariant_certificates(lattice: Lattice) -> list:
                 quadratic = False
         if not quadratic:
             continue
-        E = (_site_gradient(terms, q, fields) * _site_gradient(lattice.terms, p, fields)
-             - _site_gradient(terms, p, fields) * _site_gradient(lattice.terms, q, fields))
+        E = (_site_gradient(terms, q, fields, geometry) * _site_gradient(lattice.terms, p, fields, geometry)
+             - _site_gradient(terms, p, fields, geometry) * _site_gradient(lattice.terms, q, fields, geometry))
         E = sp.expand(E)
-        from ..problem.lattice import _parse_slot
-        slots = sorted({k for k in map(_parse_slot, E.free_symbols) if k and k[0] in fields})
-        euler = [sp.Add(*[_shift(sp.diff(E, slot_symbol(f, o)), -o, fields) for f2, o in slots if f2 == f])
+        slots = sorted({k for k in map(parse, E.free_symbols) if k and k[0] in fields})
+        euler = [sp.Add(*[_shift(sp.diff(E, make(f, o)), _neg(o), fields, geometry) for f2, o in slots if f2 == f])
                  for f in fields]
-        at_zero = E.xreplace({slot_symbol(f, o): 0 for f, o in slots})
+        at_zero = E.xreplace({make(f, o): 0 for f, o in slots})
         out.append(certify(f"midpoint keeps the quadratic invariant {name}: {{{name}, H}} sums to 0 on the "
                            f"periodic lattice (Euler operator of its site density and its value at 0)",
                            sp.Matrix(euler + [at_zero]),

@@ -247,3 +247,47 @@ def test_monitored_invariants_are_sums_over_the_torus(tmp_path):
     assert abs(got["charge"] - np.sum(y[0] * np.roll(y[1], -1, axis=0))) < 1e-14
     assert abs(got["charge"] - np.sum(y[0] * np.roll(y[1], -1, axis=1))) > 1e-3     # the other direction
     assert got["H"] == mod.hamiltonian(y)
+
+
+NLS2 = ("Sum(Sum(((q[i % N + 1, j] - q[i, j])**2 + (p[i % N + 1, j] - p[i, j])**2 + (q[i, j % M + 1] - q[i, j])**2"
+        " + (p[i, j % M + 1] - p[i, j])**2)/(2*dx**2) - (q[i, j]**2 + p[i, j]**2)**2/4, j, 1, M), i, 1, N)")
+
+
+def test_midpoint_quadratic_invariants_of_a_2d_lattice_are_decided_per_template():
+    """{Q, H} summed over the torus, decided by the 2-D discrete Euler operator of its site density
+    (N and M never enter): the mass of a 2-D cubic NLS lattice is proved kept by the midpoint rule;
+    Σ q² (negative control) and a discrete momentum along i (not kept by this lattice) are refuted."""
+    from methodgen.symbolic.lattice_scheme import quadratic_invariant_certificates
+
+    lat = Lattice(NLS2, size=("N", "M"), params={"dx": 0.5}, invariants={
+        "mass": "Sum(Sum(q[i, j]**2 + p[i, j]**2, j, 1, M), i, 1, N)",
+        "bad": "Sum(Sum(q[i, j]**2, j, 1, M), i, 1, N)",
+        "momentum": "Sum(Sum(q[i, j]*p[i % N + 1, j] - p[i, j]*q[i % N + 1, j], j, 1, M), i, 1, N)"})
+    got = {c.claim.split(":")[0].rsplit(" ", 1)[1]: c.status for c in quadratic_invariant_certificates(lat)}
+    assert got == {"mass": "proved", "bad": "refuted", "momentum": "refuted"}
+    scheme = discretize_lattice(lat, "midpoint")
+    from methodgen.symbolic.lattice_scheme import proved_invariants
+    assert proved_invariants(scheme, certificates(scheme)) == ["mass"]
+
+
+def test_2d_midpoint_keeps_the_mass_and_avf_the_energy(tmp_path):
+    """Numerical, to round-off: the 2-D NLS lattice's midpoint module keeps the mass (proved above),
+    its AVF module the energy; each drifts in the other's invariant (the controls)."""
+    lat = Lattice(NLS2, size=("N", "M"), params={"dx": 0.5}, name="nls2",
+                  invariants={"mass": "Sum(Sum(q[i, j]**2 + p[i, j]**2, j, 1, M), i, 1, N)"})
+    avf = build_lattice(lat, "avf", tmp_path / "nls2_avf.py")
+    mid = build_lattice(lat, "midpoint", tmp_path / "nls2_mid.py")
+    n, m = 12, 10
+    x = (np.arange(n) - n / 2) * 0.5
+    yy = (np.arange(m) - m / 2) * 0.5
+    X, Y = np.meshgrid(x, yy, indexing="ij")
+    u = 1.1 * np.exp(-(X**2 + Y**2) / 2) * np.exp(0.6j * X)
+    y0 = np.stack([u.real, u.imag])
+    sa = avf.solve(y0, (0, 1.0), 0.01)
+    sm = mid.solve(y0, (0, 1.0), 0.01)
+    assert sa.success and sm.success
+    I0 = avf.invariants(y0)
+    assert sm.invariant_errors["mass"] < 20 * 2.2e-16 * I0["mass"]
+    assert sa.invariant_errors["H"] < 20 * 2.2e-16 * abs(I0["H"])
+    assert sa.invariant_errors["mass"] > 1e-10 * I0["mass"]
+    assert sm.invariant_errors["H"] > 1e-10 * abs(I0["H"])
