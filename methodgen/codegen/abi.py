@@ -59,7 +59,9 @@ class PostLayout:
     tt_guard : bool
         A time transformation's guard is checked.
     energy_jump : bool
-        The energy-jump test is on.
+        The post kernel gives the energy-jump test's values (H and its size at y1): the test is
+        made per stage.  A composition makes it per composed step instead, from the ``hs``
+        kernel (``EJUMP = 2`` in the configuration), and its post kernel does not give them.
     """
 
     n_state: int
@@ -130,7 +132,7 @@ def post_layout(ir) -> PostLayout:
     tt = ir.time_transform
     return PostLayout(n_state=ir.n_state, n_force=len(ir.fsal_vars), local_error=ir.local_error,
                       n_lerr=len(ir.lerr_index), n_domain=len(ir.domain), tt_guard=bool(tt and tt.get("guard")),
-                      energy_jump=bool(ir.energy_jump))
+                      energy_jump=bool(ir.energy_jump) and not ir.energy_jump_step)
 
 
 # --- the compiled runtime's configuration ------------------------------------------------------
@@ -149,7 +151,7 @@ CFG = {name: i for i, name in enumerate((
     "POST_TT",      # where g, the level-set defect and its scale start
     "TT_GUARD",     # 1: time-transformation guard
     "POST_EJ",      # where H and its size at y1 start
-    "EJUMP",        # 1: energy-jump test
+    "EJUMP",        # energy-jump test: 0 none, 1 per stage (post kernel), 2 per composed step (hs kernel)
     "POST_LEN",     # length of post's output
     "HAS_SCALE",    # 1: the module has a scale kernel (floor of the unknowns' size)
     "RESOLUTION",   # 0 none, 1 "full", 2 "reduced"
@@ -170,6 +172,14 @@ _LERR_CODES = {None: 0, "direct": 1, "carry": 2}
 _RESOLUTION_CODES = {None: 0, "full": 1, "reduced": 2}
 
 
+def _ejump_code(ir) -> int:
+    """``EJUMP``: 0 no energy-jump test, 1 per stage (the post kernel's values), 2 per composed
+    step (the ``hs`` kernel at the step's end)."""
+    if not ir.energy_jump:
+        return 0
+    return 2 if ir.energy_jump_step else 1
+
+
 def int_config_values(ir) -> dict:
     """The values of :data:`CFG` for a module, by name, from its
     :class:`methodgen.codegen.lower.ModuleIR` (every name of :data:`CFG`, in its order)."""
@@ -178,7 +188,7 @@ def int_config_values(ir) -> dict:
     values = dict(
         N=n, DIM=ir.n_state, STAGES=ir.stages, NF=post.n_force, LERR=_LERR_CODES[ir.local_error], KLERR=post.n_lerr,
         POST_EXTRA=post.lerr, POST_DOMAIN=post.domain, NDOMAIN=post.n_domain, POST_TT=post.tt,
-        TT_GUARD=int(post.tt_guard), POST_EJ=post.ej, EJUMP=int(post.energy_jump), POST_LEN=post.length,
+        TT_GUARD=int(post.tt_guard), POST_EJ=post.ej, EJUMP=_ejump_code(ir), POST_LEN=post.length,
         HAS_SCALE=int("scale" in ir.scalar), RESOLUTION=_RESOLUTION_CODES[ir.resolution] if n else 0,
         KIND=2 if not n else (1 if ir.kind == "linear" else 0),
         KL=ir.band[0] if n else 0, KU=ir.band[1] if n else 0,
@@ -194,7 +204,7 @@ def float_config_sources(ir) -> dict:
     values = dict(
         LERR2="_LERR2" if ir.local_error else "0.0", LERR_SCALE="_LERR_SCALE" if ir.local_error else "0.0",
         MAX_LEVEL_DEFECT="MAX_LEVEL_DEFECT" if post.tt_guard else "0.0",
-        MAX_ENERGY_JUMP="MAX_ENERGY_JUMP" if post.energy_jump else "0.0",
+        MAX_ENERGY_JUMP="MAX_ENERGY_JUMP" if ir.energy_jump else "0.0",
         MAX_RESOLUTION="MAX_RESOLUTION" if ir.resolution else "0.0",
         NEWTON_FAILURE_RESOLUTION="_NEWTON_FAILURE_RESOLUTION" if ir.resolution else "0.0",
         MAX_PREDICTOR_DISAGREEMENT="MAX_PREDICTOR_DISAGREEMENT" if ir.resolution else "0.0",

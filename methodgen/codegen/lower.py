@@ -261,8 +261,12 @@ class ModuleIR:
     #: ``(kind, expression)``, kind ``"positive"`` (log, negative fractional power) or
     #: ``"nonnegative"`` (positive fractional power such as sqrt).
     domain: tuple[tuple[str, str], ...] = ()
-    #: The post kernel also gives H and Σ|terms of H| at y1 (see energy_jump).
+    #: The energy-jump test is made (see energy_jump): the post kernel also gives H and
+    #: Σ|terms of H| at y1, unless ``energy_jump_step``.
     energy_jump: bool = False
+    #: A composition's energy-jump test: once per composed step, H and its size at the step's
+    #: end from the ``hs`` kernel (the post kernel does not give them).
+    energy_jump_step: bool = False
     #: Symmetric composition of the base step: family, order, stages, source (None: the base
     #: method), and its coefficients γ_i as float64 reprs (``stages`` of them).
     composition: dict | None = None
@@ -859,6 +863,12 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
     # over as the values at y0 of the next step (a kernel gives them at the initial state).
     ejump = energy_jump(scheme, lplan, tguard) if not conds else ()
     ejump_form = energy_jump_form(system) if ejump and plan is not None else None
+    # A composition tests the energy jump once per composed step, with the hs kernel at its
+    # end: H at every stage's end was 15 % of a Störmer–Verlet o10 stage (Hénon–Heiles), and a
+    # composition's stages are not steps the user chose (their energies are the composed
+    # step's intermediate values, the composed step the unit the guard is about).
+    composition = getattr(scheme, "composition", None)
+    ejump_step = bool(ejump) and composition is not None and composition.stages > 1
     ejump1 = None
     if splan is not None:
         # Δq first (straight-line, ahead of the loops: its values are the loops' slot
@@ -876,6 +886,8 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
             ejump1 = [T1 + U1, sp.Abs(T1) + sp.Abs(U1)]
     if ejump1 is None:
         ejump1 = [u.xreplace(at1) for u in ejump]
+    if ejump_step:
+        ejump1 = []
     later = (list(lplan.extra if lplan else ()) + [u.xreplace(at1) for _, u in conds]
              + [u.xreplace(at1) for u in tguard] + ejump1)
     shared = lplan.shared if lplan else ()
@@ -972,6 +984,7 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         lerr_partner=lplan.partner if lplan else "",
         domain=tuple((kind, str(u)) for kind, u in conds),
         energy_jump=bool(ejump),
+        energy_jump_step=ejump_step,
         **_composition_fields(scheme),
         time_transform=_time_transform_fields(system, invs),
         poisson=_poisson_fields(system),

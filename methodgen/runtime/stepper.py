@@ -78,6 +78,7 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
     _LU0 = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ * _NZ,))   # "reuse": the factors at the
     _pv0 = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))                # stage's start (a stage asked again)
     _okb = numba.carray(_rt.stack_buffer(1), (1,))
+    _ejn = numba.carray(_rt.stack_buffer(2), (2,))      # H and its size at a composed step's end
     _g0 = numba.carray(_rt.stack_buffer(_NK), (_NK,))
     # the trajectory's state, compensation and carried force in stack buffers while it runs:
     # LLVM keeps them in registers across the stages (the caller's rows it must reload after
@@ -431,8 +432,9 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
                     else:
                         _s = _yl[_i] + _out[_i]
                         _yl[_i] = _s
-                    if not (_s - _s == 0.0):
-                        _bad = 1.0
+                    if _FINITE_EVERY_STAGE or _k == _STAGES - 1:
+                        if not (_s - _s == 0.0):
+                            _bad = 1.0
                 # first-same-as-last: the force at this stage's end starts the next stage
                 for _i in range(_NF):
                     _gl[_i] = _out[_DIM + _i]
@@ -484,7 +486,7 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
                         _fval[_b] = _LERR_SCALE * math.sqrt(_ne2 / _nd2)
                         _failed = 1
                         break
-                if _EJUMP:
+                if _EJUMP == 1:
                     if _chk != 0 and abs(_out[_PJ] - _e0) > _MEJ * _e1:
                         _fst[_b, 0] = _S_ENERGY_JUMP
                         _fst[_b, 1] = _n
@@ -495,6 +497,19 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
                     _e0 = _out[_PJ]
                     _e1 = _out[_PJ + 1]
                 _k += 1
+            if _EJUMP == 2 and _failed == 0 and _stop == 0 and _PROJ == 0:
+                # a composition: the energy jump of the composed step, H at its end against its
+                # start (stage -1 in the record: the composed step, no stage of it)
+                hs(_yl, _p, _ejn)
+                if _chk != 0 and abs(_ejn[0] - _e0) > _MEJ * _e1:
+                    _fst[_b, 0] = _S_ENERGY_JUMP
+                    _fst[_b, 1] = _n
+                    _fst[_b, 2] = 0
+                    _fval[_b] = abs(_ejn[0] - _e0) / _e1
+                    _failed = 1
+                    _k = -1
+                _e0 = _ejn[0]
+                _e1 = _ejn[1]
             if _stop != 0:
                 break
             if _failed != 0:
@@ -961,7 +976,8 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
     so the rows are bitwise those of the one-trajectory loop.
 
     The checks (non-finite state, domain, time-scale guard, local error, energy jump) are a
-    count of failing lanes after every stage; only where it is not zero a scalar pass
+    count of failing lanes after every stage (a composition's energy jump: after every composed
+    step, lane by lane); only where it is not zero a scalar pass
     (:func:`lane_status`) records each failing lane as :func:`stepper` does (status, step,
     index, stage; value).  A failed lane keeps its state after the failing stage; the other
     lanes of its block finish that step, and every later block runs only up to it, so rows
@@ -981,6 +997,7 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
     _SAVE = numba.carray(_rt.stack_buffer((2 * _DIM + _NG) * _L), ((2 * _DIM + _NG) * _L,))
     _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
     _ejs = numba.carray(_rt.stack_buffer(2), (2,))
+    _yq = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))          # one lane's state (EJUMP 2)
     _ls = numba.carray(_rt.stack_buffer(3), (3,))
     for _i in range(_L):
         _NE2[_i] = 0.0
@@ -1053,7 +1070,7 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
                     for _l in range(_nl):
                         if _NE2[_l] > _LERR2 * _ND2[_l]:
                             _cnt += 1
-                if _EJUMP and _chk != 0:
+                if _EJUMP == 1 and _chk != 0:
                     for _l in range(_nl):
                         if abs(_PS[_PJ * _L + _l] - _EJS[_l]) > _MEJ * _EJS[_L + _l]:
                             _cnt += 1
@@ -1081,9 +1098,33 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
                     for _j in range(_KLERR):
                         for _l in range(_nl):
                             _G0[_j * _L + _l] = _PS[(_PE + 1 + _KLERR + _j) * _L + _l]
-                if _EJUMP:
+                if _EJUMP == 1:
                     for _l in range(2 * _L):
                         _EJS[_l] = _PS[_PJ * _L + _l]    # H and its size: two consecutive rows
+            if _EJUMP == 2:
+                # a composition: each live lane's energy jump over the composed step (stepper's
+                # test, on the same values)
+                for _l in range(_nl):
+                    if _DEAD[_l] == 0.0:
+                        for _i in range(_DIM):
+                            _yq[_i] = _YS[_i * _L + _l]
+                        hs(_yq, _p, _ejs)
+                        if _chk != 0 and abs(_ejs[0] - _EJS[_l]) > _MEJ * _EJS[_L + _l]:
+                            _b = _b0 + _l
+                            _fst[_b, 0] = _S_ENERGY_JUMP
+                            _fst[_b, 1] = _n
+                            _fst[_b, 2] = 0
+                            _fst[_b, 3] = -1
+                            _fval[_b] = abs(_ejs[0] - _EJS[_l]) / _EJS[_L + _l]
+                            _DEAD[_l] = _STAGES      # (its state is the step's end: kept as it is)
+                            for _i in range(_DIM):
+                                _SAVE[_i * _L + _l] = _YS[_i * _L + _l]
+                                _SAVE[(_DIM + _i) * _L + _l] = _CS[_i * _L + _l]
+                            for _i in range(_NF):
+                                _SAVE[(2 * _DIM + _i) * _L + _l] = _FS[_i * _L + _l]
+                            _failed = 1
+                        _EJS[_l] = _ejs[0]
+                        _EJS[_L + _l] = _ejs[1]
             if _failed != 0:
                 # the failed lanes keep their state after the failing stage; the others
                 # completed this step
@@ -1138,7 +1179,7 @@ def lane_status(PS, YS, NE2, ND2, EJS, l, out):
         if NE2[l] > _LERR2 * ND2[l]:
             st = _S_LOCAL_ERROR
             val = _LERR_SCALE * math.sqrt(NE2[l] / ND2[l])
-    if _EJUMP and _chk != 0 and st == _S_OK:
+    if _EJUMP == 1 and _chk != 0 and st == _S_OK:
         d = abs(PS[_PJ * _L + l] - EJS[l])
         if d > _MEJ * EJS[_L + l]:
             st = _S_ENERGY_JUMP

@@ -242,6 +242,57 @@ def test_barrier_energy_jump_numba(barrier_modules):
     _check_barrier(barrier_modules("stormer-verlet", "numba"))
 
 
+@pytest.fixture(scope="module")
+def barrier_o4(tmp_path_factory):
+    """Störmer–Verlet composed to order 4 (triple jump) on the barrier, numpy and compiled."""
+    root = tmp_path_factory.mktemp("barrier4")
+    scheme = mg.discretize(mg.Hamiltonian(BARRIER, q=["q"], p=["p"], name="barrier"), "stormer-verlet", order=4,
+                           composition="triple-jump")
+    return {b: mg.generate(scheme, root / f"bar4_{b}.py", backend=b) for b in ("numpy", "numba")}
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_composition_tests_the_energy_jump_once_per_composed_step(barrier_o4, backend):
+    """The triple jump's fifth step from q = -1 (h = 0.1) drifts over the barrier and back, and its
+    last stage ends on the barrier's top: H jumps at the composed step's end.  The composition tests
+    H there, once per composed step (its post kernel gives no H: the configuration says EJUMP 2);
+    the error is the composed step's, with no stage named.  Control: without the guard the step is
+    accepted and H jumps by 10."""
+    if backend == "numba":
+        pytest.importorskip("llvmlite")
+    mod = barrier_o4[backend]
+    assert mod._STAGES == 3
+    if backend == "numba":
+        from methodgen.codegen.abi import CFG
+        assert int(mod._CFG[CFG["EJUMP"]]) == 2 and int(mod._CFG[CFG["POST_LEN"]]) == int(mod._CFG[CFG["POST_EJ"]])
+    with pytest.raises(mod.ResolutionError, match=r"at step 4: H changed by [0-9.]+ times its own size") as ei:
+        mod.integrate([-1.0, 2.0], 0.1, 20)
+    assert ei.value.check == "energy_jump" and "[stage" not in str(ei.value)
+    assert len(ei.value.trajectory) == 5
+    tr = mod.integrate([-1.0, 2.0], 0.1, 20, check_resolution=False)
+    assert np.abs(mod.hamiltonian(tr) - 2.0).max() > 5.0
+    # a batch names the trajectory
+    with pytest.raises(mod.ResolutionError, match=r"trajectories \[1\]"):
+        mod.integrate([[-1.1, 2.0], [-1.0, 2.0]], 0.1, 20)
+
+
+def test_a_composition_reports_a_non_finite_state_at_the_same_step_on_both_backends(tmp_path):
+    """The compiled loop checks an explicit composition's state for inf/NaN at the composed step's
+    end (a stage's inf or NaN stays in the state); the numpy module at every stage.  A Hénon–Heiles
+    orbit above the escape energy blows up: both name the same step (control: the runs do fail)."""
+    pytest.importorskip("llvmlite")
+    scheme = mg.discretize(mg.load_scene("henon-heiles-2d").run_system, "stormer-verlet", order=4)
+    a = mg.generate(scheme, tmp_path / "hh4_numpy.py")
+    b = mg.generate(scheme, tmp_path / "hh4_numba.py", backend="numba")
+    for y0 in ([0.0, 0.0, 3.0, 3.0], [0.5, -2.0, 1.0, 1.0]):
+        steps = []
+        for mod in (a, b):
+            with pytest.raises(mod.NonFiniteError) as ei:
+                mod.integrate(np.array(y0), 0.1, 200, check_resolution=False)
+            steps.append(ei.value.step)
+        assert steps[0] == steps[1] and steps[0] > 5
+
+
 def test_barrier_thinner_than_a_step_is_invisible(barrier_modules):
     """The documented limit (README): from q = -1.1 no step end touches the barrier and the
     force is ~0 wherever a step evaluates it -- no fixed-step method can see it.  A step that
