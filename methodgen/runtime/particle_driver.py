@@ -11,6 +11,7 @@ import numpy
 
 from ..codegen import ktypes as _t
 from . import particle_stepper as _ps
+from . import stepper as _stepper
 from .lattice_driver import _compiled
 
 __all__ = ["run_sv", "run_em"]
@@ -27,6 +28,7 @@ _LOOPS_EM: dict = {}
 
 def _loop(entry: str, kernels: dict, key, cache: dict, sig, python: bool):
     consts = {"math": math, **kernels}
+    consts["compensated_add"] = types.FunctionType(_stepper.compensated_add.__code__, consts, "compensated_add")
     for name in _HELPERS:
         consts[name] = types.FunctionType(getattr(_ps, name).__code__, consts, name)
     fn = types.FunctionType(getattr(_ps, entry).__code__, consts, entry)

@@ -32,20 +32,18 @@ import math
 
 __all__ = ["sv_run", "em_run", "STATUS"]
 
-# flake8: noqa: F821  (``vel``, ``fpair``, ``fext``, ``gpair`` are bound by the driver)
+# flake8: noqa: F821  (``vel``, ``fpair``, ``fext``, ``gpair``, ``compensated_add`` are bound by the driver)
 
 #: failure status of a run (``_fst[0]``)
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2}
 
 
 def add(_Y, _C, _X, c, n, d):
-    """``_Y += c _X`` elementwise with the compensation ``_C`` (Kahan)."""
+    """``_Y += c _X`` elementwise with the compensation ``_C``: the stepper's compensated (Kahan)
+    add, :func:`methodgen.runtime.stepper.compensated_add` (bound by the driver)."""
     for a in range(n):
         for k in range(d):
-            x = c * _X[a, k] + _C[a, k]
-            y = _Y[a, k]
-            t = y + x
-            _C[a, k] = (y - t) + x
+            t, _C[a, k] = compensated_add(_Y[a, k], _C[a, k], c * _X[a, k])
             _Y[a, k] = t
 
 
