@@ -15,8 +15,10 @@ from . import lattice_stepper as _ls
 __all__ = ["run_steps", "gradient_2d"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
-#: Y (2, n), T (rows, 2n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, sk, c
-SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _i8, _f8)
+#: Y (nf, n), T (rows, nf n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, D, P, F,
+#: nf, sk, cs, sw, wh, g
+SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _M, _M, _V,
+              _i8, _i8, _V, _i8, _i8, _i8)
 
 _LOOPS: dict = {}
 
@@ -24,7 +26,10 @@ _LOOPS: dict = {}
 def _bound(grad) -> dict:
     consts = {k: v for k, v in vars(_ls).items() if k.startswith("_I") and isinstance(v, int)}
     consts.update(math=math, grad=grad)
-    for name in ("factor", "solve", "block", "flow", "mm", "mv", "load4", "store4", "store_inverse"):
+    consts.update(_NMAT=_ls._NMAT, _MA=_ls._MA, _MB=_ls._MB, _MC=_ls._MC, _MUI=_ls._MUI, _MLL=_ls._MLL,
+                  _ME=_ls._ME, _MML=_ls._MML)
+    for name in ("factor", "solve", "flow", "newton", "assemble", "layout", "copy_block",
+                 "add_block", "product", "invert"):
         consts[name] = types.FunctionType(getattr(_ls, name).__code__, consts, name)
     return consts
 
@@ -57,24 +62,37 @@ def _compiled(cache: dict, kernel, fn, sig, globals_, what: str):
 
 
 def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False,
-              skew=0, coefficient=1.0):
-    """``steps`` steps from ``Y`` (2, n), updated in place: ``(rows, its, status)`` with rows
-    (steps // every + 1 + ..., 2n) (row 0 the start), Newton iterations per step, and
-    ``(code, step, iterations, value)`` of a failure (code 0: none).  ``skew=1``: a skew lattice
-    in the paired layout (``Y[f, k] = u_(2k + f)``), ``coefficient`` its stencil's c."""
-    n = Y.shape[1]
+              jac_half_width=1, stencil=None):
+    """``steps`` steps from ``Y`` (nf, n), updated in place: ``(rows, its, status)`` with rows
+    (steps // every + 1 + ..., nf n) (row 0 the start), Newton iterations per step, and
+    ``(code, step, iterations, value)`` of a failure (code 0: none).
+
+    ``jac_half_width``: the half-bandwidth wH in sites of the kernel's ∂∇̄H (its rows
+    ``(2 wH + 1) nf²``); ``stencil``: a skew lattice's coefficients ``c_(-sw) … c_sw`` at this n
+    (then Y is (1, n)), None for a canonical lattice.  The Newton matrix's sites are grouped by
+    g = max(wH + sw, 1) (:mod:`methodgen.runtime.lattice_stepper`)."""
+    nf, n = Y.shape
     nrows = steps // every + (1 if steps % every else 0) + 1
-    T = numpy.zeros((nrows, 2 * n))
-    T[0, :n], T[0, n:] = Y[0], Y[1]
+    T = numpy.zeros((nrows, nf * n))
+    T[0] = Y.reshape(-1)
     its = numpy.zeros(max(steps, 1))
     fst = numpy.zeros(4)
     W = numpy.zeros((_ls.W_ROWS, n))
+    wh = int(jac_half_width)
+    cs = numpy.zeros(1) if stencil is None else numpy.ascontiguousarray(stencil, dtype=numpy.float64)
+    sw = 0 if stencil is None else (cs.size - 1) // 2
+    w = wh + sw
+    g = max(w, 1)
+    D = numpy.zeros(((2 * wh + 1) * nf * nf, n))
+    P = numpy.zeros(((2 * w + 1) * nf * nf, n))
+    F = numpy.zeros(_ls.factor_size(n, nf, g))
     p = numpy.ascontiguousarray(p, dtype=numpy.float64)
     if p.size == 0:
         p = numpy.zeros(1)
     loop, compiled = _loop(grad, python)
     args = (Y, T, its, fst, p, int(n), float(h), int(steps), int(every), int(maxiter), float(tol),
-            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, int(skew), float(coefficient))
+            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, D, P, F,
+            int(nf), int(stencil is not None), cs, int(sw), wh, int(g))
     if compiled:
         from .fused import _drive
         _drive(loop, *args)
