@@ -58,12 +58,24 @@ W_ROWS = 14
 #: the factor array _F: per group _NMAT blocks of mB × mB slots (row stride mB): the matrix's
 #: blocks A (to the group before), B, C (to the group after), the eliminated diagonal block's
 #: inverse UI, the multiplier LL, the border column E, the border row's multiplier ML; then
-#: _NSCR scratch blocks
+#: _NSCR scratch blocks.  (The block t of the group k is at (k _NMAT + t) mB², the scratch block t
+#: at (q _NMAT + t) mB²; written out where used: the translator inlines a function returning an
+#: integer only when it returns a tuple.)
 _MA, _MB, _MC, _MUI, _MLL, _ME, _MML = 0, 1, 2, 3, 4, 5, 6
 _NMAT = 7
 _NSCR = 7
 #: failure status of a run (``_fst[0]``)
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2, "RESOLUTION": 3, "SINGULAR": 4}
+
+# The shape of the problem, bound per compiled loop by methodgen.runtime.lattice_driver (constants at
+# translation time, so that every loop over a block's entries has a known trip count and LLVM
+# unrolls the small ones: the 2 × 2 blocks of a nearest-neighbour lattice cost what the explicit
+# formulas did).  The values here are a canonical nearest-neighbour lattice's.
+#: fields per site; sites per group g; interior block size m = nf g; the last group's mB = nf (g + r)
+_NF, _GS, _BM, _BB = 2, 1, 2, 2
+#: skew (1) or canonical (0); the stencil's half-width sw; ∂∇̄H's half-width wH; the Newton matrix's
+#: 2 w + 1 diagonals (w = wH + sw)
+_SK, _SW, _WH, _W2 = 0, 0, 1, 3
 
 
 def layout(n, nf, g):
@@ -79,99 +91,177 @@ def factor_size(n, nf, g):
     return (_NMAT * q + _NSCR) * mb * mb
 
 
-# (the block ``t`` (_MA … _MML) of the group k is at (k _NMAT + t) mB² in _F, the scratch block t at
-# (q _NMAT + t) mB²; written out where used: the translator inlines a function returning an
-# integer only when it returns a tuple)
-
-
-def newton(_D, _P, n, nf, h, sk, _cs, sw, wh, w):
-    """The Newton matrix ``I - h K ∂∇̄H`` into _P from ∂∇̄H in _D (module docstring)."""
-    nf2 = nf * nf
-    for e in range(2 * w + 1):
-        for f in range(nf):
-            for f2 in range(nf):
+def newton(_D, _P, n, h, _cs):
+    """The Newton matrix ``I - h K ∂∇̄H`` into _P from ∂∇̄H in _D (module docstring); ``_cs`` the
+    skew stencil's c_(-sw) … c_sw."""
+    w = (_W2 - 1) // 2
+    for e in range(_W2):
+        for f in range(_NF):
+            for f2 in range(_NF):
                 d = 0.0
                 if e == w and f == f2:
                     d = 1.0
-                row = e * nf2 + f * nf + f2
-                if sk == 0:
-                    # canonical (w = wh): row q takes -h (row p of D), row p +h (row q of D)
-                    for s in range(n):
-                        if f == 0:
-                            _P[row, s] = d - h * _D[e * nf2 + nf + f2, s]
-                        else:
-                            _P[row, s] = d + h * _D[e * nf2 + f2, s]
+                row = e * _NF * _NF + f * _NF + f2
+                if _SK == 0:
+                    # canonical (w = wH): row q takes -h (row p of D), row p +h (row q of D)
+                    if f == 0:
+                        for s in range(n):
+                            _P[row, s] = d - h * _D[e * _NF * _NF + _NF + f2, s]
+                    else:
+                        for s in range(n):
+                            _P[row, s] = d + h * _D[e * _NF * _NF + f2, s]
                 else:
                     for s in range(n):
                         acc = 0.0
-                        for kk in range(2 * sw + 1):
-                            ed = e - w - (kk - sw)          # D_(e - k) at the site s + k
-                            if ed >= -wh and ed <= wh:
-                                acc += (h * _cs[kk]) * _D[(ed + wh) * nf2, (s + kk - sw + n) % n]
+                        for kk in range(2 * _SW + 1):
+                            ed = e - w - (kk - _SW)         # D_(e - k) at the site s + k
+                            if ed >= -_WH and ed <= _WH:
+                                t = s + kk - _SW            # the site s + k, cyclically (no division)
+                                if t < 0:
+                                    t += n
+                                elif t >= n:
+                                    t -= n
+                                acc += (h * _cs[kk]) * _D[(ed + _WH) * _NF * _NF, t]
                         _P[row, s] = d - acc
 
 
-def assemble(_P, _F, n, nf, g, w):
+def assemble(_P, _F, n):
     """The blocks A, B, C of every group into _F from the site diagonals _P (added: a coupling
     the wrap makes to the same group twice, at q = 2, sums)."""
-    q, m, mx = layout(n, nf, g)
-    nf2 = nf * nf
-    mx2 = mx * mx
+    q = n // _GS
+    w = (_W2 - 1) // 2
     for k in range(q):
-        for x in range(3 * mx2):
-            _F[k * _NMAT * mx2 + x] = 0.0
+        for x in range(3 * _BB * _BB):
+            _F[k * _NMAT * _BB * _BB + x] = 0.0
     for s in range(n):
-        k = s // g
+        k = s // _GS
         if k > q - 1:
             k = q - 1                   # the last group holds the remainder
-        for e in range(2 * w + 1):
-            t = (s + e - w + n) % n
-            kt = t // g
+        kn = k + 1                      # the group after k, cyclically
+        if kn == q:
+            kn = 0
+        for e in range(_W2):
+            t = s + e - w               # the site s + e - w, cyclically (no division: w < n)
+            if t < 0:
+                t += n
+            elif t >= n:
+                t -= n
+            kt = t // _GS
             if kt > q - 1:
                 kt = q - 1
             slot = _MA
             if kt == k:
                 slot = _MB
-            elif kt == (k + 1) % q:
+            elif kt == kn:
                 slot = _MC
-            b0 = (k * _NMAT + slot) * mx2
-            for f in range(nf):
-                i = (s - k * g) * nf + f
-                for f2 in range(nf):
-                    j = (t - kt * g) * nf + f2
-                    _F[b0 + i * mx + j] += _P[e * nf2 + f * nf + f2, s]
+            b0 = (k * _NMAT + slot) * _BB * _BB
+            for f in range(_NF):
+                i = (s - k * _GS) * _NF + f
+                for f2 in range(_NF):
+                    j = (t - kt * _GS) * _NF + f2
+                    _F[b0 + i * _BB + j] += _P[e * _NF * _NF + f * _NF + f2, s]
 
 
-def copy_block(_F, dst, src, r, c, mx):
-    for i in range(r):
-        for j in range(c):
-            _F[dst + i * mx + j] = _F[src + i * mx + j]
+# Block operations on _F (row stride _BB).  Each has a variant per shape, so that its loops'
+# trip counts are constants: m × m (…_mm), m × mB (…_mb), mB × m (…_bm), mB × mB (…_bb).
+
+def copy_mm(_F, dst, src):
+    for i in range(_BM):
+        for j in range(_BM):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
 
 
-def add_block(_F, dst, src, r, c, mx):
-    for i in range(r):
-        for j in range(c):
-            _F[dst + i * mx + j] = _F[dst + i * mx + j] + _F[src + i * mx + j]
+def copy_bb(_F, dst, src):
+    for i in range(_BB):
+        for j in range(_BB):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
 
 
-def product(_F, dst, a, b, r, c, kk, mx, mode):
-    """``dst = a b`` (mode 0), ``dst - a b`` (1) or ``-(a b)`` (2); a r × kk, b kk × c; each entry's
-    sum formed first, in the order of its terms (for 2 × 2 blocks the arithmetic of the explicit
-    products a00 b00 + a01 b10 …)."""
-    for i in range(r):
-        for j in range(c):
+def copy_mb(_F, dst, src):
+    for i in range(_BM):
+        for j in range(_BB):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
+
+
+def copy_bm(_F, dst, src):
+    for i in range(_BB):
+        for j in range(_BM):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
+
+
+def add_mb(_F, dst, src):
+    for i in range(_BM):
+        for j in range(_BB):
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] + _F[src + i * _BB + j]
+
+
+def add_bm(_F, dst, src):
+    for i in range(_BB):
+        for j in range(_BM):
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] + _F[src + i * _BB + j]
+
+
+# products dst = a b (…set), dst - a b (…sub), -(a b) (…neg); each entry's sum formed first, in the
+# order of its terms (for 2 × 2 blocks the arithmetic of the explicit a00 b00 + a01 b10 …)
+
+def mul_mmm_set(_F, dst, a, b):
+    for i in range(_BM):
+        for j in range(_BM):
             s = 0.0
-            for l in range(kk):
-                s += _F[a + i * mx + l] * _F[b + l * mx + j]
-            if mode == 0:
-                _F[dst + i * mx + j] = s
-            elif mode == 1:
-                _F[dst + i * mx + j] = _F[dst + i * mx + j] - s
-            else:
-                _F[dst + i * mx + j] = -s
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = s
 
 
-def invert(_F, dst, src, d, mx, tmp):
+def mul_mmm_sub(_F, dst, a, b):
+    for i in range(_BM):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+
+
+def mul_mmb_sub(_F, dst, a, b):
+    """dst (m × mB) less a (m × m) b (m × mB)."""
+    for i in range(_BM):
+        for j in range(_BB):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+
+
+def mul_bmm_set(_F, dst, a, b):
+    """dst (mB × m) = a (mB × m) b (m × m)."""
+    for i in range(_BB):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = s
+
+
+def mul_bmm_neg(_F, dst, a, b):
+    for i in range(_BB):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = -s
+
+
+def mul_bmb_sub(_F, dst, a, b):
+    """dst (mB × mB) less a (mB × m) b (m × mB)."""
+    for i in range(_BB):
+        for j in range(_BB):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+
+
+def invert(_F, dst, src, d, tmp):
     """The inverse of the d × d block at src into dst: 2 × 2 by its adjugate over the determinant,
     larger by Gauss-Jordan elimination with partial pivoting (in tmp, a scratch block).
     Returns 1 where it is singular (a zero or non-finite pivot; then taken as 1), else 0."""
@@ -179,56 +269,56 @@ def invert(_F, dst, src, d, mx, tmp):
     if d == 2:
         b00 = _F[src]
         b01 = _F[src + 1]
-        b10 = _F[src + mx]
-        b11 = _F[src + mx + 1]
+        b10 = _F[src + _BB]
+        b11 = _F[src + _BB + 1]
         det = b00 * b11 - b01 * b10
         if not (det != 0.0 and abs(det) < math.inf):
             bad = 1
             det = 1.0
         _F[dst] = b11 / det
         _F[dst + 1] = -b01 / det
-        _F[dst + mx] = -b10 / det
-        _F[dst + mx + 1] = b00 / det
+        _F[dst + _BB] = -b10 / det
+        _F[dst + _BB + 1] = b00 / det
         return bad
-    copy_block(_F, tmp, src, d, d, mx)
     for i in range(d):
         for j in range(d):
-            _F[dst + i * mx + j] = 0.0
-        _F[dst + i * mx + i] = 1.0
+            _F[tmp + i * _BB + j] = _F[src + i * _BB + j]
+            _F[dst + i * _BB + j] = 0.0
+        _F[dst + i * _BB + i] = 1.0
     for c in range(d):
         piv = c
-        big = abs(_F[tmp + c * mx + c])
+        big = abs(_F[tmp + c * _BB + c])
         for i in range(c + 1, d):
-            a = abs(_F[tmp + i * mx + c])
+            a = abs(_F[tmp + i * _BB + c])
             if a > big:
                 big = a
                 piv = i
         if piv != c:
             for j in range(d):
-                x = _F[tmp + c * mx + j]
-                _F[tmp + c * mx + j] = _F[tmp + piv * mx + j]
-                _F[tmp + piv * mx + j] = x
-                x = _F[dst + c * mx + j]
-                _F[dst + c * mx + j] = _F[dst + piv * mx + j]
-                _F[dst + piv * mx + j] = x
-        pv = _F[tmp + c * mx + c]
+                x = _F[tmp + c * _BB + j]
+                _F[tmp + c * _BB + j] = _F[tmp + piv * _BB + j]
+                _F[tmp + piv * _BB + j] = x
+                x = _F[dst + c * _BB + j]
+                _F[dst + c * _BB + j] = _F[dst + piv * _BB + j]
+                _F[dst + piv * _BB + j] = x
+        pv = _F[tmp + c * _BB + c]
         if not (pv != 0.0 and abs(pv) < math.inf):
             bad = 1
             pv = 1.0
         for j in range(d):
-            _F[tmp + c * mx + j] = _F[tmp + c * mx + j] / pv
-            _F[dst + c * mx + j] = _F[dst + c * mx + j] / pv
+            _F[tmp + c * _BB + j] = _F[tmp + c * _BB + j] / pv
+            _F[dst + c * _BB + j] = _F[dst + c * _BB + j] / pv
         for i in range(d):
             if i != c:
-                fac = _F[tmp + i * mx + c]
+                fac = _F[tmp + i * _BB + c]
                 if fac != 0.0:
                     for j in range(d):
-                        _F[tmp + i * mx + j] = _F[tmp + i * mx + j] - fac * _F[tmp + c * mx + j]
-                        _F[dst + i * mx + j] = _F[dst + i * mx + j] - fac * _F[dst + c * mx + j]
+                        _F[tmp + i * _BB + j] = _F[tmp + i * _BB + j] - fac * _F[tmp + c * _BB + j]
+                        _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - fac * _F[dst + c * _BB + j]
     return bad
 
 
-def factor(_P, _F, _n, _nf, _g, _w):
+def factor(_P, _F, _n):
     """Factor the Newton matrix (site diagonals in _P) into _F.  Returns 0, or 1 for a singular
     block.
 
@@ -239,145 +329,142 @@ def factor(_P, _F, _n, _nf, _g, _w):
     eliminated alongside: M_j = W_j U_j⁻¹, its diagonal block less M_j E_j, W_(j+1) = -M_j S_j.
     """
     n = _n
-    nf = _nf
-    g = _g
-    assemble(_P, _F, n, nf, g, _w)
-    q, m, mx = layout(n, nf, g)
-    mx2 = mx * mx
-    ub = (q * _NMAT + 0) * mx2          # U_j being formed
-    eb = (q * _NMAT + 1) * mx2          # E_j being formed
-    cb = (q * _NMAT + 2) * mx2          # the border's diagonal block being formed
-    wb = (q * _NMAT + 3) * mx2          # the border row's coefficient W_j
-    tb = (q * _NMAT + 4) * mx2          # the inverse's scratch
+    assemble(_P, _F, n)
+    q = n // _GS
+    z = _BB * _BB
+    ub = (q * _NMAT + 0) * z        # U_j being formed
+    eb = (q * _NMAT + 1) * z        # E_j being formed
+    cb = (q * _NMAT + 2) * z        # the border's diagonal block being formed
+    wb = (q * _NMAT + 3) * z        # the border row's coefficient W_j
+    tb = (q * _NMAT + 4) * z        # the inverse's scratch
     bad = 0
     for j in range(q - 1):
-        copy_block(_F, ub, (j * _NMAT + _MB) * mx2, m, m, mx)
-        for i in range(m):
-            for c in range(mx):
-                _F[eb + i * mx + c] = 0.0
+        copy_mm(_F, ub, (j * _NMAT + _MB) * z)
+        for i in range(_BM):
+            for c in range(_BB):
+                _F[eb + i * _BB + c] = 0.0
         if j == 0:
-            add_block(_F, eb, (0 * _NMAT + _MA) * mx2, m, mx, mx)
+            add_mb(_F, eb, _MA * z)
         if j == q - 2:
-            add_block(_F, eb, (j * _NMAT + _MC) * mx2, m, mx, mx)
+            add_mb(_F, eb, (j * _NMAT + _MC) * z)
         if j > 0:
-            lb = (j * _NMAT + _MLL) * mx2
-            product(_F, lb, (j * _NMAT + _MA) * mx2, ((j - 1) * _NMAT + _MUI) * mx2, m, m, m, mx, 0)
-            product(_F, ub, lb, ((j - 1) * _NMAT + _MC) * mx2, m, m, m, mx, 1)
-            product(_F, eb, lb, ((j - 1) * _NMAT + _ME) * mx2, m, mx, m, mx, 1)
-        if invert(_F, (j * _NMAT + _MUI) * mx2, ub, m, mx, tb) != 0:
+            lb = (j * _NMAT + _MLL) * z
+            mul_mmm_set(_F, lb, (j * _NMAT + _MA) * z, ((j - 1) * _NMAT + _MUI) * z)
+            mul_mmm_sub(_F, ub, lb, ((j - 1) * _NMAT + _MC) * z)
+            mul_mmb_sub(_F, eb, lb, ((j - 1) * _NMAT + _ME) * z)
+        if invert(_F, (j * _NMAT + _MUI) * z, ub, _BM, tb) != 0:
             bad = 1
-        copy_block(_F, (j * _NMAT + _ME) * mx2, eb, m, mx, mx)
+        copy_mb(_F, (j * _NMAT + _ME) * z, eb)
     last = q - 1
-    copy_block(_F, cb, (last * _NMAT + _MB) * mx2, mx, mx, mx)
-    copy_block(_F, wb, (last * _NMAT + _MC) * mx2, mx, m, mx)
+    copy_bb(_F, cb, (last * _NMAT + _MB) * z)
+    copy_bm(_F, wb, (last * _NMAT + _MC) * z)
     for j in range(q - 1):
         if j == q - 2:
-            add_block(_F, wb, (last * _NMAT + _MA) * mx2, mx, m, mx)
-        mb = (j * _NMAT + _MML) * mx2
-        product(_F, mb, wb, (j * _NMAT + _MUI) * mx2, mx, m, m, mx, 0)
-        product(_F, cb, mb, (j * _NMAT + _ME) * mx2, mx, mx, m, mx, 1)
+            add_bm(_F, wb, (last * _NMAT + _MA) * z)
+        mb = (j * _NMAT + _MML) * z
+        mul_bmm_set(_F, mb, wb, (j * _NMAT + _MUI) * z)
+        mul_bmb_sub(_F, cb, mb, (j * _NMAT + _ME) * z)
         if j < q - 2:
-            product(_F, wb, mb, (j * _NMAT + _MC) * mx2, mx, m, m, mx, 2)
-    if invert(_F, (last * _NMAT + _MUI) * mx2, cb, mx, mx, tb) != 0:
+            mul_bmm_neg(_F, wb, mb, (j * _NMAT + _MC) * z)
+    if invert(_F, (last * _NMAT + _MUI) * z, cb, _BB, tb) != 0:
         bad = 1
     return bad
 
 
-def solve(_W, _F, _n, _nf, _g):
+def solve(_W, _F, _n):
     """Solve the factored system for the right-hand side -R (rows _IR), in place: _IR becomes
     the update.  Forward: y_j = r_j - L_j y_(j-1), the border's row less M_j y_j; the border;
     back: x_j = U_j⁻¹ (y_j - E_j x_(q-1) - S_j x_(j+1)).  The entry i of a group k is the field
     i % nf at the site k g + i // nf."""
     n = _n
-    nf = _nf
-    g = _g
-    q, m, mx = layout(n, nf, g)
-    mx2 = mx * mx
-    yb = (q * _NMAT + 5) * mx2          # the border's right-hand side
-    tb = (q * _NMAT + 6) * mx2          # a group's back-substituted right-hand side
-    s0 = (q - 1) * g
-    for i in range(mx):
-        _F[yb + i] = -_W[_IR + i % nf, s0 + i // nf]
+    q = n // _GS
+    z = _BB * _BB
+    yb = (q * _NMAT + 5) * z        # the border's right-hand side
+    tb = (q * _NMAT + 6) * z        # a group's back-substituted right-hand side
+    s0 = (q - 1) * _GS
+    for i in range(_BB):
+        _F[yb + i] = -_W[_IR + i % _NF, s0 + i // _NF]
     for j in range(q - 1):
-        sj = j * g
-        lb = (j * _NMAT + _MLL) * mx2
-        for i in range(m):
-            r = -_W[_IR + i % nf, sj + i // nf]
+        sj = j * _GS
+        lb = (j * _NMAT + _MLL) * z
+        for i in range(_BM):
+            r = -_W[_IR + i % _NF, sj + i // _NF]
             if j > 0:
                 a = 0.0
-                for l in range(m):
-                    a += _F[lb + i * mx + l] * _W[_IY + l % nf, sj - g + l // nf]
+                for l in range(_BM):
+                    a += _F[lb + i * _BB + l] * _W[_IY + l % _NF, sj - _GS + l // _NF]
                 r -= a
-            _W[_IY + i % nf, sj + i // nf] = r
-        mb = (j * _NMAT + _MML) * mx2
-        for i in range(mx):
+            _W[_IY + i % _NF, sj + i // _NF] = r
+        mb = (j * _NMAT + _MML) * z
+        for i in range(_BB):
             a = 0.0
-            for l in range(m):
-                a += _F[mb + i * mx + l] * _W[_IY + l % nf, sj + l // nf]
+            for l in range(_BM):
+                a += _F[mb + i * _BB + l] * _W[_IY + l % _NF, sj + l // _NF]
             _F[yb + i] = _F[yb + i] - a
-    ul = ((q - 1) * _NMAT + _MUI) * mx2
-    for i in range(mx):
+    ul = ((q - 1) * _NMAT + _MUI) * z
+    for i in range(_BB):
         a = 0.0
-        for l in range(mx):
-            a += _F[ul + i * mx + l] * _F[yb + l]
-        _W[_IR + i % nf, s0 + i // nf] = a
+        for l in range(_BB):
+            a += _F[ul + i * _BB + l] * _F[yb + l]
+        _W[_IR + i % _NF, s0 + i // _NF] = a
     for k in range(q - 1):
         j = q - 2 - k
-        sj = j * g
-        e0 = (j * _NMAT + _ME) * mx2
-        c0 = (j * _NMAT + _MC) * mx2
-        for i in range(m):
+        sj = j * _GS
+        e0 = (j * _NMAT + _ME) * z
+        c0 = (j * _NMAT + _MC) * z
+        for i in range(_BM):
             a = 0.0
-            for l in range(mx):
-                a += _F[e0 + i * mx + l] * _W[_IR + l % nf, s0 + l // nf]
-            t = _W[_IY + i % nf, sj + i // nf] - a
+            for l in range(_BB):
+                a += _F[e0 + i * _BB + l] * _W[_IR + l % _NF, s0 + l // _NF]
+            t = _W[_IY + i % _NF, sj + i // _NF] - a
             if j < q - 2:
                 a = 0.0
-                for l in range(m):
-                    a += _F[c0 + i * mx + l] * _W[_IR + l % nf, sj + g + l // nf]
+                for l in range(_BM):
+                    a += _F[c0 + i * _BB + l] * _W[_IR + l % _NF, sj + _GS + l // _NF]
                 t -= a
             _F[tb + i] = t
-        u0 = (j * _NMAT + _MUI) * mx2
-        for i in range(m):
+        u0 = (j * _NMAT + _MUI) * z
+        for i in range(_BM):
             a = 0.0
-            for l in range(m):
-                a += _F[u0 + i * mx + l] * _F[tb + l]
-            _W[_IR + i % nf, sj + i // nf] = a
+            for l in range(_BM):
+                a += _F[u0 + i * _BB + l] * _F[tb + l]
+            _W[_IR + i % _NF, sj + i // _NF] = a
 
 
-def flow(_W, j, f, n, h, sk, _cs, sw):
+def flow(_W, j, f, n, h, _cs):
     """h K ∇̄H at the site j, field f, from G: canonical (h G_p, -h G_q); skew Σ_k (h c_k) G_(j+k),
     k ascending."""
-    if sk == 0:
+    if _SK == 0:
         if f == 0:
             return h * _W[_IG + 1, j]
         return -h * _W[_IG + 0, j]
     acc = 0.0
-    for kk in range(2 * sw + 1):
-        acc += (h * _cs[kk]) * _W[_IG, (j + kk - sw + n) % n]
+    for kk in range(2 * _SW + 1):
+        t = j + kk - _SW
+        if t < 0:
+            t += n
+        elif t >= n:
+            t -= n
+        acc += (h * _cs[kk]) * _W[_IG, t]
     return acc
 
 
 def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, _chk, _simpl, _maxdis, _W,
-                _D, _P, _F, _nf, _sk, _cs, _sw, _wh, _g):
+                _D, _P, _F, _cs):
     """Steps 0 .. _steps-1 from the state ``_Y`` (nf, n), updated in place.
 
     ``_T`` (rows, nf n): row k + 1 is the state after step (k + 1)·_every - 1 (and the last row
     the last state); ``_its`` (_steps,): Newton iterations; ``_fst`` (4,): status (STATUS), step,
     iterations, and the failing value (the residual, or the predictor ratio) of a failure.
     ``_chk``: the resolution check (predictor disagreement ≤ ``_maxdis``); ``_simpl``:
-    simplified Newton (the matrix at the predictor only); ``_sk``: 1 for a skew lattice, ``_cs``
-    its stencil's coefficients c_(-sw) … c_sw at this n; ``_wh`` the Jacobian's half-width, ``_g``
-    the group size (module docstring).
+    simplified Newton (the matrix at the predictor only); ``_cs`` a skew lattice's stencil
+    coefficients c_(-sw) … c_sw at this n.  The lattice's shape (nf, g, …) is bound as constants
+    (module docstring).
     """
     n = _n
     h = _h
-    nf = _nf
-    sk = _sk
-    sw = _sw
-    wh = _wh
-    w = wh + sw
-    nd = (2 * wh + 1) * nf * nf
+    nf = _NF
+    nd = (2 * _WH + 1) * _NF * _NF
     row = 1
     for s in range(_steps):
         if s == 0:
@@ -389,7 +476,7 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             grad(_Y, _W, _D, _n, _p, 0)
             for j in range(n):
                 for c in range(nf):
-                    _W[_IDY + c, j] = flow(_W, j, c, n, h, sk, _cs, sw)
+                    _W[_IDY + c, j] = flow(_W, j, c, n, h, _cs)
         for j in range(n):
             for c in range(nf):
                 z = _Y[c, j] + _W[_IDY + c, j]
@@ -415,15 +502,15 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             grad(_Y, _W, _D, _n, _p, jac)
             for j in range(n):
                 for c in range(nf):
-                    _W[_IR + c, j] = _W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, sk, _cs, sw)
+                    _W[_IR + c, j] = _W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)
             if jac == 1:
-                newton(_D, _P, n, nf, h, sk, _cs, sw, wh, w)
-                if factor(_P, _F, n, nf, _g, w) != 0:
+                newton(_D, _P, n, h, _cs)
+                if factor(_P, _F, n) != 0:
                     _fst[0] = 4.0
                     _fst[1] = s
                     _fst[2] = it
                     return
-            solve(_W, _F, n, nf, _g)
+            solve(_W, _F, n)
             size = 0.0
             scale = 1.0
             for j in range(n):
@@ -455,7 +542,7 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             res = 0.0
             for j in range(n):
                 for c in range(nf):
-                    res = max(res, abs(_W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, sk, _cs, sw)))
+                    res = max(res, abs(_W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)))
             _fst[0] = 1.0
             _fst[1] = s
             _fst[2] = it

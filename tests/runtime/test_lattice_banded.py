@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from methodgen.runtime import lattice_stepper as ls
+from methodgen.runtime.lattice_driver import shape_constants, stepper_functions
 
 
 def random_diagonals(rng, n, nf, w, periodic=True):
@@ -41,13 +42,14 @@ def stepper_solve(P, r):
     """x with M x = r (r (nf, n)) by the stepper's assemble/factor/solve, run as Python."""
     e2, nf, _, n = P.shape
     w = (e2 - 1) // 2
-    g = max(w, 1)
+    shape = shape_constants(n, nf, w)
+    st = stepper_functions(shape)
     Pr = np.ascontiguousarray(P.reshape(e2 * nf * nf, n))
-    F = np.zeros(ls.factor_size(n, nf, g))
+    F = np.zeros(ls.factor_size(n, nf, shape["_GS"]))
     W = np.zeros((ls.W_ROWS, n))
-    assert ls.factor(Pr, F, n, nf, g, w) == 0
+    assert st.factor(Pr, F, n) == 0
     W[ls._IR:ls._IR + nf] = -r              # solve() takes -R and leaves the update
-    ls.solve(W, F, n, nf, g)
+    st.solve(W, F, n)
     return W[ls._IR:ls._IR + nf].copy()
 
 
@@ -78,4 +80,4 @@ def test_a_singular_block_is_reported():
     n, nf, w = 7, 1, 2
     P = np.zeros((2 * w + 1, nf, nf, n))
     F = np.zeros(ls.factor_size(n, nf, w))
-    assert ls.factor(P.reshape(-1, n), F, n, nf, w, w) == 1
+    assert stepper_functions(shape_constants(n, nf, w)).factor(P.reshape(-1, n), F, n) == 1
