@@ -28,8 +28,12 @@ right-hand side), ``DY``, ``DY2`` (the last two steps' increments), nf rows each
 below; ``_D`` ((2 wH + 1) nf², n): the kernel's ∂∇̄H, row ``(e + wH) nf² + f nf + f'`` the entry
 ∂∇̄H_(f, j)/∂z_(f', j + e) at column j (wH the Jacobian's half-width); ``_P`` ((2 w + 1) nf², n):
 the Newton matrix in the same layout; ``_F`` (:func:`factor_size`): the blocks and the factors.
+The shape (nf, g, m, mB, the structure, the half-widths) is bound as translation-time constants
+``_NF``, ``_GS``, ``_BM``, ``_BB``, ``_SK``, ``_SW``, ``_WH``, ``_W2`` per compiled loop
+(:func:`methodgen.runtime.lattice_driver.shape_constants`): a module compiles at most g loops, one per
+N mod g.
 
-A skew lattice (``_sk = 1``, one field, ``u1 = u0 + h S ∇̄H(u0, u1)``, ``(S g)_i = Σ_k c_k g_(i+k)``,
+A skew lattice (``_SK = 1``, one field, ``u1 = u0 + h S ∇̄H(u0, u1)``, ``(S g)_i = Σ_k c_k g_(i+k)``,
 k = -sw … sw, ``_cs`` the c_k at this n) has the Newton matrix ``P_e(s) = δ_e0 - Σ_k (h c_k)
 D_(e-k)(s + k)`` (half-width wH + sw); a canonical one ``P_e = δ_e0 I - h J D_e``.
 

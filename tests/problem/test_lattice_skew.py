@@ -42,6 +42,8 @@ def test_the_stencil_is_kept_as_its_coefficients():
     ("g[i+1] + g[i-1]", "is not skew: c_1 = 1 and c_-1 = 1 (must be opposite)"),
     ("g[i+1] - g[i-1] + g[i]/2", "c_0 = 1/2 (must be 0)"),
     ("g[i+1] - 2*g[i-1]", "c_1 = 1 and c_-1 = -2 (must be opposite)"),
+    # a wide stencil: the failing pair named, the others skew
+    ("(-g[i+2] + 8*g[i+1] - 8*g[i-1] - g[i-2])/12", "is not skew: c_2 = -1/12 and c_-2 = -1/12 (must be opposite)"),
     ("g[i+4] - g[i-4]", "g[i - 4]: stencils of half-width at most 3 only (g[i - 3] … g[i + 3])"),
     ("g[i+1]*g[i-1]", "not linear in g"),
     ("g[i+1] - g[i-1] + 1", "not linear in g"),

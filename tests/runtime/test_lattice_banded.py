@@ -76,6 +76,11 @@ def test_stepper_solve_agrees_with_a_dense_solve(nf, w, n, periodic):
         assert np.max(np.abs(x - x2)) > 1e-6
 
 
+def test_the_kernel_and_the_stepper_agree_on_the_work_rows():
+    from methodgen.codegen.lattice_emit import KERNEL_Z_ROW
+    assert KERNEL_Z_ROW == ls._IZ and ls._IG == 0
+
+
 def test_a_singular_block_is_reported():
     n, nf, w = 7, 1, 2
     P = np.zeros((2 * w + 1, nf, nf, n))
