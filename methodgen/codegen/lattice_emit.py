@@ -9,8 +9,10 @@ the cached entry point (the module cache and its trust checks of :mod:`methodgen
 :mod:`methodgen.codegen.emit`).
 
 A skew lattice (one field u, ``u' = S ∇H``) gets the same kernels over its one field (a state
-row of N sites) and a Newton matrix paired into 2 × 2 blocks over the pairs of sites; its
-compiled kernel writes straight into the stepper's paired layout (``Y[f, k] = u_(2k + f)``).
+row of N sites).  Both structures' Newton matrices are banded with half-bandwidth w sites
+(:attr:`methodgen.problem.lattice.Lattice.half_width`) and solved over groups of w sites, the
+numpy module by block cyclic reduction, the compiled one by bordered block elimination
+(:mod:`methodgen.runtime.lattice_stepper`).
 """
 
 from __future__ import annotations
@@ -219,17 +221,21 @@ def _bind_ir(exprs, lattice: Lattice, size) -> list:
     return out
 
 
+#: the rows of the stepper's work array the kernel reads z from (``_IZ`` of
+#: :mod:`methodgen.runtime.lattice_stepper`; ∇̄H goes to the rows from 0)
+KERNEL_Z_ROW = 2
+
+
 def _scalar_kernel(scheme: LatticeScheme) -> tuple:
-    """``_grad_sites(Y0, W, n, p, jac)`` as a kernel-IR function (:mod:`methodgen.codegen.kir`):
-    ∇̄H(y0, z) into W[0:2] (z the rows W[14:16]) and, with ``jac``, its derivative's block
-    diagonals into W[2:14] (row 2 + 4 r + 2 f + g: site j to j + r - 1, entry (f, g)), a loop over
-    the sites of each term -- the scalar form of the module's vectorised kernels.  The module
-    prints it as Python and holds it as a table; :mod:`methodgen.runtime.lattice_stepper` inlines
-    it, compiled from the tree.  Sites are (i + o) % n with Python's floor modulo (the
-    translator's too)."""
+    """``_grad_sites(Y0, W, D, n, p, jac)`` as a kernel-IR function (:mod:`methodgen.codegen.kir`):
+    ∇̄H(y0, z) into W[0:nf] (z the rows W[KERNEL_Z_ROW:KERNEL_Z_ROW + nf]) and, with ``jac``, its
+    derivative's site diagonals into D (row ``(e + wH) nf² + f nf + f'``: ∂∇̄H_(f, j)/∂z_(f', j + e) at
+    column j, wH the lattice's :attr:`~methodgen.problem.lattice.Lattice.jacobian_half_width`), a loop
+    over the sites of each term -- the scalar form of the module's vectorised kernels, for both
+    structures (a skew lattice's one field is nf = 1).  The module prints it as Python and holds
+    it as a table; :mod:`methodgen.runtime.lattice_stepper` inlines it, compiled from the tree.
+    Sites are (i + o) % n with Python's floor modulo (the translator's too)."""
     lat = scheme.lattice
-    if lat.structure == "skew":
-        return _scalar_kernel_paired(scheme)
     printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
     fields = lat.fields
     n = _v("n")
@@ -248,7 +254,7 @@ def _scalar_kernel(scheme: LatticeScheme) -> tuple:
         for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
             site = _v(f"i{_otag(o)}")
             inner.append(("=", _v(s0.name), ("[]", "Y0", (("n", fields.index(f)), site))))
-            inner.append(("=", _v(s1.name), ("[]", "W", (("n", 14 + fields.index(f)), site))))
+            inner.append(("=", _v(s1.name), ("[]", "W", (("n", KERNEL_Z_ROW + fields.index(f)), site))))
         dt = differenced(tp)
         inner += _difference_ir(dt.binds)
         kk = len(dt.pieces)
@@ -261,69 +267,15 @@ def _scalar_kernel(scheme: LatticeScheme) -> tuple:
                     for a, (f, o) in enumerate(t.slots)]
 
         jac = j_pre + scatter(j_out[:kk])
+        nf, wh = len(fields), lat.jacobian_half_width
         for a, (f, o) in enumerate(t.slots):
             for b, (g, o2) in enumerate(t.slots):
-                row = 2 + 4 * (o2 - o + 1) + 2 * fields.index(f) + fields.index(g)
-                jac.append(("+=", ("[]", "W", (("n", row), _v(f"i{_otag(o)}"))), j_out[kk + a * kk + b]))
+                row = (o2 - o + wh) * nf * nf + nf * fields.index(f) + fields.index(g)
+                jac.append(("+=", ("[]", "D", (("n", row), _v(f"i{_otag(o)}"))), j_out[kk + a * kk + b]))
         inner.append(("if", ("!=", _v("jac"), ("n", 0)), tuple(jac), tuple(g_pre + scatter(g_out))))
         body.append(("#", _docsafe(t.source)))
         body.append(("for", "i", lo, stop, tuple(inner)))
-    return kir.function("_grad_sites", ("Y0", "W", "n", "p", "jac"), body)
-
-
-def _scalar_kernel_paired(scheme: LatticeScheme) -> tuple:
-    """:func:`_scalar_kernel` for a skew lattice, in the stepper's paired layout: the u-site s
-    (0-based, of N = 2n) is the entry ``s % 2`` of the pair ``s // 2``; the derivative's entry
-    ∂∇̄H_s/∂z_s' goes to the pair block r = (s' // 2 - s // 2) + 1, computed on the sites before
-    the wrap (shifted by N to stay non-negative; N is even, so the parity is kept) -- the block
-    tridiagonal form of the pentadiagonal Newton matrix (:mod:`methodgen.runtime.lattice_stepper`)."""
-    lat = scheme.lattice
-    printer = ScalarPrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
-    nu = _v("nu")
-    allx = [e for tp in scheme.terms for e in list(tp.pieces) + [x for row in tp.jac for x in row]]
-    body = [("=", nu, ("*", ("n", 2), _v("n")))] + _bind_ir(allx, lat, ("*", ("n", 2.0), _v("n")))
-    for tp in scheme.terms:
-        t = tp.term
-        if not t.slots:
-            continue              # a constant: no gradient
-        inner = []
-        for o in sorted({o for _, o in t.slots}):
-            tag = _otag(o)
-            a_, s_ = _v(f"a{tag}"), _v(f"s{tag}")
-            inner += [("=", a_, ("+", _plus(_v("i"), o), nu)), ("=", s_, ("%", a_, nu)),
-                      ("=", _v(f"f{tag}"), ("%", s_, ("n", 2))), ("=", _v(f"k{tag}"), ("//", s_, ("n", 2))),
-                      ("=", _v(f"h{tag}"), ("//", a_, ("n", 2)))]
-        for s0, s1, (f, o) in zip(tp.z0, tp.z1, t.slots):
-            ft, kt = _v(f"f{_otag(o)}"), _v(f"k{_otag(o)}")
-            inner.append(("=", _v(s0.name), ("[]", "Y0", (ft, kt))))
-            inner.append(("=", _v(s1.name), ("[]", "W", (("+", ("n", 14), ft), kt))))
-        dt = differenced(tp)
-        inner += _difference_ir(dt.binds)
-        kk = len(dt.pieces)
-        flat_jac = [e for row in dt.jac for e in row]
-        g_pre, g_out = _cse_trees(dt.pieces, printer, "_g")
-        j_pre, j_out = _cse_trees(list(dt.pieces) + flat_jac, printer, "_j")
-
-        def scatter(outs, t=t):
-            return [("+=", ("[]", "W", (_v(f"f{_otag(o)}"), _v(f"k{_otag(o)}"))), outs[a])
-                    for a, (f, o) in enumerate(t.slots)]
-
-        jac = j_pre + scatter(j_out[:kk])
-        for a, (f, o) in enumerate(t.slots):
-            for b, (g, o2) in enumerate(t.slots):
-                ta, tb = _otag(o), _otag(o2)
-                fa = _v(f"f{ta}")
-                if o == o2:        # the same site: the diagonal block, (f, f)
-                    row = ("+", ("n", 6), ("*", ("n", 3), fa))
-                else:
-                    blk = ("+", ("-", _v(f"h{tb}"), _v(f"h{ta}")), ("n", 1))
-                    row = ("+", ("+", ("+", ("n", 2), ("*", ("n", 4), blk)), ("*", ("n", 2), fa)), _v(f"f{tb}"))
-                jac.append(("+=", ("[]", "W", (row, _v(f"k{ta}"))), j_out[kk + a * kk + b]))
-        inner.append(("if", ("!=", _v("jac"), ("n", 0)), tuple(jac), tuple(g_pre + scatter(g_out))))
-        body.append(("#", _docsafe(t.source)))
-        body.append(("#", "every term of a skew lattice is over all sites"))
-        body.append(("for", "i", ("n", 0), nu, tuple(inner)))
-    return kir.function("_grad_sites", ("Y0", "W", "n", "p", "jac"), body)
+    return kir.function("_grad_sites", ("Y0", "W", "D", "n", "p", "jac"), body)
 
 
 def _kernel_text(fn, name: str = "_grad_sites", use: str = "the compiled step loop inlines this tree") -> list[str]:
@@ -410,9 +362,12 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     scalar = _kernel_text(_scalar_kernel(scheme)) if backend == "compiled" else []
     skew = lat.structure == "skew"
     skew_lines = []
+    sw = max((abs(k) for k in lat.stencil), default=0)
     if skew:
-        c1 = lat.stencil[1]      # half-width 1 and skew: (S g)_i = c_1 (g_(i+1) - g_(i-1))
-        skew_lines = _bind([c1], lat) + [f"return {printer.doprint(c1)}"]
+        # c_(-sw) … c_sw, the zeros too (the flow's sum runs over every offset, as the stepper's)
+        cs = [lat.stencil.get(k, sp.S.Zero) for k in range(-sw, sw + 1)]
+        skew_lines = _bind(cs, lat) + ["return ("] + [f"    float({printer.doprint(c)}),  # c_{k}"
+                                                      for k, c in zip(range(-sw, sw + 1), cs)] + [")"]
     code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t["piece_lines"]] + scalar)
     env = _environment()
     special, defaults, description, header = _front(
@@ -423,6 +378,8 @@ def render(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
         q=lat.q_name, p=lat.p_name, size=lat.size.name, skew=skew, nf=len(lat.fields),
         field_names=list(lat.fields), structure=lat.structure, skew_text=_docsafe(lat.skew_text or ""),
         skew_lines=skew_lines, nmin=lat.nmin, param_names=list(lat.params),
+        jac_half_width=lat.jacobian_half_width, half_width=lat.half_width, stencil_half_width=sw,
+        group=max(lat.half_width, 1),
         defaults_text=defaults, traits=traits, signature=sig, terms=terms, special=special, extra=extra,
         quantities=quantities, quantity_names=[q for q, _ in quantities], backend=backend, scalar=scalar)
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"

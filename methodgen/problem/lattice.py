@@ -21,10 +21,11 @@ Index grammar (exact, by construction -- nothing is sampled):
 * ``q[(i + c) % N + 1]`` -- the periodic neighbour ``i + c + 1`` (mod N), always valid;
 * outside any Sum, ``q[k]`` and ``q[N - k]`` -- a fixed site (a boundary term).
 
-A site term may couple sites at most one apart (nearest neighbours, cyclically): the step's
-Newton matrix is then block tridiagonal, cyclic for a periodic lattice, and solved in O(N)
-(:func:`methodgen.symbolic.lattice_scheme`'s module).  Wider stencils and nested (pair) sums over a
-symbolic range are refused with a message saying so.
+A site term may couple sites up to :data:`MAX_TERM_WIDTH` apart (its slots' offsets span at most
+that, e.g. ``(q[(i + 1) % N + 1] - q[i])**2`` couples i and i + 2): the step's Newton matrix is
+then banded with half-bandwidth w sites (cyclically for a periodic lattice), solved in O(N)
+by grouping w sites into one block (:mod:`methodgen.runtime.lattice_stepper`).  Nested (pair)
+sums over a symbolic range, and wider terms, are refused with a message saying so.
 
 Two structures:
 
@@ -33,11 +34,15 @@ Two structures:
   and ``u' = S ∇H`` with S a constant periodic stencil applied to the gradient ``g = ∇H``,
   ``(S g)_i = Σ_k c_k g_{i+k}``, e.g. the centred difference of a KdV lattice.  The stencil is
   parsed by the same whitelist parser (``g[i + c]`` or ``g[(i + c) % N + 1]``: the site i + c,
-  cyclically), must be linear in g with coefficients free of the field, of half-width 1, and
-  *skew*: ``c_0 = 0`` and ``c_{-k} = -c_k``, checked exactly (refused otherwise, naming the
-  coefficient that fails).  Skew lattices are periodic: every term is summed over all sites
-  ``Sum(…, i, 1, N)`` with periodic neighbours, and N is even (the step's pentadiagonal Newton
-  matrix is solved as a block tridiagonal one over the pairs of sites (2k - 1, 2k)).
+  cyclically), must be linear in g with coefficients free of the field, of half-width at most
+  :data:`MAX_STENCIL_HALF_WIDTH`, and *skew*: ``c_0 = 0`` and ``c_{-k} = -c_k``, checked exactly
+  (refused otherwise, naming the coefficient that fails).  Skew lattices are periodic: every
+  term is summed over all sites ``Sum(…, i, 1, N)`` with periodic neighbours; any N ≥
+  :attr:`Lattice.nmin` (odd too).
+
+The Newton matrix's half-bandwidth in sites is :attr:`Lattice.half_width`: the widest term's
+width (canonical), plus the stencil's half-width (skew, ``I - h S ∂∇̄H``).  Every lattice needs
+N ≥ 2 w + 1, so that the sites i - w … i + w are distinct.
 
 A *2-D periodic* lattice names two sizes, ``Lattice(H, size=("N", "M"))`` (a :class:`Lattice2D`):
 terms ``Sum(Sum(body, j, 1, M), i, 1, N)`` over the N × M torus with two-index fields
@@ -71,13 +76,13 @@ __all__ = ["Bound", "SiteTerm", "Lattice", "slot_symbol", "STENCIL_GRADIENT", "S
 
 #: smallest size any lattice admits: with N ≥ 3 the sites i - 1, i, i + 1 are distinct
 MIN_SIZE = 3
-#: smallest size of a skew lattice: N/2 ≥ 3 pairs of sites, so that the pairs k - 1, k, k + 1
-#: of the paired Newton matrix are distinct (the block solvers' smallest cyclic system)
-MIN_SKEW_SIZE = 6
 #: the names a skew stencil's text uses: the gradient ``g`` at the row's site ``i``
 STENCIL_GRADIENT, STENCIL_INDEX = "g", "i"
-#: the widest skew stencil: half-width 1 (with nearest-neighbour terms, a pentadiagonal matrix)
-MAX_STENCIL_HALF_WIDTH = 1
+#: the widest site term: its slots' offsets span at most this many sites (the Newton matrix's
+#: blocks grow with the width, w sites per block: 4 keeps them ≤ 8 × 8 for a canonical lattice)
+MAX_TERM_WIDTH = 4
+#: the widest skew stencil: g[i - 3] … g[i + 3] (a sixth-order first difference)
+MAX_STENCIL_HALF_WIDTH = 3
 _SKEW_EXAMPLE = "(g[i+1] - g[i-1])/(2*dx)"
 
 
@@ -432,9 +437,9 @@ class Lattice:
             raise ParseError(f"{what} {text!r} is zero: u' = S ∇H would not move")
         wide = [o for o in coeffs if abs(o) > MAX_STENCIL_HALF_WIDTH]
         if wide:
+            w = MAX_STENCIL_HALF_WIDTH
             raise ParseError(f"{what} {text!r} reaches g[i {'+' if wide[0] > 0 else '-'} {abs(wide[0])}]: stencils "
-                             f"of half-width {MAX_STENCIL_HALF_WIDTH} only (g[i - 1], g[i], g[i + 1]; the step's "
-                             "Newton matrix is then pentadiagonal)")
+                             f"of half-width at most {w} only (g[i - {w}] … g[i + {w}])")
         # exactly skew: each pair cancels, c_0 = 0 (reduced by cancel: rational in params and N)
         bad = []
         for o in sorted({abs(o) for o in coeffs}):
@@ -462,7 +467,6 @@ class Lattice:
                     raise ParseError(f"{what}: {t.source} {where}; skew lattices are periodic only (for now): "
                                      f"write every term as Sum(…, i, 1, N) with periodic neighbours "
                                      f"{self.q_name}[i % N + 1], {self.q_name}[(i - 2) % N + 1]")
-        self.nmin = max(self.nmin, MIN_SKEW_SIZE)
 
     def _parse(self, text: str, what: str) -> tuple[SiteTerm, ...]:
         symbols = {s.name: s for s in self.param_symbols}
@@ -488,9 +492,10 @@ class Lattice:
             raise ParseError(f"{what} has no term in the fields")
         for t in terms:
             _check_term(t, what)
-            if t.width() > 1:
-                raise ParseError(f"{what} term {t.source} couples sites {t.width()} apart; lattice terms "
-                                 "may couple nearest neighbours only (wider stencils are not supported yet)")
+            if t.width() > MAX_TERM_WIDTH:
+                raise ParseError(f"{what} term {t.source} couples sites {t.width()} apart; lattice terms may "
+                                 f"couple sites at most {MAX_TERM_WIDTH} apart (their offsets spanning at most "
+                                 f"{MAX_TERM_WIDTH}, e.g. q[i] and q[(i + {MAX_TERM_WIDTH - 1}) % N + 1])")
         return tuple(terms)
 
     def _term(self, template, lo: Bound, hi: Bound, src: str) -> SiteTerm:
@@ -518,7 +523,20 @@ class Lattice:
                         n = max(n, 1 - bnd.c - min(o, 0))
             if not t.lo.from_end and t.hi.from_end:
                 n = max(n, t.lo.c - t.hi.c)
-        return n
+        # the sites i - w … i + w of the Newton matrix's band distinct (no entry wraps onto another)
+        return max(n, 2 * self.half_width + 1)
+
+    @property
+    def jacobian_half_width(self) -> int:
+        """The half-bandwidth in sites of ∂∇H: the widest term of H (a term's pieces at the site
+        j depend on the slots of every site the term couples to j)."""
+        return max((t.width() for t in self.terms), default=0)
+
+    @property
+    def half_width(self) -> int:
+        """The Newton matrix's half-bandwidth w in sites: ``I - h J ∂∇̄H`` couples sites at most
+        :attr:`jacobian_half_width` apart; ``I - h S ∂∇̄H`` that plus the stencil's half-width."""
+        return self.jacobian_half_width + max((abs(k) for k in self.stencil), default=0)
 
     # --- the pieces the derivations and the module need -------------------------------------
 
@@ -530,9 +548,6 @@ class Lattice:
     def check_size(self, n: int) -> None:
         if isinstance(n, bool) or not isinstance(n, int) or n < self.nmin:
             raise InputError(f"the lattice {self.name!r} needs N ≥ {self.nmin} sites, got {n!r}")
-        if self.structure == "skew" and n % 2:
-            raise InputError(f"the skew lattice {self.name!r} needs an even N (its Newton matrix is solved over "
-                             f"the pairs of sites (2k - 1, 2k)), got N = {n}; use N = {n - 1} or {n + 1}")
 
     def stencil_matrix(self, n: int) -> sp.Matrix:
         """S at size ``n`` as an n × n matrix, ``S[i, (i + k) % n] += c_k`` (for tests at small n)."""

@@ -15,37 +15,62 @@ from . import lattice_stepper as _ls
 __all__ = ["run_steps", "gradient_2d"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
-#: Y (2, n), T (rows, 2n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, sk, c
-SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _i8, _f8)
+#: Y (nf, n), T (rows, nf n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, D, P, F, cs
+SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _M, _M, _V, _V)
 
 _LOOPS: dict = {}
+#: the stepper's functions the step loop calls (bound with the problem's shape)
+_FUNCTIONS = ("factor", "solve", "flow", "newton", "assemble", "invert", "copy_mm", "copy_bb", "copy_mb", "copy_bm",
+              "add_mb", "add_bm", "mul_mmm_set", "mul_mmm_sub", "mul_mmb_sub", "mul_bmm_set", "mul_bmm_neg",
+              "mul_bmb_sub")
 
 
-def _bound(grad) -> dict:
-    consts = {k: v for k, v in vars(_ls).items() if k.startswith("_I") and isinstance(v, int)}
+def shape_constants(n: int, nf: int, jac_half_width: int, stencil_half_width: int = 0, skew: bool = False) -> dict:
+    """The constants :mod:`methodgen.runtime.lattice_stepper` is bound with for n sites: fields per
+    site, the group size g = max(w, 1) (w = wH + sw), the blocks' sizes m = nf g and mB = nf (g +
+    n mod g), the structure and the half-widths."""
+    w = jac_half_width + stencil_half_width
+    g = max(w, 1)
+    q, m, mb = _ls.layout(n, nf, g)
+    return {"_NF": nf, "_GS": g, "_BM": m, "_BB": mb, "_SK": int(skew), "_SW": stencil_half_width,
+            "_WH": jac_half_width, "_W2": 2 * w + 1}
+
+
+def _bound(grad, shape: dict) -> dict:
+    consts = {k: v for k, v in vars(_ls).items() if k.startswith(("_I", "_M", "_N")) and isinstance(v, int)}
+    consts.update(shape)
     consts.update(math=math, grad=grad)
-    for name in ("factor", "solve", "block", "flow", "mm", "mv", "load4", "store4", "store_inverse"):
+    for name in _FUNCTIONS:
         consts[name] = types.FunctionType(getattr(_ls, name).__code__, consts, name)
     return consts
 
 
-def _loop(grad, python: bool):
-    """The step loop for the module kernel ``grad``: compiled (cached per kernel) or Python."""
-    consts = _bound(grad)
+def stepper_functions(shape: dict) -> types.SimpleNamespace:
+    """The stepper's functions bound with ``shape`` (:func:`shape_constants`), as plain Python (for
+    tests of the solve: ``newton(D, P, n, h, cs)``, ``factor(P, F, n)``, ``solve(W, F, n)``)."""
+    consts = _bound(None, shape)
+    return types.SimpleNamespace(**{k: consts[k] for k in _FUNCTIONS})
+
+
+def _loop(grad, python: bool, shape: dict):
+    """The step loop for the module kernel ``grad`` and the problem's ``shape``: compiled (cached
+    per kernel and shape: a module runs at most g shapes, one per n mod g) or Python."""
+    consts = _bound(grad, shape)
     fn = types.FunctionType(_ls.lattice_run.__code__, consts, "lattice_run")
     if python:
         return fn, False
     from ..codegen import llvmkernels as _lk
     if not _lk.enabled():
         return fn, False
-    return _compiled(_LOOPS, grad, fn, SIG, consts, "the lattice step loop"), True
+    return _compiled(_LOOPS, grad, fn, SIG, consts, "the lattice step loop", tuple(sorted(shape.items()))), True
 
 
-def _compiled(cache: dict, kernel, fn, sig, globals_, what: str):
+def _compiled(cache: dict, kernel, fn, sig, globals_, what: str, variant=()):
     """``fn`` compiled for ``sig`` with a C entry, cached in ``cache`` per module kernel
-    ``kernel`` (kept with it, so its code's id is not reused while the entry lives)."""
+    ``kernel`` (kept with it, so its code's id is not reused while the entry lives) and
+    ``variant``."""
     from ..codegen import llvmkernels as _lk
-    key = id(kernel.__code__)
+    key = (id(kernel.__code__), variant)
     got = cache.get(key)
     if got is None or got[1] is not kernel:
         try:
@@ -57,24 +82,35 @@ def _compiled(cache: dict, kernel, fn, sig, globals_, what: str):
 
 
 def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False,
-              skew=0, coefficient=1.0):
-    """``steps`` steps from ``Y`` (2, n), updated in place: ``(rows, its, status)`` with rows
-    (steps // every + 1 + ..., 2n) (row 0 the start), Newton iterations per step, and
-    ``(code, step, iterations, value)`` of a failure (code 0: none).  ``skew=1``: a skew lattice
-    in the paired layout (``Y[f, k] = u_(2k + f)``), ``coefficient`` its stencil's c."""
-    n = Y.shape[1]
+              jac_half_width=1, stencil=None):
+    """``steps`` steps from ``Y`` (nf, n), updated in place: ``(rows, its, status)`` with rows
+    (steps // every + 1 + ..., nf n) (row 0 the start), Newton iterations per step, and
+    ``(code, step, iterations, value)`` of a failure (code 0: none).
+
+    ``jac_half_width``: the half-bandwidth wH in sites of the kernel's ∂∇̄H (its rows
+    ``(2 wH + 1) nf²``); ``stencil``: a skew lattice's coefficients ``c_(-sw) … c_sw`` at this n
+    (then Y is (1, n)), None for a canonical lattice.  The Newton matrix's sites are grouped by
+    g = max(wH + sw, 1) (:mod:`methodgen.runtime.lattice_stepper`)."""
+    nf, n = Y.shape
     nrows = steps // every + (1 if steps % every else 0) + 1
-    T = numpy.zeros((nrows, 2 * n))
-    T[0, :n], T[0, n:] = Y[0], Y[1]
+    T = numpy.zeros((nrows, nf * n))
+    T[0] = Y.reshape(-1)
     its = numpy.zeros(max(steps, 1))
     fst = numpy.zeros(4)
     W = numpy.zeros((_ls.W_ROWS, n))
+    wh = int(jac_half_width)
+    cs = numpy.zeros(1) if stencil is None else numpy.ascontiguousarray(stencil, dtype=numpy.float64)
+    sw = 0 if stencil is None else (cs.size - 1) // 2
+    shape = shape_constants(n, nf, wh, sw, stencil is not None)
+    D = numpy.zeros(((2 * wh + 1) * nf * nf, n))
+    P = numpy.zeros((shape["_W2"] * nf * nf, n))
+    F = numpy.zeros(_ls.factor_size(n, nf, shape["_GS"]))
     p = numpy.ascontiguousarray(p, dtype=numpy.float64)
     if p.size == 0:
         p = numpy.zeros(1)
-    loop, compiled = _loop(grad, python)
+    loop, compiled = _loop(grad, python, shape)
     args = (Y, T, its, fst, p, int(n), float(h), int(steps), int(every), int(maxiter), float(tol),
-            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, int(skew), float(coefficient))
+            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, D, P, F, cs)
     if compiled:
         from .fused import _drive
         _drive(loop, *args)

@@ -1,32 +1,41 @@
 """The step loop of a lattice module (:mod:`methodgen.codegen.lattice_emit`), one source run two ways.
 
-:func:`lattice_run` takes ``steps`` steps of ``y1 = y0 + h J ∇̄H(y0, y1)`` on a lattice of n
-sites: the predictor, Newton's method ("newton" or "simplified") with the Newton matrix
-``I - h J ∂∇̄H/∂y1`` block tridiagonal and cyclic (2 × 2 blocks per site), factored by block
-Gaussian elimination with a border (the periodic corner couples every row to the last site, and
-the last row to every site: both carried as one extra block column and row, O(n) operations),
-the convergence, non-finite and resolution checks, and the saved rows.  Like
-:mod:`methodgen.runtime.stepper`, it is written in the subset of Python that
-:mod:`methodgen.codegen.llvmkernels` translates: the module's kernel ``grad`` (∇̄H and its derivative,
-a loop over the sites of each term, printed by the module) is bound as a global and inlined,
-the whole compiled to machine code with the size n a run-time argument -- or run as plain Python
-(the reference the compiled loop is tested against, and the fallback without llvmlite).
+:func:`lattice_run` takes ``steps`` steps of ``y1 = y0 + h K ∇̄H(y0, y1)`` on a lattice of n
+sites (K the canonical J, or a skew stencil S): the predictor, Newton's method ("newton" or
+"simplified") with the Newton matrix ``I - h K ∂∇̄H/∂y1``, the convergence, non-finite and
+resolution checks, and the saved rows.  Like :mod:`methodgen.runtime.stepper`, it is written in the
+subset of Python that :mod:`methodgen.codegen.llvmkernels` translates: the module's kernel ``grad``
+(∇̄H and its derivative, a loop over the sites of each term, printed by the module) is bound as
+a global and inlined, the whole compiled to machine code with the size n a run-time argument
+-- or run as plain Python (the reference the compiled loop is tested against, and the
+fallback without llvmlite).
 
-Work array ``_W`` (``W_ROWS``, n): ``G`` (2 rows: ∇̄H), ``D`` (12: the derivative's three block
-diagonals, entries 00 01 10 11 of site j to j-1, j, j+1), ``Z``, ``ZP`` (2 each: the iterate and
-the predictor), ``R`` (2: the residual, then the update), ``UI`` (4: the eliminated diagonal
-blocks' inverses), ``LL`` (4: the multipliers of the rows), ``E`` (4: the border column), ``ML``
-(4: the last row's multipliers), ``Y`` (2: the forward-substituted right-hand side), ``DY``, ``DY2``
-(2 each: the last two steps' increments).
+The Newton matrix.  With ``nf`` fields per site (2: q, p; 1: a skew lattice's u) and every
+site coupled to the sites at most w away (cyclically; w the lattice's
+:attr:`~methodgen.problem.lattice.Lattice.half_width`), the matrix is banded.  The sites are grouped
+into blocks of g = max(w, 1) consecutive sites -- q = n // g groups, the last one taking the
+remainder r = n - q g too (g + r sites) -- so that a group couples only to the groups before
+and after it: the matrix is block tridiagonal and cyclic, interior blocks m × m (m = nf g), the
+last group's mB × mB (mB = nf (g + r)).  It is factored by block Gaussian elimination with
+the last group as a border (the periodic corners couple group 0 to the last group, and the
+last group to group 0: both carried as one block column and row; O(n nf³ g²) operations).
+A half-width-1 canonical lattice is the case g = 1, m = mB = 2: the 2 × 2 blocks per site of
+before, the same arithmetic.  A non-periodic lattice is the case of zero corners.
 
-A skew lattice (one field u, ``u1 = u0 + h S ∇̄H(u0, u1)``, ``(S g)_i = c (g_{i+1} - g_{i-1})``,
-``_sk = 1``) runs in the same layout over the pairs of sites: column k holds ``u_{2k}, u_{2k+1}``
-(0-based) as the rows "q" and "p" (the module's kernel writes ∇̄H and its derivative there), and
-``h S`` is the block tridiagonal constant ``[[0, -c], [0, 0]]`` (to the pair k - 1), ``[[0, c],
-[-c, 0]]``, ``[[0, 0], [c, 0]]`` (to k + 1) -- the canonical J scaled by c plus two corner terms
-(:func:`flow`, :func:`block`).  The Newton matrix I - h S ∂∇̄H/∂u1 is pentadiagonal in u, so
-block tridiagonal in the pairs: the same factorisation solves it.  A canonical lattice runs
-with ``_sk = 0`` and c = 1 (``h * 1.0`` is h: the same bits as without the skew terms).
+Arrays: ``_Y`` (nf, n) the state; ``_W`` (``W_ROWS``, n): ``G`` (∇̄H), ``Z``, ``ZP`` (the iterate
+and the predictor), ``R`` (the residual, then the update), ``Y`` (the forward-substituted
+right-hand side), ``DY``, ``DY2`` (the last two steps' increments), nf rows each at the offsets
+below; ``_D`` ((2 wH + 1) nf², n): the kernel's ∂∇̄H, row ``(e + wH) nf² + f nf + f'`` the entry
+∂∇̄H_(f, j)/∂z_(f', j + e) at column j (wH the Jacobian's half-width); ``_P`` ((2 w + 1) nf², n):
+the Newton matrix in the same layout; ``_F`` (:func:`factor_size`): the blocks and the factors.
+The shape (nf, g, m, mB, the structure, the half-widths) is bound as translation-time constants
+``_NF``, ``_GS``, ``_BM``, ``_BB``, ``_SK``, ``_SW``, ``_WH``, ``_W2`` per compiled loop
+(:func:`methodgen.runtime.lattice_driver.shape_constants`): a module compiles at most g loops, one per
+N mod g.
+
+A skew lattice (``_SK = 1``, one field, ``u1 = u0 + h S ∇̄H(u0, u1)``, ``(S g)_i = Σ_k c_k g_(i+k)``,
+k = -sw … sw, ``_cs`` the c_k at this n) has the Newton matrix ``P_e(s) = δ_e0 - Σ_k (h c_k)
+D_(e-k)(s + k)`` (half-width wH + sw); a canonical one ``P_e = δ_e0 I - h J D_e``.
 
 The predictor extrapolates the last two increments, ``z = y + 2 Δ₁ - Δ₂`` (error O(h³): fewer
 Newton iterations than from the explicit Euler step, and no evaluation of ∇H of its own); the
@@ -34,241 +43,451 @@ second step takes ``y + Δ₁``, the first the explicit Euler step.
 
 References
 ----------
-G. H. Golub, C. F. Van Loan, *Matrix Computations*, 4th ed. (2013), §4.5 (block tridiagonal
-systems), §2.1.4 (bordered systems).
+G. H. Golub, C. F. Van Loan, *Matrix Computations*, 4th ed. (2013), §4.3 (banded systems),
+§4.5 (block tridiagonal systems), §2.1.4 (bordered systems).
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["lattice_run", "W_ROWS", "STATUS"]
+__all__ = ["lattice_run", "W_ROWS", "STATUS", "layout", "factor_size"]
 
 # flake8: noqa: F821  (``grad`` and the constants below are bound by the driver)
 
-#: rows of the work array
-_IG, _ID, _IZ, _IZP, _IR, _IUI, _ILL, _IE, _IML, _IY, _IDY, _IDY2 = 0, 2, 14, 16, 18, 20, 24, 28, 32, 36, 38, 40
-W_ROWS = 42
+#: rows of the work array _W (nf ≤ 2 rows each; the module's kernel reads Z at _IZ, writes G at _IG)
+_IG, _IZ, _IZP, _IR, _IY, _IDY, _IDY2 = 0, 2, 4, 6, 8, 10, 12
+W_ROWS = 14
 # (named _I…: the translator reads a global integer constant only under a private name)
+#: the factor array _F: per group _NMAT blocks of mB × mB slots (row stride mB): the matrix's
+#: blocks A (to the group before), B, C (to the group after), the eliminated diagonal block's
+#: inverse UI, the multiplier LL, the border column E, the border row's multiplier ML; then
+#: _NSCR scratch blocks.  (The block t of the group k is at (k _NMAT + t) mB², the scratch block t
+#: at (q _NMAT + t) mB²; written out where used: the translator inlines a function returning an
+#: integer only when it returns a tuple.)
+_MA, _MB, _MC, _MUI, _MLL, _ME, _MML = 0, 1, 2, 3, 4, 5, 6
+_NMAT = 7
+_NSCR = 7
 #: failure status of a run (``_fst[0]``)
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2, "RESOLUTION": 3, "SINGULAR": 4}
 
-
-def block(_W, r, j, h, n, sk):
-    """The Newton matrix's 2 × 2 block of site j to j + r - 1 (r = 0, 1, 2), from ∂∇̄H in D: row q
-    is -h (row p of D), row p is +h (row q of D), the identity added on the diagonal (r = 1); h is
-    the step times the structure's coefficient.
-
-    A skew lattice (``sk`` 1, pairs of sites) adds the stencil's corner terms: the row q of the
-    pair j (u_2j, whose flow is c (g_2j+1 - g_2j-1)) takes +h (row p of D_(r+1) at j - 1), the
-    row p (u_2j+1: c (g_2j+2 - g_2j)) takes -h (row q of D_(r-1) at j + 1); D_3 = D_(-1) = 0."""
-    d = 1.0 if r == 1 else 0.0
-    b00 = d - h * _W[_ID + 4 * r + 2, j]
-    b01 = -h * _W[_ID + 4 * r + 3, j]
-    b10 = h * _W[_ID + 4 * r + 0, j]
-    b11 = d + h * _W[_ID + 4 * r + 1, j]
-    if sk != 0:
-        if r < 2:
-            jm = n - 1 if j == 0 else j - 1
-            b00 += h * _W[_ID + 4 * (r + 1) + 2, jm]
-            b01 += h * _W[_ID + 4 * (r + 1) + 3, jm]
-        if r > 0:
-            jp = 0 if j == n - 1 else j + 1
-            b10 -= h * _W[_ID + 4 * (r - 1) + 0, jp]
-            b11 -= h * _W[_ID + 4 * (r - 1) + 1, jp]
-    return b00, b01, b10, b11
+# The shape of the problem, bound per compiled loop by methodgen.runtime.lattice_driver (constants at
+# translation time, so that every loop over a block's entries has a known trip count and LLVM
+# unrolls the small ones: the 2 × 2 blocks of a nearest-neighbour lattice cost what the explicit
+# formulas did).  The values here are a canonical nearest-neighbour lattice's.
+#: fields per site; sites per group g; interior block size m = nf g; the last group's mB = nf (g + r)
+_NF, _GS, _BM, _BB = 2, 1, 2, 2
+#: skew (1) or canonical (0); the stencil's half-width sw; ∂∇̄H's half-width wH; the Newton matrix's
+#: 2 w + 1 diagonals (w = wH + sw)
+_SK, _SW, _WH, _W2 = 0, 0, 1, 3
 
 
-def flow(_W, j, n, h, sk):
-    """h K ∇̄H at the site (or pair) j from G: canonical (h G_p, -h G_q); skew (pairs of sites)
-    (h (G_p[j] - G_p[j - 1]), h (G_q[j + 1] - G_q[j])), h the step times c."""
-    if sk == 0:
-        return h * _W[_IG + 1, j], -h * _W[_IG + 0, j]
-    jm = n - 1 if j == 0 else j - 1
-    jp = 0 if j == n - 1 else j + 1
-    return h * (_W[_IG + 1, j] - _W[_IG + 1, jm]), h * (_W[_IG + 0, jp] - _W[_IG + 0, j])
+def layout(n, nf, g):
+    """``(q, m, mb)``: the number of groups of g sites, the interior blocks' size m = nf g and the
+    last group's mb = nf (g + n - q g)."""
+    q = n // g
+    return q, nf * g, nf * (g + n - q * g)
 
 
-def mm(a00, a01, a10, a11, b00, b01, b10, b11):
-    """The product of two 2 × 2 matrices, entries row by row."""
-    return (a00 * b00 + a01 * b10, a00 * b01 + a01 * b11, a10 * b00 + a11 * b10, a10 * b01 + a11 * b11)
+def factor_size(n, nf, g):
+    """The length of the factor array ``_F`` for n sites, nf fields, groups of g sites."""
+    q, m, mb = layout(n, nf, g)
+    return (_NMAT * q + _NSCR) * mb * mb
 
 
-def mv(a00, a01, a10, a11, v0, v1):
-    """A 2 × 2 matrix (entries row by row) times a vector."""
-    return a00 * v0 + a01 * v1, a10 * v0 + a11 * v1
+def newton(_D, _P, n, h, _cs):
+    """The Newton matrix ``I - h K ∂∇̄H`` into _P from ∂∇̄H in _D (module docstring); ``_cs`` the
+    skew stencil's c_(-sw) … c_sw."""
+    w = (_W2 - 1) // 2
+    for e in range(_W2):
+        for f in range(_NF):
+            for f2 in range(_NF):
+                d = 0.0
+                if e == w and f == f2:
+                    d = 1.0
+                row = e * _NF * _NF + f * _NF + f2
+                if _SK == 0:
+                    # canonical (w = wH): row q takes -h (row p of D), row p +h (row q of D)
+                    if f == 0:
+                        for s in range(n):
+                            _P[row, s] = d - h * _D[e * _NF * _NF + _NF + f2, s]
+                    else:
+                        for s in range(n):
+                            _P[row, s] = d + h * _D[e * _NF * _NF + f2, s]
+                else:
+                    for s in range(n):
+                        acc = 0.0
+                        for kk in range(2 * _SW + 1):
+                            ed = e - w - (kk - _SW)         # D_(e - k) at the site s + k
+                            if ed >= -_WH and ed <= _WH:
+                                t = s + kk - _SW            # the site s + k, cyclically (no division)
+                                if t < 0:
+                                    t += n
+                                elif t >= n:
+                                    t -= n
+                                acc += (h * _cs[kk]) * _D[(ed + _WH) * _NF * _NF, t]
+                        _P[row, s] = d - acc
 
 
-def load4(_W, row, j):
-    return _W[row + 0, j], _W[row + 1, j], _W[row + 2, j], _W[row + 3, j]
+def assemble(_P, _F, n):
+    """The blocks A, B, C of every group into _F from the site diagonals _P (added: a coupling
+    the wrap makes to the same group twice, at q = 2, sums)."""
+    q = n // _GS
+    w = (_W2 - 1) // 2
+    for k in range(q):
+        for x in range(3 * _BB * _BB):
+            _F[k * _NMAT * _BB * _BB + x] = 0.0
+    for s in range(n):
+        k = s // _GS
+        if k > q - 1:
+            k = q - 1                   # the last group holds the remainder
+        kn = k + 1                      # the group after k, cyclically
+        if kn == q:
+            kn = 0
+        for e in range(_W2):
+            t = s + e - w               # the site s + e - w, cyclically (no division: w < n)
+            if t < 0:
+                t += n
+            elif t >= n:
+                t -= n
+            kt = t // _GS
+            if kt > q - 1:
+                kt = q - 1
+            slot = _MA
+            if kt == k:
+                slot = _MB
+            elif kt == kn:
+                slot = _MC
+            b0 = (k * _NMAT + slot) * _BB * _BB
+            for f in range(_NF):
+                i = (s - k * _GS) * _NF + f
+                for f2 in range(_NF):
+                    j = (t - kt * _GS) * _NF + f2
+                    _F[b0 + i * _BB + j] += _P[e * _NF * _NF + f * _NF + f2, s]
 
 
-def store4(_W, row, j, x00, x01, x10, x11):
-    _W[row + 0, j] = x00
-    _W[row + 1, j] = x01
-    _W[row + 2, j] = x10
-    _W[row + 3, j] = x11
+# Block operations on _F (row stride _BB).  Each has a variant per shape, so that its loops'
+# trip counts are constants: m × m (…_mm), m × mB (…_mb), mB × m (…_bm), mB × mB (…_bb).
+
+def copy_mm(_F, dst, src):
+    for i in range(_BM):
+        for j in range(_BM):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
 
 
-def store_inverse(_W, j, b00, b01, b10, b11):
-    """The inverse of the block into UI at j; 1 where it is singular (stored as if det were 1)."""
-    det = b00 * b11 - b01 * b10
+def copy_bb(_F, dst, src):
+    for i in range(_BB):
+        for j in range(_BB):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
+
+
+def copy_mb(_F, dst, src):
+    for i in range(_BM):
+        for j in range(_BB):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
+
+
+def copy_bm(_F, dst, src):
+    for i in range(_BB):
+        for j in range(_BM):
+            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
+
+
+def add_mb(_F, dst, src):
+    for i in range(_BM):
+        for j in range(_BB):
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] + _F[src + i * _BB + j]
+
+
+def add_bm(_F, dst, src):
+    for i in range(_BB):
+        for j in range(_BM):
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] + _F[src + i * _BB + j]
+
+
+# products dst = a b (…set), dst - a b (…sub), -(a b) (…neg); each entry's sum formed first, in the
+# order of its terms (for 2 × 2 blocks the arithmetic of the explicit a00 b00 + a01 b10 …)
+
+def mul_mmm_set(_F, dst, a, b):
+    for i in range(_BM):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = s
+
+
+def mul_mmm_sub(_F, dst, a, b):
+    for i in range(_BM):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+
+
+def mul_mmb_sub(_F, dst, a, b):
+    """dst (m × mB) less a (m × m) b (m × mB)."""
+    for i in range(_BM):
+        for j in range(_BB):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+
+
+def mul_bmm_set(_F, dst, a, b):
+    """dst (mB × m) = a (mB × m) b (m × m)."""
+    for i in range(_BB):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = s
+
+
+def mul_bmm_neg(_F, dst, a, b):
+    for i in range(_BB):
+        for j in range(_BM):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = -s
+
+
+def mul_bmb_sub(_F, dst, a, b):
+    """dst (mB × mB) less a (mB × m) b (m × mB)."""
+    for i in range(_BB):
+        for j in range(_BB):
+            s = 0.0
+            for l in range(_BM):
+                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
+            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+
+
+def invert(_F, dst, src, d, tmp):
+    """The inverse of the d × d block at src into dst: 2 × 2 by its adjugate over the determinant,
+    larger by Gauss-Jordan elimination with partial pivoting (in tmp, a scratch block).
+    Returns 1 where it is singular (a zero or non-finite pivot; then taken as 1), else 0."""
     bad = 0
-    if not (det != 0.0 and abs(det) < math.inf):
-        bad = 1
-        det = 1.0
-    store4(_W, _IUI, j, b11 / det, -b01 / det, -b10 / det, b00 / det)
+    if d == 2:
+        b00 = _F[src]
+        b01 = _F[src + 1]
+        b10 = _F[src + _BB]
+        b11 = _F[src + _BB + 1]
+        det = b00 * b11 - b01 * b10
+        if not (det != 0.0 and abs(det) < math.inf):
+            bad = 1
+            det = 1.0
+        _F[dst] = b11 / det
+        _F[dst + 1] = -b01 / det
+        _F[dst + _BB] = -b10 / det
+        _F[dst + _BB + 1] = b00 / det
+        return bad
+    for i in range(d):
+        for j in range(d):
+            _F[tmp + i * _BB + j] = _F[src + i * _BB + j]
+            _F[dst + i * _BB + j] = 0.0
+        _F[dst + i * _BB + i] = 1.0
+    for c in range(d):
+        piv = c
+        big = abs(_F[tmp + c * _BB + c])
+        for i in range(c + 1, d):
+            a = abs(_F[tmp + i * _BB + c])
+            if a > big:
+                big = a
+                piv = i
+        if piv != c:
+            for j in range(d):
+                x = _F[tmp + c * _BB + j]
+                _F[tmp + c * _BB + j] = _F[tmp + piv * _BB + j]
+                _F[tmp + piv * _BB + j] = x
+                x = _F[dst + c * _BB + j]
+                _F[dst + c * _BB + j] = _F[dst + piv * _BB + j]
+                _F[dst + piv * _BB + j] = x
+        pv = _F[tmp + c * _BB + c]
+        if not (pv != 0.0 and abs(pv) < math.inf):
+            bad = 1
+            pv = 1.0
+        for j in range(d):
+            _F[tmp + c * _BB + j] = _F[tmp + c * _BB + j] / pv
+            _F[dst + c * _BB + j] = _F[dst + c * _BB + j] / pv
+        for i in range(d):
+            if i != c:
+                fac = _F[tmp + i * _BB + c]
+                if fac != 0.0:
+                    for j in range(d):
+                        _F[tmp + i * _BB + j] = _F[tmp + i * _BB + j] - fac * _F[tmp + c * _BB + j]
+                        _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - fac * _F[dst + c * _BB + j]
     return bad
 
 
-def factor(_W, _n, _h, _sk):
-    """Factor the Newton matrix (blocks from ``D``) into UI, LL, E, ML (rows of _W; the last
-    site's eliminated block's inverse in column n-1 of UI).  Returns 0, or 1 for a singular block.
+def factor(_P, _F, _n):
+    """Factor the Newton matrix (site diagonals in _P) into _F.  Returns 0, or 1 for a singular
+    block.
 
-    Forward elimination over the sites j = 0 … n-2, the last site x_{n-1} a border: row j is
-    U_j x_j + S_j x_{j+1} + E_j x_{n-1} (S_j = C_j for j < n-2; the border collects A_0 at j = 0
-    and C_{n-2} at j = n-2); L_j = A_j U_{j-1}⁻¹, U_j = B_j - L_j S_{j-1}, E_j = E⁰_j - L_j E_{j-1}.
-    The last row's coefficient W_j on x_j (C_{n-1} at j = 0, A_{n-1} joining at j = n-2) is
-    eliminated alongside: M_j = W_j U_j⁻¹, its diagonal block less M_j E_j, W_{j+1} = -M_j S_j.
+    Forward elimination over the groups j = 0 … q-2, the last group x_(q-1) a border: row j is
+    U_j x_j + S_j x_(j+1) + E_j x_(q-1) (S_j = C_j for j < q-2; the border collects A_0 at j = 0
+    and C_(q-2) at j = q-2); L_j = A_j U_(j-1)⁻¹, U_j = B_j - L_j S_(j-1), E_j = E⁰_j - L_j E_(j-1).
+    The last row's coefficient W_j on x_j (C_(q-1) at j = 0, A_(q-1) joining at j = q-2) is
+    eliminated alongside: M_j = W_j U_j⁻¹, its diagonal block less M_j E_j, W_(j+1) = -M_j S_j.
     """
     n = _n
-    h = _h
-    sk = _sk
+    assemble(_P, _F, n)
+    q = n // _GS
+    z = _BB * _BB
+    ub = (q * _NMAT + 0) * z        # U_j being formed
+    eb = (q * _NMAT + 1) * z        # E_j being formed
+    cb = (q * _NMAT + 2) * z        # the border's diagonal block being formed
+    wb = (q * _NMAT + 3) * z        # the border row's coefficient W_j
+    tb = (q * _NMAT + 4) * z        # the inverse's scratch
     bad = 0
-    for j in range(n - 1):
-        b00, b01, b10, b11 = block(_W, 1, j, h, n, sk)
-        e00, e01, e10, e11 = 0.0, 0.0, 0.0, 0.0
+    for j in range(q - 1):
+        copy_mm(_F, ub, (j * _NMAT + _MB) * z)
+        for i in range(_BM):
+            for c in range(_BB):
+                _F[eb + i * _BB + c] = 0.0
         if j == 0:
-            c00, c01, c10, c11 = block(_W, 0, 0, h, n, sk)
-            e00, e01, e10, e11 = e00 + c00, e01 + c01, e10 + c10, e11 + c11
-        if j == n - 2:
-            c00, c01, c10, c11 = block(_W, 2, j, h, n, sk)
-            e00, e01, e10, e11 = e00 + c00, e01 + c01, e10 + c10, e11 + c11
+            add_mb(_F, eb, _MA * z)
+        if j == q - 2:
+            add_mb(_F, eb, (j * _NMAT + _MC) * z)
         if j > 0:
-            a00, a01, a10, a11 = block(_W, 0, j, h, n, sk)
-            u00, u01, u10, u11 = load4(_W, _IUI, j - 1)
-            l00, l01, l10, l11 = mm(a00, a01, a10, a11, u00, u01, u10, u11)
-            store4(_W, _ILL, j, l00, l01, l10, l11)
-            if j - 1 < n - 2:     # S_{j-1} = C_{j-1} (the super-diagonal, not the border)
-                s00, s01, s10, s11 = block(_W, 2, j - 1, h, n, sk)
-                t00, t01, t10, t11 = mm(l00, l01, l10, l11, s00, s01, s10, s11)
-                b00, b01, b10, b11 = b00 - t00, b01 - t01, b10 - t10, b11 - t11
-            p00, p01, p10, p11 = load4(_W, _IE, j - 1)
-            t00, t01, t10, t11 = mm(l00, l01, l10, l11, p00, p01, p10, p11)
-            e00, e01, e10, e11 = e00 - t00, e01 - t01, e10 - t10, e11 - t11
-        if store_inverse(_W, j, b00, b01, b10, b11) != 0:
+            lb = (j * _NMAT + _MLL) * z
+            mul_mmm_set(_F, lb, (j * _NMAT + _MA) * z, ((j - 1) * _NMAT + _MUI) * z)
+            mul_mmm_sub(_F, ub, lb, ((j - 1) * _NMAT + _MC) * z)
+            mul_mmb_sub(_F, eb, lb, ((j - 1) * _NMAT + _ME) * z)
+        if invert(_F, (j * _NMAT + _MUI) * z, ub, _BM, tb) != 0:
             bad = 1
-        store4(_W, _IE, j, e00, e01, e10, e11)
-    last = n - 1
-    c00, c01, c10, c11 = block(_W, 1, last, h, n, sk)
-    w00, w01, w10, w11 = block(_W, 2, last, h, n, sk)
-    for j in range(n - 1):
-        if j == n - 2:
-            a00, a01, a10, a11 = block(_W, 0, last, h, n, sk)
-            w00, w01, w10, w11 = w00 + a00, w01 + a01, w10 + a10, w11 + a11
-        u00, u01, u10, u11 = load4(_W, _IUI, j)
-        m00, m01, m10, m11 = mm(w00, w01, w10, w11, u00, u01, u10, u11)
-        store4(_W, _IML, j, m00, m01, m10, m11)
-        p00, p01, p10, p11 = load4(_W, _IE, j)
-        t00, t01, t10, t11 = mm(m00, m01, m10, m11, p00, p01, p10, p11)
-        c00, c01, c10, c11 = c00 - t00, c01 - t01, c10 - t10, c11 - t11
-        if j < n - 2:
-            s00, s01, s10, s11 = block(_W, 2, j, h, n, sk)
-            t00, t01, t10, t11 = mm(m00, m01, m10, m11, s00, s01, s10, s11)
-            w00, w01, w10, w11 = -t00, -t01, -t10, -t11
-    if store_inverse(_W, last, c00, c01, c10, c11) != 0:
+        copy_mb(_F, (j * _NMAT + _ME) * z, eb)
+    last = q - 1
+    copy_bb(_F, cb, (last * _NMAT + _MB) * z)
+    copy_bm(_F, wb, (last * _NMAT + _MC) * z)
+    for j in range(q - 1):
+        if j == q - 2:
+            add_bm(_F, wb, (last * _NMAT + _MA) * z)
+        mb = (j * _NMAT + _MML) * z
+        mul_bmm_set(_F, mb, wb, (j * _NMAT + _MUI) * z)
+        mul_bmb_sub(_F, cb, mb, (j * _NMAT + _ME) * z)
+        if j < q - 2:
+            mul_bmm_neg(_F, wb, mb, (j * _NMAT + _MC) * z)
+    if invert(_F, (last * _NMAT + _MUI) * z, cb, _BB, tb) != 0:
         bad = 1
     return bad
 
 
-def solve(_W, _n, _h, _sk):
+def solve(_W, _F, _n):
     """Solve the factored system for the right-hand side -R (rows _IR), in place: _IR becomes
-    the update.  Forward: y_j = r_j - L_j y_{j-1}, the last row less M_j y_j; the last site;
-    back: x_j = U_j⁻¹ (y_j - S_j x_{j+1} - E_j x_{n-1})."""
+    the update.  Forward: y_j = r_j - L_j y_(j-1), the border's row less M_j y_j; the border;
+    back: x_j = U_j⁻¹ (y_j - E_j x_(q-1) - S_j x_(j+1)).  The entry i of a group k is the field
+    i % nf at the site k g + i // nf."""
     n = _n
-    h = _h
-    sk = _sk
-    last = n - 1
-    yl0 = -_W[_IR + 0, last]
-    yl1 = -_W[_IR + 1, last]
-    y0 = 0.0
-    y1 = 0.0
-    for j in range(n - 1):
-        r0 = -_W[_IR + 0, j]
-        r1 = -_W[_IR + 1, j]
-        if j > 0:
-            l00, l01, l10, l11 = load4(_W, _ILL, j)
-            a0, a1 = mv(l00, l01, l10, l11, y0, y1)
-            r0 -= a0
-            r1 -= a1
-        y0 = r0
-        y1 = r1
-        _W[_IY + 0, j] = y0
-        _W[_IY + 1, j] = y1
-        m00, m01, m10, m11 = load4(_W, _IML, j)
-        a0, a1 = mv(m00, m01, m10, m11, y0, y1)
-        yl0 -= a0
-        yl1 -= a1
-    u00, u01, u10, u11 = load4(_W, _IUI, last)
-    xl0, xl1 = mv(u00, u01, u10, u11, yl0, yl1)
-    _W[_IR + 0, last] = xl0
-    _W[_IR + 1, last] = xl1
-    x0 = xl0
-    x1 = xl1
-    for k in range(n - 1):
-        j = n - 2 - k
-        e00, e01, e10, e11 = load4(_W, _IE, j)
-        a0, a1 = mv(e00, e01, e10, e11, xl0, xl1)
-        t0 = _W[_IY + 0, j] - a0
-        t1 = _W[_IY + 1, j] - a1
-        if j < n - 2:
-            s00, s01, s10, s11 = block(_W, 2, j, h, n, sk)
-            a0, a1 = mv(s00, s01, s10, s11, x0, x1)
-            t0 -= a0
-            t1 -= a1
-        u00, u01, u10, u11 = load4(_W, _IUI, j)
-        x0, x1 = mv(u00, u01, u10, u11, t0, t1)
-        _W[_IR + 0, j] = x0
-        _W[_IR + 1, j] = x1
+    q = n // _GS
+    z = _BB * _BB
+    yb = (q * _NMAT + 5) * z        # the border's right-hand side
+    tb = (q * _NMAT + 6) * z        # a group's back-substituted right-hand side
+    s0 = (q - 1) * _GS
+    for i in range(_BB):
+        _F[yb + i] = -_W[_IR + i % _NF, s0 + i // _NF]
+    for j in range(q - 1):
+        sj = j * _GS
+        lb = (j * _NMAT + _MLL) * z
+        for i in range(_BM):
+            r = -_W[_IR + i % _NF, sj + i // _NF]
+            if j > 0:
+                a = 0.0
+                for l in range(_BM):
+                    a += _F[lb + i * _BB + l] * _W[_IY + l % _NF, sj - _GS + l // _NF]
+                r -= a
+            _W[_IY + i % _NF, sj + i // _NF] = r
+        mb = (j * _NMAT + _MML) * z
+        for i in range(_BB):
+            a = 0.0
+            for l in range(_BM):
+                a += _F[mb + i * _BB + l] * _W[_IY + l % _NF, sj + l // _NF]
+            _F[yb + i] = _F[yb + i] - a
+    ul = ((q - 1) * _NMAT + _MUI) * z
+    for i in range(_BB):
+        a = 0.0
+        for l in range(_BB):
+            a += _F[ul + i * _BB + l] * _F[yb + l]
+        _W[_IR + i % _NF, s0 + i // _NF] = a
+    for k in range(q - 1):
+        j = q - 2 - k
+        sj = j * _GS
+        e0 = (j * _NMAT + _ME) * z
+        c0 = (j * _NMAT + _MC) * z
+        for i in range(_BM):
+            a = 0.0
+            for l in range(_BB):
+                a += _F[e0 + i * _BB + l] * _W[_IR + l % _NF, s0 + l // _NF]
+            t = _W[_IY + i % _NF, sj + i // _NF] - a
+            if j < q - 2:
+                a = 0.0
+                for l in range(_BM):
+                    a += _F[c0 + i * _BB + l] * _W[_IR + l % _NF, sj + _GS + l // _NF]
+                t -= a
+            _F[tb + i] = t
+        u0 = (j * _NMAT + _MUI) * z
+        for i in range(_BM):
+            a = 0.0
+            for l in range(_BM):
+                a += _F[u0 + i * _BB + l] * _F[tb + l]
+            _W[_IR + i % _NF, sj + i // _NF] = a
+
+
+def flow(_W, j, f, n, h, _cs):
+    """h K ∇̄H at the site j, field f, from G: canonical (h G_p, -h G_q); skew Σ_k (h c_k) G_(j+k),
+    k ascending."""
+    if _SK == 0:
+        if f == 0:
+            return h * _W[_IG + 1, j]
+        return -h * _W[_IG + 0, j]
+    acc = 0.0
+    for kk in range(2 * _SW + 1):
+        t = j + kk - _SW
+        if t < 0:
+            t += n
+        elif t >= n:
+            t -= n
+        acc += (h * _cs[kk]) * _W[_IG, t]
+    return acc
+
 
 def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, _chk, _simpl, _maxdis, _W,
-                _sk, _c):
-    """Steps 0 .. _steps-1 from the state ``_Y`` (2, n), updated in place.
+                _D, _P, _F, _cs):
+    """Steps 0 .. _steps-1 from the state ``_Y`` (nf, n), updated in place.
 
-    ``_T`` (rows, 2n): row k + 1 is the state after step (k + 1)·_every - 1 (and the last row the
-    last state); ``_its`` (_steps,): Newton iterations; ``_fst`` (4,): status (STATUS), step,
+    ``_T`` (rows, nf n): row k + 1 is the state after step (k + 1)·_every - 1 (and the last row
+    the last state); ``_its`` (_steps,): Newton iterations; ``_fst`` (4,): status (STATUS), step,
     iterations, and the failing value (the residual, or the predictor ratio) of a failure.
     ``_chk``: the resolution check (predictor disagreement ≤ ``_maxdis``); ``_simpl``:
-    simplified Newton (the matrix at the predictor only); ``_sk``: 1 for a skew lattice (``_Y`` the
-    pairs of sites), with ``_c`` the stencil's coefficient (1.0 for a canonical lattice).
+    simplified Newton (the matrix at the predictor only); ``_cs`` a skew lattice's stencil
+    coefficients c_(-sw) … c_sw at this n.  The lattice's shape (nf, g, …) is bound as constants
+    (module docstring).
     """
     n = _n
-    h = _h * _c
-    sk = _sk
+    h = _h
+    nf = _NF
+    nd = (2 * _WH + 1) * _NF * _NF
     row = 1
     for s in range(_steps):
         if s == 0:
-            # the first step: the explicit Euler predictor Z = Y + h J ∇H(Y)
+            # the first step: the explicit Euler predictor Z = Y + h K ∇H(Y)
             for j in range(n):
-                _W[_IG + 0, j] = 0.0
-                _W[_IG + 1, j] = 0.0
-                _W[_IZ + 0, j] = _Y[0, j]
-                _W[_IZ + 1, j] = _Y[1, j]
-            grad(_Y, _W, _n, _p, 0)
+                for c in range(nf):
+                    _W[_IG + c, j] = 0.0
+                    _W[_IZ + c, j] = _Y[c, j]
+            grad(_Y, _W, _D, _n, _p, 0)
             for j in range(n):
-                f0, f1 = flow(_W, j, n, h, sk)
-                _W[_IDY + 0, j] = f0
-                _W[_IDY + 1, j] = f1
+                for c in range(nf):
+                    _W[_IDY + c, j] = flow(_W, j, c, n, h, _cs)
         for j in range(n):
-            z0 = _Y[0, j] + _W[_IDY + 0, j]
-            z1 = _Y[1, j] + _W[_IDY + 1, j]
-            if s >= 2:
-                z0 = _Y[0, j] + (2.0 * _W[_IDY + 0, j] - _W[_IDY2 + 0, j])
-                z1 = _Y[1, j] + (2.0 * _W[_IDY + 1, j] - _W[_IDY2 + 1, j])
-            _W[_IZ + 0, j] = z0
-            _W[_IZ + 1, j] = z1
-            _W[_IZP + 0, j] = z0
-            _W[_IZP + 1, j] = z1
+            for c in range(nf):
+                z = _Y[c, j] + _W[_IDY + c, j]
+                if s >= 2:
+                    z = _Y[c, j] + (2.0 * _W[_IDY + c, j] - _W[_IDY2 + c, j])
+                _W[_IZ + c, j] = z
+                _W[_IZP + c, j] = z
         last = math.inf
         refac = 0
         done = 0
@@ -278,28 +497,28 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             it += 1
             jac = 1 if (it == 1 or _simpl == 0 or refac == 1) else 0
             for j in range(n):
-                _W[_IG + 0, j] = 0.0
-                _W[_IG + 1, j] = 0.0
+                for c in range(nf):
+                    _W[_IG + c, j] = 0.0
             if jac == 1:
-                for k in range(12):
+                for k in range(nd):
                     for j in range(n):
-                        _W[_ID + k, j] = 0.0
-            grad(_Y, _W, _n, _p, jac)
+                        _D[k, j] = 0.0
+            grad(_Y, _W, _D, _n, _p, jac)
             for j in range(n):
-                f0, f1 = flow(_W, j, n, h, sk)
-                _W[_IR + 0, j] = _W[_IZ + 0, j] - _Y[0, j] - f0
-                _W[_IR + 1, j] = _W[_IZ + 1, j] - _Y[1, j] - f1
+                for c in range(nf):
+                    _W[_IR + c, j] = _W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)
             if jac == 1:
-                if factor(_W, _n, h, sk) != 0:
+                newton(_D, _P, n, h, _cs)
+                if factor(_P, _F, n) != 0:
                     _fst[0] = 4.0
                     _fst[1] = s
                     _fst[2] = it
                     return
-            solve(_W, _n, h, sk)
+            solve(_W, _F, n)
             size = 0.0
             scale = 1.0
             for j in range(n):
-                for c in range(2):
+                for c in range(nf):
                     d = _W[_IR + c, j]
                     z = _W[_IZ + c, j] + d
                     _W[_IZ + c, j] = z
@@ -321,14 +540,13 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
         if done == 0:
             # the residual at the last iterate, for the message
             for j in range(n):
-                _W[_IG + 0, j] = 0.0
-                _W[_IG + 1, j] = 0.0
-            grad(_Y, _W, _n, _p, 0)
+                for c in range(nf):
+                    _W[_IG + c, j] = 0.0
+            grad(_Y, _W, _D, _n, _p, 0)
             res = 0.0
             for j in range(n):
-                f0, f1 = flow(_W, j, n, h, sk)
-                res = max(res, abs(_W[_IZ + 0, j] - _Y[0, j] - f0))
-                res = max(res, abs(_W[_IZ + 1, j] - _Y[1, j] - f1))
+                for c in range(nf):
+                    res = max(res, abs(_W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)))
             _fst[0] = 1.0
             _fst[1] = s
             _fst[2] = it
@@ -338,7 +556,7 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             moved = 0.0
             off = 0.0
             for j in range(n):
-                for c in range(2):
+                for c in range(nf):
                     moved = max(moved, abs(_W[_IZ + c, j] - _Y[c, j]))
                     off = max(off, abs(_W[_IZ + c, j] - _W[_IZP + c, j]))
             ratio = 0.0
@@ -351,15 +569,13 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
                 _fst[3] = ratio
                 return
         for j in range(n):
-            _W[_IDY2 + 0, j] = _W[_IDY + 0, j]
-            _W[_IDY2 + 1, j] = _W[_IDY + 1, j]
-            _W[_IDY + 0, j] = _W[_IZ + 0, j] - _Y[0, j]
-            _W[_IDY + 1, j] = _W[_IZ + 1, j] - _Y[1, j]
-            _Y[0, j] = _W[_IZ + 0, j]
-            _Y[1, j] = _W[_IZ + 1, j]
+            for c in range(nf):
+                _W[_IDY2 + c, j] = _W[_IDY + c, j]
+                _W[_IDY + c, j] = _W[_IZ + c, j] - _Y[c, j]
+                _Y[c, j] = _W[_IZ + c, j]
         _its[s] = it
         if (s + 1) % _every == 0 or s + 1 == _steps:
-            for j in range(n):
-                _T[row, j] = _Y[0, j]
-                _T[row, n + j] = _Y[1, j]
+            for c in range(nf):
+                for j in range(n):
+                    _T[row, c * n + j] = _Y[c, j]
             row += 1

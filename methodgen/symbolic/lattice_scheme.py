@@ -7,8 +7,8 @@ template's slots at site i) every method here has a discrete gradient of the sam
 
 with one *piece* ``A_{t,s}`` per term and slot, an expression in the template's slots at the
 step's start and end.  The step is ``y1 = y0 + h J ∇̄H(y0, y1)`` (J canonical); its Newton
-matrix ``I - h J ∂∇̄H/∂y1`` is block tridiagonal in the sites (2 × 2 blocks), cyclic when a
-term wraps.  The pieces and their derivatives ``∂A_{t,s}/∂Z1_{s'}`` are all a module needs:
+matrix ``I - h J ∂∇̄H/∂y1`` is banded in the sites (2 × 2 blocks, coupling sites as far apart as
+the widest term's slots), cyclic when a term wraps.  The pieces and their derivatives ``∂A_{t,s}/∂Z1_{s'}`` are all a module needs:
 they are derived here once, whatever N.
 
 Methods:
@@ -29,8 +29,10 @@ A *skew* lattice (one field u, ``u' = S ∇H`` with S a constant skew stencil,
 ``u1 - u0 = h S ∇̄H(u0, u1)``.  With the term lemma, ``H(u1) - H(u0) = ∇̄Hᵀ(u1 - u0) =
 h ∇̄Hᵀ S ∇̄H``, and that vanishes for every N because S is skew -- proved per stencil by
 re-indexing, never expanding N terms (:func:`skew_certificates`).  Its Newton matrix
-``I - h S ∂∇̄H/∂u1`` is pentadiagonal and cyclic (S and ∂∇̄H tridiagonal), block tridiagonal
-with 2 × 2 blocks over the pairs of sites (2k - 1, 2k): the canonical lattices' solvers apply.
+``I - h S ∂∇̄H/∂u1`` is banded and cyclic, of half-bandwidth the stencil's plus ∂∇̄H's (5 diagonals
+for the centred difference and nearest neighbours): the canonical lattices' solver applies
+(:mod:`methodgen.runtime.lattice_stepper`: w sites grouped into a block make any band block
+tridiagonal).
 
 A *2-D periodic* lattice (:class:`methodgen.problem.lattice.Lattice2D`) takes the same pieces per
 template (its slots are 2-D offsets) and the same certificates: the module adds each piece at
@@ -118,8 +120,9 @@ class LatticeScheme:
                 "structure": self.lattice.structure,
                 "solve": ("simplified newton (the constant linear part, a periodic 2-D stencil, solved by the 2-D FFT)"
                           if getattr(self.lattice, "dims", 1) == 2 else
-                          "newton (pentadiagonal, cyclic: block tridiagonal over pairs of sites)" if skew else
-                          "newton (block tridiagonal, cyclic)")}
+                          "newton (block tridiagonal, cyclic)" if self.lattice.half_width <= 1 else
+                          f"newton (banded, half-width {self.lattice.half_width} sites, cyclic: block tridiagonal "
+                          f"over groups of {self.lattice.half_width} sites)")}
 
 
 def _avf_pieces(h: sp.Expr, z0, z1) -> tuple[list, list]:

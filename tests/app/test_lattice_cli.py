@@ -131,11 +131,37 @@ def test_kdv_runs_on_both_backends_and_keeps_energy_and_mass(capsys):
     assert a["traits"]["structure"] == "skew" and a["traits"]["energy_preserving"]
 
 
-def test_kdv_refuses_an_odd_size_with_one_line(capsys):
-    code = cli.main(["run", "kdv", "--param", "N=513"])
+def test_kdv_refuses_a_size_below_the_minimum_with_one_line(capsys):
+    code = cli.main(["run", "kdv", "--param", "N=4"])
     out, err = capsys.readouterr()
-    assert code == 2 and "needs an even N" in err and "use N = 512 or 514" in err
+    assert code == 2 and "needs N ≥ 5 sites" in err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_kdv4_runs_at_an_odd_size_on_both_backends_and_keeps_energy_and_mass(capsys):
+    """The fourth-order KdV (a skew stencil of half-width 2, terms two sites wide: the Newton matrix
+    couples sites 4 apart, grouped 4 sites a block, the last group taking N mod 4 = 3 more)."""
+    pytest.importorskip("llvmlite")
+    code, a, err = _run(capsys, "kdv4", "--steps", "40", "--param", "N=63")
+    assert code == 0, err
+    code, b, err = _run(capsys, "kdv4", "--steps", "40", "--param", "N=63", "--backend", "numba")
+    assert code == 0, err
+    assert len(a["y_final"]) == 63 and np.max(np.abs(np.array(a["y_final"]) - np.array(b["y_final"]))) < 1e-13
+    for rep in (a, b):
+        for k in ("H", "mass"):
+            v = rep["invariants"][k]
+            assert v["max_abs_error"] <= 1e-13 * max(1.0, abs(v["initial"]))
+    code, mid, err = _run(capsys, "kdv4", "--steps", "40", "--param", "N=63", "--method", "midpoint")
+    assert code == 0 and mid["invariants"]["H"]["max_abs_error"] > 1e-9        # the control drifts
+    code = cli.main(["run", "kdv4", "--param", "N=8"])
+    assert code == 2 and "needs N ≥ 9 sites" in capsys.readouterr()[1]
+
+
+def test_verify_kdv4_proves_per_template(capsys):
+    code = cli.main(["verify", "kdv4", "--json"])
+    rep = json.loads(capsys.readouterr()[0])
+    assert code == 0 and rep["all_proved"]
+    assert rep["proved_invariants"] == {"avf": ["H", "mass"], "midpoint": ["mass"]}
 
 
 def test_verify_kdv_says_which_invariants_are_proved(capsys):

@@ -61,7 +61,8 @@ def test_periodic_index_forms(index, offset):
     ("Sum(q[i % N + 2] + p[i]**2, i, 1, N)", "(i + c) % N + 1"),
     ("Sum(q[2*i] + p[i]**2, i, 1, N)", "not a supported index"),
     ("Sum(Sum(q[i]*q[j], j, 1, N), i, 1, N)", "nested Sums"),
-    ("Sum(q[i]*q[(i + 1) % N + 1] + p[i]**2, i, 1, N)", "couples sites 2 apart"),
+    ("Sum(q[i]*q[(i + 4) % N + 1] + p[i]**2, i, 1, N)", "couples sites 5 apart; lattice terms may couple sites "
+                                                        "at most 4 apart"),
     ("Sum(q[i]**2, i, 1, N)*Sum(p[i]**2, i, 1, N)", "non-linearly"),
     ("Sum(q[i]**2 + p[i]**2, i, 1, N) + q[0]", "outside the sites"),
     ("Sum(q[i]**2 + x[i]**2, i, 1, N)", "not allowed"),
@@ -72,7 +73,7 @@ def test_periodic_index_forms(index, offset):
     ("Sum(q[i]**2 + p[i]**2, i, N, 1)", "is empty"),
     ("Sum(q[i % N]**2 + p[i]**2, i, 1, N)", "not a site 1 … N"),
     ("Sum(1, i, 1, N) + 2", "no term in the fields"),
-    ("Sum(p[i]**2, i, 1, N) + q[1]*q[N - 1]", "q[1]*q[N - 1] couples sites 2 apart"),
+    ("Sum(p[i]**2, i, 1, N) + q[1]*q[N - 4]", "q[1]*q[N - 4] couples sites 5 apart"),
 ])
 def test_refusals_name_what_is_valid(text, message):
     with pytest.raises(ParseError, match=re.escape(message)):

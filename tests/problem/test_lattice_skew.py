@@ -28,7 +28,7 @@ def test_the_stencil_is_kept_as_its_coefficients():
     N, L = lat.size, sp.Symbol("L", real=True)
     assert lat.structure == "skew" and lat.fields == ("u",)
     assert lat.stencil == {-1: -N**2 / (2 * L**2), 1: N**2 / (2 * L**2)}
-    assert lat.nmin == 6
+    assert lat.nmin == 5 and lat.half_width == 2          # I - h S ∂∇̄H couples sites 2 apart: N ≥ 2·2 + 1
     # the periodic index form is the same stencil
     other = Lattice(KDV, fields=("u",), skew="(g[i % N + 1] - g[(i - 2) % N + 1])*N**2/(2*L**2)",
                     params={"L": 40.0})
@@ -42,7 +42,9 @@ def test_the_stencil_is_kept_as_its_coefficients():
     ("g[i+1] + g[i-1]", "is not skew: c_1 = 1 and c_-1 = 1 (must be opposite)"),
     ("g[i+1] - g[i-1] + g[i]/2", "c_0 = 1/2 (must be 0)"),
     ("g[i+1] - 2*g[i-1]", "c_1 = 1 and c_-1 = -2 (must be opposite)"),
-    ("g[i+2] - g[i-2]", "half-width 1 only"),
+    # a wide stencil: the failing pair named, the others skew
+    ("(-g[i+2] + 8*g[i+1] - 8*g[i-1] - g[i-2])/12", "is not skew: c_2 = -1/12 and c_-2 = -1/12 (must be opposite)"),
+    ("g[i+4] - g[i-4]", "g[i - 4]: stencils of half-width at most 3 only (g[i - 3] … g[i + 3])"),
     ("g[i+1]*g[i-1]", "not linear in g"),
     ("g[i+1] - g[i-1] + 1", "not linear in g"),
     ("u[i]*(g[i+1] - g[i-1])", "subscripting 'u[i]' is not allowed"),
@@ -81,12 +83,13 @@ def test_fields_without_a_structure_and_name_clashes_are_refused():
         Lattice(KDV, fields=("u",), skew=KDV_S, params={"L": 40.0, "u_p1": 1.0})
 
 
-def test_the_size_must_be_even():
+def test_any_size_from_the_minimum():
+    """Odd sizes too (the Newton matrix is grouped by w sites, the last group taking the rest);
+    below 2 w + 1 sites the band's sites would wrap onto each other: refused."""
     lat = kdv()
-    lat.check_size(6)
-    with pytest.raises(InputError, match=re.escape("needs an even N") + ".*use N = 64 or 66"):
-        lat.check_size(65)
-    with pytest.raises(InputError, match="N ≥ 6"):
+    for n in (5, 6, 65):
+        lat.check_size(n)
+    with pytest.raises(InputError, match="N ≥ 5"):
         lat.check_size(4)
 
 

@@ -288,24 +288,30 @@ def test_bordered_block_elimination_agrees_with_a_dense_solve(sg, n, periodic):
     """methodgen.runtime.lattice_stepper's factor/solve (as Python) against numpy's dense solve of the
     same Newton matrix; negative control: a wrong corner block is seen."""
     from methodgen.runtime import lattice_stepper as ls
+    from methodgen.runtime.lattice_driver import shape_constants, stepper_functions
 
     rng = np.random.default_rng(100 + n)
     h = 0.3
-    W = np.zeros((ls.W_ROWS, n))
-    W[ls._ID:ls._ID + 12] = rng.normal(size=(12, n))
+    D = rng.normal(size=(12, n))                 # ∂∇̄H's site diagonals, rows e nf² + f nf + f'
     if not periodic:
-        W[ls._ID:ls._ID + 4, 0] = 0.0           # no coupling of site 0 to site n-1
-        W[ls._ID + 8:ls._ID + 12, n - 1] = 0.0
-    D = [[W[ls._ID + 4 * r + k] for k in range(4)] for r in range(3)]
-    M = [(-h * d[2], -h * d[3], h * d[0], h * d[1]) for d in D]
+        D[0:4, 0] = 0.0                          # no coupling of site 0 to site n-1
+        D[8:12, n - 1] = 0.0
+    Dm = D.reshape(3, 2, 2, n)
+    M = [(-h * d[1, 0], -h * d[1, 1], h * d[0, 0], h * d[0, 1]) for d in Dm]    # the module's blocks
     M = [tuple(a.copy() for a in blk) for blk in M]
     M[1][0][:] += 1.0
     M[1][3][:] += 1.0
     dense = sg._dense(*M)
     r = rng.normal(size=(n, 2))
+    st = stepper_functions(shape_constants(n, 2, 1))
+    P = np.zeros((12, n))
+    st.newton(D, P, n, h, np.zeros(1))
+    assert np.array_equal(P.reshape(3, 2, 2, n), np.array(M).reshape(3, 2, 2, n))    # the same arithmetic
+    F = np.zeros(ls.factor_size(n, 2, 1))
+    W = np.zeros((ls.W_ROWS, n))
     W[ls._IR:ls._IR + 2] = -r.T                  # solve() takes -R and leaves the update
-    assert ls.factor(W, n, h, 0) == 0
-    ls.solve(W, n, h, 0)
+    assert st.factor(P, F, n) == 0
+    st.solve(W, F, n)
     x = W[ls._IR:ls._IR + 2].T
     xd = np.linalg.solve(dense, r.reshape(-1)).reshape(n, 2)
     assert np.max(np.abs(x - xd)) < 1e-11 * max(1.0, np.max(np.abs(xd)))

@@ -64,12 +64,12 @@ def _dense_newton(mod, lat, z, y0, h):
     return np.eye(n) - h * S @ dG
 
 
-@pytest.mark.parametrize("n", [6, 8, 10, 18, 64])
-def test_paired_newton_solve_agrees_with_a_dense_solve(avf, lat, n):
-    """The module's Newton matrix (pentadiagonal, paired into 2 × 2 blocks over the pairs of sites,
-    solved by block cyclic reduction) against numpy's dense solve of I - h S ∂∇̄H assembled in u;
-    negative control: a wrong corner entry (row 0 to the site N - 2, cyclically two to the left)
-    gives another solution, which the comparison sees."""
+@pytest.mark.parametrize("n", [5, 6, 7, 8, 10, 18, 63, 64])
+def test_newton_solve_agrees_with_a_dense_solve(avf, lat, n):
+    """The module's Newton matrix (pentadiagonal: site diagonals grouped two sites a block, the last
+    group a border for odd N, solved by block cyclic reduction) against numpy's dense solve of
+    I - h S ∂∇̄H assembled in u; negative control: a wrong corner entry (row 0 to the site N - 2,
+    cyclically two to the left) gives another solution, which the comparison sees."""
     h = 2.0 * (L / n) ** 3           # h/dx³ of order 1: the matrix is far from I
     y0 = rough(n, n)
     z = y0 + 0.05 * np.cos(np.arange(n))
@@ -79,7 +79,7 @@ def test_paired_newton_solve_agrees_with_a_dense_solve(avf, lat, n):
     assert dense[0, n - 2] != 0.0 and dense[1, n - 1] != 0.0          # the pentadiagonal corners
     _, M = avf._residual(z.reshape(1, n), y0.reshape(1, n), h, n, avf._params(None), True)
     r = np.random.default_rng(n).normal(size=n)
-    x = avf.block_cyclic_solve(avf.block_cyclic_factor(*M), r.reshape(n // 2, 2)).reshape(n)
+    x = avf.newton_solve(avf.newton_factor(M), r.reshape(1, n)).reshape(n)
     xd = np.linalg.solve(dense, r)
     assert np.max(np.abs(x - xd)) < 1e-12 * max(1.0, np.max(np.abs(xd)))
     wrong = dense.copy()
@@ -103,33 +103,38 @@ def test_residual_jacobian_against_finite_differences(avf):
     assert np.max(np.abs(J - fd)) < 1e-6 * np.max(np.abs(J))
 
 
-@pytest.mark.parametrize("n", [6, 10, 12, 32])
-def test_compiled_bordered_elimination_solves_the_paired_matrix(n):
-    """methodgen.runtime.lattice_stepper's factor/solve in the skew mode (as Python) on a random
-    tridiagonal ∂∇̄H in the paired layout, against numpy's dense solve of I - h (E - E⁻¹) ∂∇̄H;
-    negative control: a wrong corner entry is seen."""
+@pytest.mark.parametrize("n", [5, 6, 7, 10, 12, 32])
+def test_compiled_bordered_elimination_solves_the_skew_matrix(n):
+    """methodgen.runtime.lattice_stepper's newton/factor/solve in the skew mode (as Python) on a random
+    tridiagonal ∂∇̄H, against numpy's dense solve of I - h (E - E⁻¹) ∂∇̄H; negative control: a
+    wrong corner entry is seen."""
     from methodgen.runtime import lattice_stepper as ls
+    from methodgen.runtime.lattice_driver import shape_constants, stepper_functions
 
     rng = np.random.default_rng(200 + n)
-    m, h = n // 2, 0.3
+    h = 0.3
     Dd = {d: rng.normal(size=n) for d in (-1, 0, 1)}
-    W = np.zeros((ls.W_ROWS, m))
+    D = np.zeros((3, n))
     dG = np.zeros((n, n))
     for d, vals in Dd.items():
+        D[d + 1] = vals
         for s in range(n):
             dG[s, (s + d) % n] += vals[s]
-            r = (s + d + n) // 2 - (s + n) // 2 + 1        # the pair block, before the wrap
-            W[ls._ID + 4 * r + 2 * (s % 2) + (s + d) % 2, s // 2] += vals[s]
     S = np.zeros((n, n))
     for s in range(n):
         S[s, (s + 1) % n] += 1.0
         S[s, (s - 1) % n] -= 1.0
     dense = np.eye(n) - h * S @ dG
     rhs = rng.normal(size=n)
-    W[ls._IR:ls._IR + 2] = -rhs.reshape(m, 2).T
-    assert ls.factor(W, m, h, 1) == 0
-    ls.solve(W, m, h, 1)
-    x = W[ls._IR:ls._IR + 2].T.reshape(n)
+    st = stepper_functions(shape_constants(n, 1, 1, 1, skew=True))
+    P = np.zeros((5, n))
+    st.newton(D, P, n, h, np.array([-1.0, 0.0, 1.0]))
+    F = np.zeros(ls.factor_size(n, 1, 2))
+    W = np.zeros((ls.W_ROWS, n))
+    W[ls._IR] = -rhs
+    assert st.factor(P, F, n) == 0
+    st.solve(W, F, n)
+    x = W[ls._IR].copy()
     xd = np.linalg.solve(dense, rhs)
     assert np.max(np.abs(x - xd)) < 1e-10 * max(1.0, np.max(np.abs(xd)))
     dense[1, n - 1] += 0.5
@@ -211,10 +216,10 @@ def test_order_two_and_the_soliton_moves_at_its_speed(avf):
 
 
 def test_bad_input_names_what_is_valid(avf):
-    with pytest.raises(ValueError, match="N even and ≥ 6"):
-        avf.integrate(np.zeros(7), 0.1, 1)
-    with pytest.raises(ValueError, match="N even and ≥ 6"):
+    with pytest.raises(ValueError, match="N ≥ 5"):
         avf.integrate(np.zeros(4), 0.1, 1)
+    with pytest.raises(ValueError, match="N ≥ 5"):
+        avf.integrate(np.zeros((2, 6)), 0.1, 1)
     with pytest.raises(KeyError, match="parameters are"):
         avf.integrate(soliton(8), 0.1, 1, params={"c": 1.0})
 
@@ -234,13 +239,13 @@ def test_module_is_deterministic_and_imports_numpy_only(lat):
     body = a.split('"""', 2)[2]
     imports = {ln.split()[1] for ln in body.splitlines() if ln.startswith(("import ", "from "))}
     assert imports == {"math", "numpy"}
-    assert "STRUCTURE = 'skew'" in a and "def _skew_coefficient(n, p):" in a
+    assert "STRUCTURE = 'skew'" in a and "def _skew_coefficients(n, p):" in a
 
 
 # --- the compiled backend ---------------------------------------------------------------------
 
 @pytest.mark.parametrize("solver", ["newton", "simplified"])
-@pytest.mark.parametrize("n", [6, 8, 64])
+@pytest.mark.parametrize("n", [5, 6, 7, 8, 64])
 def test_compiled_steps_are_the_numpy_modules(avf, compiled, n, solver):
     y0 = soliton(n) + 0.05 * np.sin(np.arange(n))
     ia, ic = {}, {}
@@ -255,13 +260,13 @@ def test_compiled_loop_is_its_python_source_bitwise(compiled):
     """The skew step loop compiled and the same source run as Python: the same bits."""
     from methodgen.runtime.lattice_driver import run_steps
 
-    n = 12
+    n = 13
     out = []
-    c = compiled._skew_coefficient(n, compiled._params(None))
+    c = compiled._skew_coefficients(n, compiled._params(None))
     for python in (False, True):
-        Y = np.ascontiguousarray(soliton(n).reshape(n // 2, 2).T)
+        Y = soliton(n).reshape(1, n).copy()
         T, its, st = run_steps(compiled._grad_sites, Y, 0.01, 5, 1, np.array([L]), 50, 4 * 2.2e-16,
-                               True, True, 1.0, python=python, skew=1, coefficient=c)
+                               True, True, 1.0, python=python, jac_half_width=1, stencil=c)
         out.append((T, its, st))
     assert out[0][2] == (0, 0, 0, 0.0)
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
