@@ -276,6 +276,24 @@ def test_a_composition_tests_the_energy_jump_once_per_composed_step(barrier_o4, 
         mod.integrate([[-1.1, 2.0], [-1.0, 2.0]], 0.1, 20)
 
 
+def test_a_lockstep_batch_names_the_lane_whose_composed_step_jumps(barrier_o4):
+    """The compiled lock-step loop (a batch of at least MIN_BATCH trajectories) makes the same
+    per-step test lane by lane: of 20 lanes, the one started at q = -1 lands on the barrier's top
+    at step 4 and is named; the numpy batch names the same lane and step.  Control: the other
+    lanes alone run through."""
+    pytest.importorskip("llvmlite")
+    from methodgen.runtime.nbabi import MIN_BATCH
+    starts = np.array([[-5.0 - 0.01 * k, 2.0] for k in range(20)])     # (never near the barrier in 20 steps)
+    starts[7] = [-1.0, 2.0]
+    assert len(starts) >= MIN_BATCH
+    for backend in ("numba", "numpy"):
+        mod = barrier_o4[backend]
+        with pytest.raises(mod.ResolutionError, match=r"at step 4.*trajectories \[7\]") as ei:
+            mod.integrate(starts, 0.1, 20)
+        assert ei.value.check == "energy_jump"
+        mod.integrate(np.delete(starts, 7, axis=0), 0.1, 20)
+
+
 def test_a_composition_reports_a_non_finite_state_at_the_same_step_on_both_backends(tmp_path):
     """The compiled loop checks an explicit composition's state for inf/NaN at the composed step's
     end (a stage's inf or NaN stays in the state); the numpy module at every stage.  A Hénon–Heiles
