@@ -20,9 +20,7 @@ SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _
 
 _LOOPS: dict = {}
 #: the stepper's functions the step loop calls (bound with the problem's shape)
-_FUNCTIONS = ("factor", "solve", "flow", "newton", "assemble", "invert", "copy_mm", "copy_bb", "copy_mb", "copy_bm",
-              "add_mb", "add_bm", "mul_mmm_set", "mul_mmm_sub", "mul_mmb_sub", "mul_bmm_set", "mul_bmm_neg",
-              "mul_bmb_sub")
+_FUNCTIONS = ("factor", "solve", "flow", "newton", "assemble", "invert", "copy", "add", "mul")
 
 
 def shape_constants(n: int, nf: int, jac_half_width: int, stencil_half_width: int = 0, skew: bool = False) -> dict:

@@ -166,103 +166,37 @@ def assemble(_P, _F, n):
                     _F[b0 + i * _BB + j] += _P[e * _NF * _NF + f * _NF + f2, s]
 
 
-# Block operations on _F (row stride _BB).  Each has a variant per shape, so that its loops'
-# trip counts are constants: m × m (…_mm), m × mB (…_mb), mB × m (…_bm), mB × mB (…_bb).
+# Block operations on _F (row stride _BB), r × c blocks: the callers pass the shape as the
+# constants _BM, _BB (m × m, m × mB, mB × m, mB × mB), so that after inlining every loop's trip
+# count is known and LLVM unrolls the small ones.
 
-def copy_mm(_F, dst, src):
-    for i in range(_BM):
-        for j in range(_BM):
+def copy(_F, dst, src, r, c):
+    for i in range(r):
+        for j in range(c):
             _F[dst + i * _BB + j] = _F[src + i * _BB + j]
 
 
-def copy_bb(_F, dst, src):
-    for i in range(_BB):
-        for j in range(_BB):
-            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
-
-
-def copy_mb(_F, dst, src):
-    for i in range(_BM):
-        for j in range(_BB):
-            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
-
-
-def copy_bm(_F, dst, src):
-    for i in range(_BB):
-        for j in range(_BM):
-            _F[dst + i * _BB + j] = _F[src + i * _BB + j]
-
-
-def add_mb(_F, dst, src):
-    for i in range(_BM):
-        for j in range(_BB):
+def add(_F, dst, src, r, c):
+    for i in range(r):
+        for j in range(c):
             _F[dst + i * _BB + j] = _F[dst + i * _BB + j] + _F[src + i * _BB + j]
 
 
-def add_bm(_F, dst, src):
-    for i in range(_BB):
-        for j in range(_BM):
-            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] + _F[src + i * _BB + j]
-
-
-# products dst = a b (…set), dst - a b (…sub), -(a b) (…neg); each entry's sum formed first, in the
-# order of its terms (for 2 × 2 blocks the arithmetic of the explicit a00 b00 + a01 b10 …)
-
-def mul_mmm_set(_F, dst, a, b):
-    for i in range(_BM):
-        for j in range(_BM):
+def mul(_F, dst, a, b, r, c, k, mode):
+    """The product a (r × k) b (k × c) into dst (r × c): set (mode 0), subtracted (1) or negated
+    (2); each entry's sum formed first, in the order of its terms (for 2 × 2 blocks the
+    arithmetic of the explicit a00 b00 + a01 b10 …)."""
+    for i in range(r):
+        for j in range(c):
             s = 0.0
-            for l in range(_BM):
+            for l in range(k):
                 s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
-            _F[dst + i * _BB + j] = s
-
-
-def mul_mmm_sub(_F, dst, a, b):
-    for i in range(_BM):
-        for j in range(_BM):
-            s = 0.0
-            for l in range(_BM):
-                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
-            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
-
-
-def mul_mmb_sub(_F, dst, a, b):
-    """dst (m × mB) less a (m × m) b (m × mB)."""
-    for i in range(_BM):
-        for j in range(_BB):
-            s = 0.0
-            for l in range(_BM):
-                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
-            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
-
-
-def mul_bmm_set(_F, dst, a, b):
-    """dst (mB × m) = a (mB × m) b (m × m)."""
-    for i in range(_BB):
-        for j in range(_BM):
-            s = 0.0
-            for l in range(_BM):
-                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
-            _F[dst + i * _BB + j] = s
-
-
-def mul_bmm_neg(_F, dst, a, b):
-    for i in range(_BB):
-        for j in range(_BM):
-            s = 0.0
-            for l in range(_BM):
-                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
-            _F[dst + i * _BB + j] = -s
-
-
-def mul_bmb_sub(_F, dst, a, b):
-    """dst (mB × mB) less a (mB × m) b (m × mB)."""
-    for i in range(_BB):
-        for j in range(_BB):
-            s = 0.0
-            for l in range(_BM):
-                s += _F[a + i * _BB + l] * _F[b + l * _BB + j]
-            _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+            if mode == 0:
+                _F[dst + i * _BB + j] = s
+            elif mode == 1:
+                _F[dst + i * _BB + j] = _F[dst + i * _BB + j] - s
+            else:
+                _F[dst + i * _BB + j] = -s
 
 
 def invert(_F, dst, src, d, tmp):
@@ -343,33 +277,33 @@ def factor(_P, _F, _n):
     tb = (q * _NMAT + 4) * z        # the inverse's scratch
     bad = 0
     for j in range(q - 1):
-        copy_mm(_F, ub, (j * _NMAT + _MB) * z)
+        copy(_F, ub, (j * _NMAT + _MB) * z, _BM, _BM)
         for i in range(_BM):
             for c in range(_BB):
                 _F[eb + i * _BB + c] = 0.0
         if j == 0:
-            add_mb(_F, eb, _MA * z)
+            add(_F, eb, _MA * z, _BM, _BB)
         if j == q - 2:
-            add_mb(_F, eb, (j * _NMAT + _MC) * z)
+            add(_F, eb, (j * _NMAT + _MC) * z, _BM, _BB)
         if j > 0:
             lb = (j * _NMAT + _MLL) * z
-            mul_mmm_set(_F, lb, (j * _NMAT + _MA) * z, ((j - 1) * _NMAT + _MUI) * z)
-            mul_mmm_sub(_F, ub, lb, ((j - 1) * _NMAT + _MC) * z)
-            mul_mmb_sub(_F, eb, lb, ((j - 1) * _NMAT + _ME) * z)
+            mul(_F, lb, (j * _NMAT + _MA) * z, ((j - 1) * _NMAT + _MUI) * z, _BM, _BM, _BM, 0)
+            mul(_F, ub, lb, ((j - 1) * _NMAT + _MC) * z, _BM, _BM, _BM, 1)
+            mul(_F, eb, lb, ((j - 1) * _NMAT + _ME) * z, _BM, _BB, _BM, 1)
         if invert(_F, (j * _NMAT + _MUI) * z, ub, _BM, tb) != 0:
             bad = 1
-        copy_mb(_F, (j * _NMAT + _ME) * z, eb)
+        copy(_F, (j * _NMAT + _ME) * z, eb, _BM, _BB)
     last = q - 1
-    copy_bb(_F, cb, (last * _NMAT + _MB) * z)
-    copy_bm(_F, wb, (last * _NMAT + _MC) * z)
+    copy(_F, cb, (last * _NMAT + _MB) * z, _BB, _BB)
+    copy(_F, wb, (last * _NMAT + _MC) * z, _BB, _BM)
     for j in range(q - 1):
         if j == q - 2:
-            add_bm(_F, wb, (last * _NMAT + _MA) * z)
+            add(_F, wb, (last * _NMAT + _MA) * z, _BB, _BM)
         mb = (j * _NMAT + _MML) * z
-        mul_bmm_set(_F, mb, wb, (j * _NMAT + _MUI) * z)
-        mul_bmb_sub(_F, cb, mb, (j * _NMAT + _ME) * z)
+        mul(_F, mb, wb, (j * _NMAT + _MUI) * z, _BB, _BM, _BM, 0)
+        mul(_F, cb, mb, (j * _NMAT + _ME) * z, _BB, _BB, _BM, 1)
         if j < q - 2:
-            mul_bmm_neg(_F, wb, mb, (j * _NMAT + _MC) * z)
+            mul(_F, wb, mb, (j * _NMAT + _MC) * z, _BB, _BM, _BM, 2)
     if invert(_F, (last * _NMAT + _MUI) * z, cb, _BB, tb) != 0:
         bad = 1
     return bad
