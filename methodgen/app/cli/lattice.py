@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import sys
-
 from ...errors import InputError
-from .common import EXIT_NUMERICAL, dump_json, parse_params
+from .common import parse_params
+from .family import run_and_report, verify_and_report
 
 #: the run options a lattice run takes; any other given option is refused, naming these
 _LATTICE_RUN_OPTIONS = {"method", "h", "steps", "t_final", "param", "json", "scene", "func", "command",
@@ -40,29 +39,17 @@ def run(args) -> int:
         size = (first, given[1] if given[1] is not None else (first if given[0] is not None else scene.size[1]))
     if args.method is not None and args.method not in scene.methods and args.method not in ("avf", "midpoint"):
         raise InputError(f"--method {args.method!r}: a lattice runs avf or midpoint")
-    try:
-        rep = run_lattice_scene(args.scene, args.method, args.h, args.steps, size=size, params=values or None,
-                                t_final=args.t_final, check_resolution=args.check_resolution,
-                                backend="compiled" if args.backend == "numba" else "numpy")
-    except Exception as exc:     # the module's ConvergenceError / NonFiniteError: one line, non-zero
-        if type(exc).__name__ not in ("ConvergenceError", "NonFiniteError", "ResolutionError"):
-            raise
-        print(f"methodgen: stopped: {exc}", file=sys.stderr)
-        if args.json:
-            print(dump_json({"scene": scene.name, "success": False, "message": str(exc)}))
-        return EXIT_NUMERICAL
-    if args.json:
-        print(dump_json(rep))
-        return 0
-    size = f"{' × '.join(sizes)} = {rep['N']} × {rep['M']}" if len(sizes) == 2 else f"N = {rep['N']}"
-    print(f"lattice {rep['scene']}  method {rep['method']}  backend {rep['backend']}  {size}  h = {rep['h']:g}  steps = {rep['steps']}"
-          f"  (t = 0 .. {rep['t_final']:g})")
-    print(f"{'invariant':>10} {'initial':>24} {'final':>24} {'max abs error':>14}")
-    for k, v in rep["invariants"].items():
-        print(f"{k:>10} {v['initial']:>24.17g} {v['final']:>24.17g} {v['max_abs_error']:>14.3e}")
-    print(f"build {rep['build_seconds']:.2f} s; {rep['seconds']:.2f} s for the steps "
-          f"({rep['seconds_per_step'] * 1e3:.3g} ms a step, {rep['newton_iterations_mean']:.2f} Newton iterations)")
-    return 0
+    def header(rep):
+        size = f"{' × '.join(sizes)} = {rep['N']} × {rep['M']}" if len(sizes) == 2 else f"N = {rep['N']}"
+        return (f"lattice {rep['scene']}  method {rep['method']}  backend {rep['backend']}  {size}  h = {rep['h']:g}  "
+                f"steps = {rep['steps']}  (t = 0 .. {rep['t_final']:g})")
+
+    return run_and_report(
+        args, scene.name,
+        lambda: run_lattice_scene(args.scene, args.method, args.h, args.steps, size=size, params=values or None,
+                                  t_final=args.t_final, check_resolution=args.check_resolution,
+                                  backend="compiled" if args.backend == "numba" else "numpy"),
+        header, lambda rep: f", {rep['newton_iterations_mean']:.2f} Newton iterations")
 
 
 def verify(args) -> int:
@@ -71,22 +58,12 @@ def verify(args) -> int:
     from ...symbolic.lattice_scheme import certificates, discretize_lattice, proved_invariants
 
     scene = load_lattice_scene(args.scene)
-    methods = [args.method] if getattr(args, "method", None) else list(scene.methods)
-    out, ok, kept = [], True, {}
-    for m in methods:
+
+    def certify(m):
         scheme = discretize_lattice(scene.lattice, m)
         certs = certificates(scheme)
-        for c in certs:
-            out.append({"method": m, "claim": c.claim, "status": c.status, "how": c.method})
-            ok &= c.status == "proved"
-        kept[m] = proved_invariants(scheme, certs)
-    if getattr(args, "json", False):
-        print(dump_json({"scene": scene.name, "certificates": out, "all_proved": ok, "proved_invariants": kept}))
-    else:
-        print(f"lattice {scene.name}: certificates per site term (independent of N)")
-        for c in out:
-            print(f"  [{c['status']}] {c['method']}: {c['claim']} ({c['how']})")
-        for m, names in kept.items():
-            every = " × ".join(x.name for x in getattr(scene.lattice, "sizes", (scene.lattice.size,)))
-            print(f"  {m} keeps, proved at every {every}: {', '.join(names) if names else 'none of the invariants'}")
-    return 0 if ok else EXIT_NUMERICAL
+        return certs, proved_invariants(scheme, certs)
+
+    every = " × ".join(x.name for x in getattr(scene.lattice, "sizes", (scene.lattice.size,)))
+    return verify_and_report(args, scene.name, [args.method] if getattr(args, "method", None) else list(scene.methods),
+                             certify, f"lattice {scene.name}: certificates per site term (independent of N)", every)
