@@ -11,6 +11,7 @@ import numpy
 
 from ..codegen import ktypes as _t
 from . import lattice_stepper as _ls
+from . import stepper as _stepper
 
 __all__ = ["run_steps", "gradient_2d"]
 
@@ -40,6 +41,7 @@ def _bound(grad, shape: dict) -> dict:
     consts.update(math=math, grad=grad)
     for name in _FUNCTIONS:
         consts[name] = types.FunctionType(getattr(_ls, name).__code__, consts, name)
+    consts["settled"] = types.FunctionType(_stepper.settled.__code__, consts, "settled")
     return consts
 
 

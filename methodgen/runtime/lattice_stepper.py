@@ -53,7 +53,7 @@ import math
 
 __all__ = ["lattice_run", "W_ROWS", "STATUS", "layout", "factor_size"]
 
-# flake8: noqa: F821  (``grad`` and the constants below are bound by the driver)
+# flake8: noqa: F821  (``grad``, ``settled`` and the constants below are bound by the driver)
 
 #: rows of the work array _W (nf ≤ 2 rows each; the module's kernel reads Z at _IZ, writes G at _IG)
 _IG, _IZ, _IZP, _IR, _IY, _IDY, _IDY2 = 0, 2, 4, 6, 8, 10, 12
@@ -463,7 +463,7 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
                 _fst[1] = s
                 _fst[2] = it
                 return
-            if size <= _tol * scale or (size <= 1e3 * 2.220446049250313e-16 * scale and size > 0.5 * last):
+            if settled(size, scale, last, _tol) != 0:
                 done = 1
                 break
             # simplified Newton converging slowly (the matrix at the predictor too far off): the

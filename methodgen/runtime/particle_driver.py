@@ -28,7 +28,8 @@ _LOOPS_EM: dict = {}
 
 def _loop(entry: str, kernels: dict, key, cache: dict, sig, python: bool):
     consts = {"math": math, **kernels}
-    consts["compensated_add"] = types.FunctionType(_stepper.compensated_add.__code__, consts, "compensated_add")
+    for name in ("compensated_add", "settled"):      # the stepper's own helpers
+        consts[name] = types.FunctionType(getattr(_stepper, name).__code__, consts, name)
     for name in _HELPERS:
         consts[name] = types.FunctionType(getattr(_ps, name).__code__, consts, name)
     fn = types.FunctionType(getattr(_ps, entry).__code__, consts, entry)

@@ -32,7 +32,7 @@ import math
 
 __all__ = ["sv_run", "em_run", "STATUS"]
 
-# flake8: noqa: F821  (``vel``, ``fpair``, ``fext``, ``gpair``, ``compensated_add`` are bound by the driver)
+# flake8: noqa: F821  (``vel``, ``fpair``, ``fext``, ``gpair``, ``compensated_add``, ``settled`` are bound by the driver)
 
 #: failure status of a run (``_fst[0]``)
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2}
@@ -173,7 +173,7 @@ def em_run(_Q, _P, _CQ, _CP, _A, _D, _PT, _V, _M, _p, _n, _d, _h, _steps, _every
                 _fst[1] = s
                 _fst[2] = it
                 return
-            if size <= _tol * scale or (size <= 1e3 * 2.220446049250313e-16 * scale and size > 0.5 * last):
+            if settled(size, scale, last, _tol) != 0:
                 done = 1
                 break
             last = size

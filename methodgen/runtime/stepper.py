@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["stepper", "lockstep", "rows", "lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax",
-           "compensated_add"]
+           "compensated_add", "settled"]
 
 # The names below that this file does not define (``numba``, ``_rt``, the upper-case
 # constants and the kernels) are bound by methodgen.runtime.fused when it compiles the loop.
@@ -711,6 +711,17 @@ def compensated_add(y, c, x):
     a = x + c
     s = y + a
     return s, a - (s - y)
+
+
+def settled(size, scale, last, tol):
+    """1 where an iteration has converged, else 0: its update ``size`` (max-norm) is at ``tol``
+    times the iterate's ``scale``, or at round-off (1000 ulps of it) and no longer halving from the
+    ``last`` one.  The rule of the lattice and particle step loops
+    (:mod:`methodgen.runtime.lattice_stepper`, :mod:`methodgen.runtime.particle_stepper`), which
+    bind it as this module's."""
+    if size <= tol * scale or (size <= 1e3 * 2.220446049250313e-16 * scale and size > 0.5 * last):
+        return 1
+    return 0
 
 
 def small_solve(A, b, x, W, c):
