@@ -1128,19 +1128,15 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
                             _fst[_b, 3] = -1
                             _fval[_b] = abs(_ejs[0] - _EJS[_l]) / _EJS[_L + _l]
                             _DEAD[_l] = _STAGES      # (its state is the step's end: kept as it is)
-                            for _i in range(_DIM):
-                                _SAVE[_i * _L + _l] = _YS[_i * _L + _l]
-                                _SAVE[(_DIM + _i) * _L + _l] = _CS[_i * _L + _l]
-                            for _i in range(_NF):
-                                _SAVE[(2 * _DIM + _i) * _L + _l] = _FS[_i * _L + _l]
                             _failed = 1
                         _EJS[_l] = _ejs[0]
                         _EJS[_L + _l] = _ejs[1]
             if _failed != 0:
                 # the failed lanes keep their state after the failing stage; the others
-                # completed this step
+                # completed this step (a lane that failed at the last stage, or at the composed
+                # step's end, ran no stage after it: its state is that already)
                 for _l in range(_nl):
-                    if _DEAD[_l] != 0.0:
+                    if _DEAD[_l] != 0.0 and _DEAD[_l] < _STAGES:
                         for _i in range(_DIM):
                             _YS[_i * _L + _l] = _SAVE[_i * _L + _l]
                             _CS[_i * _L + _l] = _SAVE[(_DIM + _i) * _L + _l]
