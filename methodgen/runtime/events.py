@@ -367,9 +367,14 @@ class _FamilyExpr:
                 raise InputError(f"{what} {self.shown!r}: {name!r} is indexed in this {layout.kind} module: write "
                                  f"{name}[k]; valid: {layout.valid()}")
         self._at = {}
-        # parse now (a bad text is refused when the event is made, not at the first step), at the
-        # smallest size the text's integer indices need (the arrays' size where given)
+        # parse now (a bad text is refused when the event is made, not at the first step), at a
+        # size its integer indices allow (the arrays' size where given): the largest literal index,
+        # doubled where the size's name enters (q[N - 15], q[N // 2 + 3]); a size a run meets
+        # where an index falls outside 1 … N is refused then, at the first evaluation
+        literals = [int(k) for inside in re.findall(r"\[([^\]]*)\]", text) for k in re.findall(r"\d+", inside)]
         n0 = max([layout.nmin] + [int(k) for k in _LITERAL_INDEX.findall(text)])
+        if re.search(rf"(?<![\w.]){re.escape(layout.size)}(?!\w)", text):
+            n0 = max(n0, 2 * (max(literals, default=0) + 1))
         sizes = {len(a) for a in self.arrays.values()}
         self.at(sizes.pop() if len(sizes) == 1 else n0)
 
