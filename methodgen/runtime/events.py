@@ -551,7 +551,7 @@ def solve_family(integrate, y0, t0, h, steps, params, events, *, save_every=1, o
         ``g(t, y)`` with the attributes of scipy's ``solve_ivp`` (``terminal``: bool or the
         count n, stop at the n-th crossing; ``direction``) and methodgen's ``condition(t, y)``
         (a crossing counts where it holds at the located state) and ``vectorized`` (g takes
-        times (k,) and states (k, *y0.shape)); :func:`event` makes them from text.
+        times (k,) and states ``(k, *y0.shape)``); :func:`event` makes them from text.
     save_every : int
         Rows of ``Solution.y``: every k-th step (and the last, and the located state of a
         terminal event).
@@ -572,7 +572,7 @@ def solve_family(integrate, y0, t0, h, steps, params, events, *, save_every=1, o
     Solution
         As the module's ``solve``, with ``status`` 1 where a terminal event stopped the run
         (``t``, ``y`` end at the located state; the message names the event), and per event
-        function: ``t_events`` (k,), ``y_events`` (k, *y0.shape), ``n_events`` (k,) the step n
+        function: ``t_events`` (k,), ``y_events`` ``(k, *y0.shape)``, ``n_events`` (k,) the step n
         each crossing lies in (from the run's state y_n, the n-th row of a ``save_every=1``
         run) and ``tau_events`` (k,) its sub-step τ: the located state is ``step(y_n, τ)``.
 
