@@ -154,6 +154,12 @@ def test_rendering_is_deterministic_and_imports_numpy_only(family):
     scheme = discretize_particles(family, "stormer-verlet", 8)
     a, b = render(scheme, "sig"), render(scheme, "sig")
     assert a == b and a.startswith("# content-sha256: ") and "# signature: sig" in a
-    imported = {n.names[0].name.split(".")[0] for n in ast.walk(ast.parse(a)) if isinstance(n, ast.Import)}
-    imported |= {n.module.split(".")[0] for n in ast.walk(ast.parse(a)) if isinstance(n, ast.ImportFrom)}
+    tree = ast.parse(a)
+    # the module's own imports (top level and in its functions), but solve()'s events path, which
+    # imports methodgen's one event location (methodgen.runtime.events) only when given events
+    solve = next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "solve")
+    lazy = {id(n) for n in ast.walk(solve) if isinstance(n, ast.ImportFrom)}
+    assert {n.module for n in ast.walk(solve) if isinstance(n, ast.ImportFrom)} == {"methodgen.runtime.events"}
+    imported = {n.names[0].name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)}
+    imported |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and id(n) not in lazy}
     assert imported == {"math", "numpy"}
