@@ -261,10 +261,12 @@ def _environment_for(folder: str):
     env.filters["pyrepr"] = repr
     env.filters["pytuple"] = lambda seq: repr(tuple(seq))
     from .special_helpers import source as helper_source
+    from .zeroin import source as zeroin_source
     from .compiled_kernels import block_kernel, kernel_function, kernel_text, stage_kernel
 
     env.globals["STATUS"] = STATUS     # the runtime's status codes (methodgen.codegen.abi)
     env.globals["helper_source"] = helper_source   # the scalar helpers' one source (a copy per module)
+    env.globals["zeroin_source"] = zeroin_source   # event location's root finder, one source (a copy per module)
     env.globals["kernel_function"] = kernel_function   # compiled kernels as kernel IR
     env.globals["kernel_text"] = kernel_text
     env.globals["stage_kernel"] = stage_kernel

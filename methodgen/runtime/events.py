@@ -24,6 +24,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import InputError
+from ..codegen.zeroin import zeroin
 from ..problem.parse import parse_expr
 
 __all__ = ["Event", "event", "section_event", "poincare", "solve_family"]
@@ -472,54 +473,6 @@ def _values(fn, t, Y):
     return np.array([float(fn(ti, yi)) for ti, yi in zip(t.tolist(), Y)])
 
 
-def _brent(f, b, fa, fb):
-    """A root of f in [0, b] with f(0) = fa and f(b) = fb of opposite signs, to adjacent floats
-    (Brent's method: R. P. Brent, Algorithms for Minimization without Derivatives, 1973, ch. 4;
-    the ordinary modules' ``_zeroin``, which their templates carry as they import numpy only).
-    ``f`` returns (value, state); returns (x, f(x), state at x)."""
-    eps = np.finfo(float).eps
-    a = 0.0
-    c, fc = a, fa
-    yb = None
-    d = e = b - a
-    for _ in range(200):
-        if (fb > 0.0) == (fc > 0.0) and fb != 0.0:
-            c, fc = a, fa
-            d = e = b - a
-        if abs(fc) < abs(fb):
-            a, b, c = b, c, b
-            fa, fb, fc = fb, fc, fb
-            yb = None
-        tol1 = 2.0 * eps * abs(b)
-        xm = 0.5 * (c - b)
-        if abs(xm) <= tol1 or fb == 0.0:
-            break
-        if abs(e) >= tol1 and abs(fa) > abs(fb):
-            s = fb / fa
-            if a == c:
-                p, q = 2.0 * xm * s, 1.0 - s
-            else:
-                q, r = fa / fc, fb / fc
-                p = s * (2.0 * xm * q * (q - r) - (b - a) * (r - 1.0))
-                q = (q - 1.0) * (r - 1.0) * (s - 1.0)
-            if p > 0.0:
-                q = -q
-            else:
-                p = -p
-            if 2.0 * p < min(3.0 * xm * q - abs(tol1 * q), abs(e * q)):
-                e, d = d, p / q
-            else:
-                d = e = xm
-        else:
-            d = e = xm
-        a, fa = b, fb
-        b = b + d if abs(d) > tol1 else b + (tol1 if xm > 0.0 else -tol1)
-        fb, yb = f(b)
-    if yb is None:
-        fb, yb = f(b)
-    return b, fb, yb
-
-
 def solve_family(integrate, y0, t0, h, steps, params, events, *, save_every=1, options=None,
                  invariants, solution, failures, iterations=None):
     """``solve(..., events=...)`` of a lattice (1-D, 2-D) or particle family's module: the run in
@@ -667,7 +620,7 @@ def solve_family(integrate, y0, t0, h, steps, params, events, *, save_every=1, o
                         g_end, y_end = phi(yk, tk, h, f)
                         if g_end == 0.0 or (g_end > 0.0) != (gk > 0.0):
                             tau, y_at = (h, y_end) if g_end == 0.0 else \
-                                _brent(lambda x: phi(yk, tk, x, f), h, gk, g_end)[::2]
+                                zeroin(lambda x: phi(yk, tk, x, f), h, gk, g_end)[::2]
                         else:
                             # the run's row shows a sign the fresh step does not: the same crossing
                             # at the step's end where the two agree to round-off, else reported
