@@ -10,7 +10,7 @@ state: without W (the pairs alone), with the central trap ``W = m w² |q|²/2`` 
 Itoh–Abe discrete gradient, 2 components × 2 quotients per particle).  A step's cost is its sweeps
 (iterations) times one sweep's, and W changes the iteration count (it changes the dynamics), so
 both are given: µs a step and µs a sweep (a step's time over the fixed-point iterations it took
-plus the predictor's sweep), the CPU time least of 5 repeats, after compilation.  Last, the cold
+plus the predictor's sweep), the least CPU time of ``--repeats`` runs, after compilation.  Last, the cold
 build of the scene (import, parse, derive, render, write, import, compile the stepper through
 LLVM, two steps) in a new process with a fresh METHODGEN_CACHE.
 """
@@ -62,6 +62,7 @@ def main(argv=None):
     ap.add_argument("--sizes", type=int, nargs="+", default=[21, 51])
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--orders", type=int, nargs="+", default=[2])
+    ap.add_argument("--repeats", type=int, default=5, help="the least CPU time of this many runs")
     args = ap.parse_args(argv)
     from methodgen.app.particles_scene import load_particles_scene
     from methodgen.codegen.particle_emit import build_particles
@@ -83,7 +84,8 @@ def main(argv=None):
                 info = {}
                 mod.integrate(y0, 0.01, args.steps, arrays=arrays, save_every=args.steps, info=info)
                 sweeps = float(np.mean(info["iterations"])) + len(mod.GAMMAS)     # + each stage's predictor
-                cpu = _best(lambda: mod.integrate(y0, 0.01, args.steps, arrays=arrays, save_every=args.steps))
+                cpu = _best(lambda: mod.integrate(y0, 0.01, args.steps, arrays=arrays, save_every=args.steps),
+                            args.repeats)
                 step, sweep = cpu / args.steps * 1e6, cpu / args.steps / sweeps * 1e6
                 if base is None:
                     base = (step, sweep)

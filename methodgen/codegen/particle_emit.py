@@ -3,7 +3,9 @@
 :func:`render` prints a :class:`methodgen.symbolic.particle_scheme.ParticleScheme` through
 ``templates/particles_module.py.j2``: the one-body values and velocities vectorised over the
 particles, the pair values and forces (Störmer–Verlet) or the pair's discrete-gradient factor
-``g`` (energy-momentum) vectorised over the pairs, CSE'd; the pair tables (``numpy.triu_indices``)
+``g`` (energy-momentum) vectorised over the pairs, the external potential's force or discrete
+gradient ``G(q0_a, q1_a)`` (energy-momentum) vectorised over the particles, CSE'd; the stages of
+a composition as a loop over its coefficients (``KICKS``/``DRIFTS``, ``GAMMAS``); the pair tables (``numpy.triu_indices``)
 of a size are built by the module at run time and the forces accumulated per particle with
 ``numpy.bincount``.  Nothing in the text depends on N: the module is derived, printed and
 imported once, in the time one template costs.

@@ -80,7 +80,7 @@ from ..problem.particles import Particles, particle_symbol
 __all__ = ["PARTICLE_METHODS", "ParticleScheme", "discretize_particles", "radial_profile", "certificates",
            "proved_invariants", "invariant_names", "verify_particles", "dg_identity", "kinetic_midpoint_identity",
            "translation_defect", "rotation_defects", "central_profile", "external_discrete_gradient",
-           "external_dg_identity", "ORDERS", "SV_ORDERS", "EM_ORDERS"]
+           "external_dg_identity", "ORDERS", "SV_ORDERS"]
 
 #: the methods of a particle family, and what they claim
 PARTICLE_METHODS = {
@@ -91,10 +91,8 @@ PARTICLE_METHODS = {
 }
 #: the orders both methods are composed to (symmetric compositions of the order-2 step)
 ORDERS = (2, 4, 6, 8)
-#: the orders Störmer–Verlet is composed to
+#: (the name of :data:`ORDERS` from when only Störmer–Verlet was composed)
 SV_ORDERS = ORDERS
-#: the orders energy-momentum is composed to (each stage an energy-momentum step of size γ_k h)
-EM_ORDERS = ORDERS
 #: how the external potential's discrete gradient is formed (energy-momentum)
 EXTERNAL_KINDS = ("none", "central", "itoh-abe")
 
