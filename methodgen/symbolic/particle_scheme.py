@@ -47,9 +47,11 @@ The external potential's discrete gradient (:func:`external_discrete_gradient`):
   writes without the removable singularity at ``q1 = q0`` (no 0/0, no cancellation as
   ``Δq → 0``: the form the pair term's ``V_s[s0, s1]`` is printed in), while Gonzalez's
   correction ``(W(q1) - W(q0) - ∇W(q̄)·Δq) Δq / |Δq|²`` divides an O(|Δq|³) difference of
-  O(1) values by ``|Δq|²`` -- the relative error of the quotient grows as ``ε/|Δq|²``.  The
-  price: Itoh–Abe's G is not along ``q̄_a``, so it keeps H but not L, even for a rotation
-  invariant W (such a W is central in d ≤ 3 and takes the first branch).
+  O(1) values by ``|Δq|²`` -- its rounding error grows as ``ε |W| / |Δq|`` as ``Δq → 0``, and
+  no exact rewriting removes the division for a general W.  The price: Itoh–Abe's G is not
+  along ``q̄_a``, so it keeps H but not L, even for a rotation invariant W (such a W is central
+  in d ≤ 3 and takes the first branch).
+
 References
 ----------
 .. [1] R. A. LaBudde, D. Greenspan, "Energy and momentum conserving methods of arbitrary order
@@ -93,8 +95,6 @@ PARTICLE_METHODS = {
 ORDERS = (2, 4, 6, 8)
 #: (the name of :data:`ORDERS` from when only Störmer–Verlet was composed)
 SV_ORDERS = ORDERS
-#: how the external potential's discrete gradient is formed (energy-momentum)
-EXTERNAL_KINDS = ("none", "central", "itoh-abe")
 
 
 @dataclass(frozen=True)
@@ -448,7 +448,7 @@ def _one_body_angular_identity(d: int) -> list:
     return [sp.expand(mid[k] * G[l] - mid[l] * G[k]) for k in range(d) for l in range(k + 1, d)]
 
 
-def _external_certificates(scheme: ParticleScheme, certify, ref_inv: str) -> list:
+def _external_certificates(scheme: ParticleScheme, certify) -> list:
     """The energy-momentum certificates of the external potential's discrete gradient ``G`` as
     emitted (``scheme.external_dg``): ``G·(q1 - q0) = W(q1) - W(q0)`` for any two points, proved
     in pieces that are each exact (module docstring; :func:`external_discrete_gradient`)."""
@@ -572,7 +572,7 @@ def certificates(scheme: ParticleScheme) -> list:
                            dg_identity(scheme.profile, scheme.s, scheme.g, scheme.s0, scheme.s1),
                            ref=ref, details={"keeps": "H"}))
     if scheme.external_kind != "none":
-        out += _external_certificates(scheme, certify, ref_inv)
+        out += _external_certificates(scheme, certify)
     out.append(certify("kinetic midpoint identity: ∇T(p̄)·(p1 - p0) = T(p1) - T(p0) per particle",
                        kinetic_midpoint_identity(fam.kinetic, pa), ref=ref, details={"keeps": "H"}))
     if fam.dim >= 2 and fam.pair != 0:
