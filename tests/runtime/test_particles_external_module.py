@@ -178,3 +178,12 @@ def test_the_discrete_gradient_of_w_has_no_cancellation_as_q1_tends_to_q0(W, kin
             D[:, 0] = delta
             naive_err = max(naive_err, np.max(np.abs((W_at(Q0 + D) - W_at(Q0)) / delta - grad(Q0 + D / 2)[:, 0])))
     assert naive_err > 1e-6                              # the control: the cancellation this form avoids
+
+
+@pytest.mark.parametrize("order", [3, 10, "4"])
+def test_build_refuses_an_order_not_offered_naming_the_valid_ones(modules, order, tmp_path):
+    from methodgen.errors import InputError
+
+    with pytest.raises(InputError, match="the orders are 2, 4, 6, 8"):
+        build_particles(modules["trap"], "energy-momentum", tmp_path / "bad.py", order=order)
+    assert not (tmp_path / "bad.py").exists()
