@@ -18,7 +18,8 @@ Format (TOML; the built-in ones are in ``methodgen/symbolic/scenes/particles``):
     x = "0"
     [run]
     method = ["stormer-verlet", "energy-momentum"]
-    order = 8                     # Störmer–Verlet's composition order (2, 4, 6, 8)
+    order = {stormer-verlet = 8, energy-momentum = 2}   # composition orders (2, 4, 6, 8) per method;
+                                  # one number: the same for every method; a method not named: 2
     N = 21                        # the size (--param N=51 on the command line)
     h = 0.01
     steps = 1000
@@ -44,7 +45,7 @@ __all__ = ["ParticleScene", "is_particles_scene", "load_particles_scene", "parti
 
 _TOP = {"name": str, "description": str, "particles": dict, "params": dict, "initial": dict, "run": dict}
 _PARTICLES = {"H": str, "q": list, "p": list, "arrays": list, "size": str}
-_RUN = {"method": (str, list), "order": int, "N": int, "h": (int, float), "steps": int, "barycentric": bool}
+_RUN = {"method": (str, list), "order": (int, dict), "N": int, "h": (int, float), "steps": int, "barycentric": bool}
 
 
 def particles_scene_names() -> list[str]:
@@ -67,12 +68,17 @@ class ParticleScene:
     initial: dict
     first: dict
     methods: tuple[str, ...]
-    order: int
+    orders: dict
     size: int
     h: float
     steps: int
     barycentric: bool
     source: str
+
+    @property
+    def order(self) -> int:
+        """The composition order of the scene's first method."""
+        return self.orders[self.methods[0]]
 
     def state(self, n: int, params: dict | None = None) -> tuple[np.ndarray, dict]:
         """``(y0, arrays)`` at size ``n``: the state (q[1..n], p[1..n]) particle-major and the
@@ -126,7 +132,7 @@ def load_particles_scene(name_or_path) -> ParticleScene:
         Unknown or mistyped keys, a missing table, an unknown method or order, bad formulas.
     """
     from ..problem.particles import Particles
-    from ..symbolic.particle_scheme import PARTICLE_METHODS, SV_ORDERS
+    from ..symbolic.particle_scheme import ORDERS, PARTICLE_METHODS
 
     data, path = _files.read("particles", name_or_path, _TOP, "particle")
     where = str(path)
@@ -173,9 +179,15 @@ def load_particles_scene(name_or_path) -> ParticleScene:
             raise SceneError(f"{where} [run]: method {m!r} is not available for particles; available: "
                              f"{', '.join(PARTICLE_METHODS)}")
     order = run.get("order", 2)
-    if order not in SV_ORDERS:
-        raise SceneError(f"{where} [run]: order {order!r}: Störmer–Verlet is composed to order "
-                         f"{', '.join(map(str, SV_ORDERS))}")
+    given = order if isinstance(order, dict) else {m: order for m in methods}
+    for m, k in given.items():
+        if m not in methods:
+            raise SceneError(f"{where} [run]: order of {m!r}, a method the scene does not run; its methods are "
+                             f"{', '.join(methods)}")
+        if isinstance(k, bool) or k not in ORDERS:
+            raise SceneError(f"{where} [run]: order {k!r} for {m}: the particle methods are composed to order "
+                             f"{', '.join(map(str, ORDERS))}")
+    orders = {m: given.get(m, 2) for m in methods}
     if run["steps"] < 1 or not (math.isfinite(run["h"]) and run["h"] > 0):
         raise SceneError(f"{where} [run]: steps must be ≥ 1 and h > 0")
     barycentric = run.get("barycentric", False)
@@ -185,7 +197,7 @@ def load_particles_scene(name_or_path) -> ParticleScene:
         fam.check_size(run["N"])
     except InputError as exc:
         raise SceneError(f"{where} [run]: {exc}") from None
-    scene = ParticleScene(name, data.get("description", ""), fam, initial, first, tuple(methods), order,
+    scene = ParticleScene(name, data.get("description", ""), fam, initial, first, tuple(methods), orders,
                           run["N"], float(run["h"]), run["steps"], barycentric, where)
     try:
         scene.state(fam.nmin)      # the formulas parse (whitelist) and evaluate
@@ -198,8 +210,8 @@ def run_particles_scene(name_or_path, method=None, h=None, steps=None, *, size=N
                         t_final=None, backend="numpy", progress=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
-    ``size``: N for this run (default the scene's); ``order``: Störmer–Verlet's composition order
-    (default the scene's; energy-momentum is of order 2); ``backend``: "numpy" or "compiled"
+    ``size``: N for this run (default the scene's); ``order``: the method's composition order (2, 4,
+    6, 8; default the scene's for the method, else 2); ``backend``: "numpy" or "compiled"
     (:func:`methodgen.codegen.particle_emit.build_particles`).
     """
     from ..codegen.particle_emit import build_particles
@@ -208,7 +220,7 @@ def run_particles_scene(name_or_path, method=None, h=None, steps=None, *, size=N
     method = method or scene.methods[0]
     n = scene.size if size is None else size
     scene.family.check_size(n)
-    order = (scene.order if order is None else int(order)) if method == "stormer-verlet" else (order or 2)
+    order = scene.orders.get(method, 2) if order is None else int(order)
     h = scene.h if h is None else float(h)
     steps = scene.steps if steps is None else int(steps)
     if t_final is not None:

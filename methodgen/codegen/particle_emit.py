@@ -3,7 +3,9 @@
 :func:`render` prints a :class:`methodgen.symbolic.particle_scheme.ParticleScheme` through
 ``templates/particles_module.py.j2``: the one-body values and velocities vectorised over the
 particles, the pair values and forces (Störmer–Verlet) or the pair's discrete-gradient factor
-``g`` (energy-momentum) vectorised over the pairs, CSE'd; the pair tables (``numpy.triu_indices``)
+``g`` (energy-momentum) vectorised over the pairs, the external potential's force or discrete
+gradient ``G(q0_a, q1_a)`` (energy-momentum) vectorised over the particles, CSE'd; the stages of
+a composition as a loop over its coefficients (``KICKS``/``DRIFTS``, ``GAMMAS``); the pair tables (``numpy.triu_indices``)
 of a size are built by the module at run time and the forces accumulated per particle with
 ``numpy.bincount``.  Nothing in the text depends on N: the module is derived, printed and
 imported once, in the time one template costs.
@@ -100,6 +102,13 @@ def _vector_fn(exprs, fam, roles, source, shape, printer, prefix) -> list[str]:
             + [f"return {_tuple([f'numpy.broadcast_to({x}, {shape})' for x in outs])}"])
 
 
+def _ends(exprs, scheme: ParticleScheme, source: str) -> list[str]:
+    """Lines binding the end positions ``x_a1 = Q1[:, 0]``, … that ``exprs`` use (the external
+    potential's discrete gradient, energy-momentum)."""
+    used = set().union(*[e.free_symbols for e in exprs]) if exprs else set()
+    return [f"{s.name} = {source}[:, {k}]" for k, s in enumerate(scheme.q1_slots) if s in used]
+
+
 # --- compiled: scalar kernels of one particle or one pair ---------------------------------------
 
 def _scalar_bind(exprs, fam, roles_at, sources) -> list:
@@ -144,7 +153,10 @@ def _kernels(scheme: ParticleScheme, printer) -> list:
     ``_vel(_P, _V, _a, _M, _p)`` (∇T at the particle a into ``_V[_a]``), and either
     ``_fpair(_Q, _F, _a, _b, _M, _p)`` and ``_fext(_Q, _F, _a, _M, _p)`` (forces added into ``_F``,
     Störmer–Verlet) or ``_gpair(_Q, _D, _A, _a, _b, _M, _p)`` (the pair's ``±g (r0 + r1)`` added
-    into ``_A``, r1 = r0 + D_a - D_b; energy-momentum)."""
+    into ``_A``, r1 = r0 + D_a - D_b) and ``_gext(_Q, _D, _A, _a, _M, _p)`` (the external
+    potential's discrete gradient ``G(q0_a, q0_a + D_a)`` added into ``_A[_a]``; energy-momentum).
+    A kernel the stepper does not call (no W: ``HAS_EXTERNAL`` 0) still exists, a no-op, so the
+    stepper compiles with the same globals."""
     fam = scheme.family
     d = fam.dim
     fns = []
@@ -191,6 +203,18 @@ def _kernels(scheme: ParticleScheme, printer) -> list:
         body.append(("-=", ("[]", "_A", (_v("_b"), ("n", k))), _v(f"_c{k}")))
     del qa
     fns.append(kir.function("_gpair", ("_Q", "_D", "_A", "_a", "_b", "_M", "_p"), body))
+    G = list(scheme.external_dg)
+    if G:
+        used = set().union(*[e.free_symbols for e in G])
+        # the end position as the numpy module forms it (Q1 = Q0 + D): the same bits
+        ends = [("=", _v(s1.name), ("+", ("[]", "_Q", (_v("_a"), ("n", k))), ("[]", "_D", (_v("_a"), ("n", k)))))
+                for k, s1 in enumerate(scheme.q1_slots) if s1 in used]
+        pre, outs = _cse_bases(G, printer, "_t")
+        body = (_scalar_bind(G, fam, {"a": "_a"}, {"q": "_Q", "p": "_P"}) + ends + pre
+                + [("+=", ("[]", "_A", (_v("_a"), ("n", k))), outs[k]) for k in range(d)])
+    else:       # (the stepper does not call it: HAS_EXTERNAL is 0)
+        body = [("+=", ("[]", "_A", (_v("_a"), ("n", 0))), ("n", 0.0))]
+    fns.append(kir.function("_gext", ("_Q", "_D", "_A", "_a", "_M", "_p"), body))
     return fns
 
 
@@ -212,6 +236,13 @@ def render(scheme: ParticleScheme, sig: str, backend: str = "numpy") -> str:
         pre, (gout,) = _cse_lines([g], printer, "_t")
         lines["pair"] = (_bind([g], fam) + _gather([g], fam, "ab", "Q") + pre
                          + [f"return numpy.broadcast_to({gout}, s0.shape)"])
+        G = list(scheme.external_dg)
+        if G:
+            pre, outs = _cse_lines(G, printer, "_t")
+            lines["external_dg"] = (_bind(G, fam) + _gather(G, fam, "a", "Q0") + _ends(G, scheme, "Q1") + pre
+                                    + [f"return {_tuple([f'numpy.broadcast_to({x}, (Q0.shape[0],))' for x in outs])}"])
+        else:
+            lines["external_dg"] = ["return ()"]
     else:
         fa, fb = scheme.pair_force
         lines["pair"] = _vector_fn(list(fa) + list(fb), fam, "ab", "Q", "I.shape", printer, "_t")
@@ -231,10 +262,16 @@ def render(scheme: ParticleScheme, sig: str, backend: str = "numpy") -> str:
     if helpers:
         special = "\n\n" + special.strip("\n") + "\n"
     defaults = "{" + ", ".join(f"{k!r}: {v!r}" for k, v in fam.params.items()) + "}"
-    kept = "H (to round-off), the total linear and angular momentum" if em else \
-        "a modified energy near H (symplectic); the total linear and angular momentum"
+    if em:
+        kept = "H (to round-off), the total linear and angular momentum"
+        if scheme.external_kind == "central":
+            kept += " (the external potential is central: G = W_σ[σ0, σ1] (q0 + q1))"
+        elif scheme.external_kind == "itoh-abe":
+            kept += " (the external potential's discrete gradient is Itoh–Abe's: not L)"
+    else:
+        kept = "a modified energy near H (symplectic); the total linear and angular momentum"
     description = f"{PARTICLE_METHODS[scheme.method]}; keeps {kept} where the certificates prove them."
-    comp = "" if em or scheme.order == 2 else f", composed to order {scheme.order} ({scheme.composition})"
+    comp = "" if scheme.order == 2 else f", composed to order {scheme.order} ({scheme.composition})"
     header = [f"Generated by methodgen {__version__} from templates/{TEMPLATE} -- do not edit.",
               f"system: {fam.name}; method: {scheme.method}{comp} (particles, any N); backend: {backend}",
               f"H = {_docsafe(fam.text)}",
@@ -246,7 +283,7 @@ def render(scheme: ParticleScheme, sig: str, backend: str = "numpy") -> str:
         description=description, traits=scheme.traits, signature=sig, size=fam.size.name, nmin=fam.nmin, dim=d,
         q_fields=list(fam.q_names), p_fields=list(fam.p_names), array_names=list(fam.array_names),
         param_names=list(fam.params), defaults_text=defaults, invariant_names=list(invariant_names(fam)),
-        planes=planes, kicks=list(scheme.kicks), drifts=list(scheme.drifts), em=em,
+        planes=planes, kicks=list(scheme.kicks), drifts=list(scheme.drifts), gammas=list(scheme.gammas), em=em,
         has_external=any(e != 0 for e in scheme.external_force), lines=lines, special=special,
         backend=backend, scalar=scalar)
     text = re.sub(r"\n{4,}", "\n\n\n", text).rstrip() + "\n"
@@ -266,7 +303,8 @@ def build_particles(fam: Particles, method: str = "stormer-verlet", path=None, *
     method : {"stormer-verlet", "energy-momentum"}
     path : path-like, optional
     order : {2, 4, 6, 8}
-        Störmer–Verlet composed symmetrically to this order (energy-momentum: 2).
+        Either method composed symmetrically to this order (Störmer–Verlet's kick-drift-kick
+        stages, energy-momentum steps of size ``γ_k h``).
     composition : str, optional
         The composition family (default :data:`methodgen.symbolic.compositions.DEFAULT_FAMILY`).
     backend : {"numpy", "compiled"}

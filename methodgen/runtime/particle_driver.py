@@ -19,8 +19,9 @@ __all__ = ["run_sv", "run_em"]
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 #: Q, P, CQ, CP, F, V (n, d), M, p, n, d, h, steps, every, T, kick, drift, ns, hx, fst
 SIG_SV = _t.void(_M, _M, _M, _M, _M, _M, _M, _V, _i8, _i8, _f8, _i8, _i8, _M, _V, _V, _i8, _i8, _V)
-#: Q, P, CQ, CP, A, D, PT, V (n, d), M, p, n, d, h, steps, every, T, its, maxiter, tol, fst
-SIG_EM = _t.void(_M, _M, _M, _M, _M, _M, _M, _M, _M, _V, _i8, _i8, _f8, _i8, _i8, _M, _V, _i8, _f8, _V)
+#: Q, P, CQ, CP, A, D, PT, V (n, d), M, p, n, d, h, steps, every, T, its, maxiter, tol, gammas, ns, hx, fst
+SIG_EM = _t.void(_M, _M, _M, _M, _M, _M, _M, _M, _M, _V, _i8, _i8, _f8, _i8, _i8, _M, _V, _i8, _f8, _V, _i8, _i8,
+                 _V)
 _HELPERS = ("add", "forces", "dg", "finite", "save")
 _LOOPS_SV: dict = {}
 _LOOPS_EM: dict = {}
@@ -60,7 +61,7 @@ def _finish(T, fst, steps, every, its):
     code = int(fst[0])
     done = int(fst[1]) if code else steps
     kept = done // every + 1 + (1 if code == 0 and steps % every else 0)
-    return T[:kept], its[:steps].astype(numpy.int64), (code, int(fst[1]), int(fst[2]), float(fst[3]))
+    return T[:kept], its[:steps].astype(numpy.int64), (code, int(fst[1]), int(fst[2]), float(fst[3]), int(fst[4]))
 
 
 def _prepare(Q, P, M, p):
@@ -73,11 +74,11 @@ def _prepare(Q, P, M, p):
 
 def run_sv(vel, fpair, fext, Q, P, M, p, h, steps, every, kicks, drifts, has_external, *, python=False):
     """Störmer–Verlet composition steps from ``Q``, ``P`` (n, d), updated in place: ``(rows, its,
-    (code, step, iterations, value))`` with rows (steps // every + 1 + …, 2nd), row 0 the start."""
+    (code, step, iterations, value, stage))`` with rows (steps // every + 1 + …, 2nd), row 0 the start."""
     Q, P, M, p = _prepare(Q, P, M, p)
     n, d = Q.shape
     T = _rows(steps, every, n, d, Q, P)
-    fst = numpy.zeros(4)
+    fst = numpy.zeros(5)
     work = [numpy.zeros((n, d)) for _ in range(4)]     # CQ, CP, F, V
     kick = numpy.ascontiguousarray(kicks, dtype=numpy.float64)
     drift = numpy.ascontiguousarray(drifts, dtype=numpy.float64)
@@ -87,16 +88,20 @@ def run_sv(vel, fpair, fext, Q, P, M, p, h, steps, every, kicks, drifts, has_ext
     return _finish(T, fst, steps, every, numpy.zeros(max(steps, 1)))
 
 
-def run_em(vel, gpair, Q, P, M, p, h, steps, every, maxiter, tol, *, python=False):
+def run_em(vel, gpair, gext, Q, P, M, p, h, steps, every, maxiter, tol, gammas=(1.0,), has_external=0, *,
+           python=False):
     """Energy-momentum steps from ``Q``, ``P`` (n, d), updated in place (as :func:`run_sv`; ``its``
-    the fixed-point iterations per step)."""
+    the fixed-point iterations per step, summed over the stages): each step the stages of size
+    ``γ_k h`` (``gammas``, the composition's coefficients); ``has_external``: 1 to add the external
+    potential's discrete gradient (``gext``) per particle."""
     Q, P, M, p = _prepare(Q, P, M, p)
     n, d = Q.shape
     T = _rows(steps, every, n, d, Q, P)
-    fst = numpy.zeros(4)
+    fst = numpy.zeros(5)
     its = numpy.zeros(max(steps, 1))
     work = [numpy.zeros((n, d)) for _ in range(6)]     # CQ, CP, A, D, PT, V
-    loop, compiled = _loop("em_run", {"vel": vel, "gpair": gpair}, gpair, _LOOPS_EM, SIG_EM, python)
+    gam = numpy.ascontiguousarray(gammas, dtype=numpy.float64)
+    loop, compiled = _loop("em_run", {"vel": vel, "gpair": gpair, "gext": gext}, gpair, _LOOPS_EM, SIG_EM, python)
     _call(loop, compiled, (Q, P, *work, M, p, int(n), int(d), float(h), int(steps), int(every), T, its,
-                           int(maxiter), float(tol), fst))
+                           int(maxiter), float(tol), gam, int(gam.size), int(has_external), fst))
     return _finish(T, fst, steps, every, its)

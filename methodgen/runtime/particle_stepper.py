@@ -4,9 +4,10 @@
 module's coefficients, adjacent half kicks merged, the force at the step's end kept for the next
 step's first kick); :func:`em_run` ``steps`` steps of the energy-momentum method, the increment
 ``Δq = h ∇T(p0 - (h/2) A(q0, q0 + Δq))`` by fixed-point iteration from the Störmer–Verlet
-predictor (``A(q0, q0) = ∇V(q0)``).  Forces and discrete gradients are pair loops ``a < b``
-over the module's pair kernel (``fpair``, ``gpair``), the velocities a loop over the particles
-(``vel``).  Like :mod:`methodgen.runtime.lattice_stepper` this is written in the subset of
+predictor (``A(q0, q0) = ∇V(q0)``), in stages of size ``γ_k h`` where the method is composed to
+a higher order.  Forces and discrete gradients are pair loops ``a < b`` over the module's pair
+kernel (``fpair``, ``gpair``) plus, with an external potential, a loop over the particles
+(``fext``, ``gext``): O(N²) + O(N) per sweep; the velocities a loop over the particles (``vel``).  Like :mod:`methodgen.runtime.lattice_stepper` this is written in the subset of
 Python that :mod:`methodgen.codegen.llvmkernels` translates: the module's kernels are bound as
 globals and inlined, the whole compiled with N a run-time argument -- or run as plain Python,
 the reference the compiled loops are tested against bit for bit.
@@ -32,7 +33,8 @@ import math
 
 __all__ = ["sv_run", "em_run", "STATUS"]
 
-# flake8: noqa: F821  (``vel``, ``fpair``, ``fext``, ``gpair``, ``compensated_add``, ``settled`` are bound by the driver)
+# flake8: noqa: F821  (``vel``, ``fpair``, ``fext``, ``gpair``, ``gext``, ``compensated_add``, ``settled`` are bound
+# by the driver)
 
 #: failure status of a run (``_fst[0]``)
 STATUS = {"OK": 0, "CONVERGENCE": 1, "NONFINITE": 2}
@@ -61,14 +63,18 @@ def forces(_Q, _F, _M, _p, n, d, hx):
             fext(_Q, _F, a, _M, _p)
 
 
-def dg(_Q, _D, _A, _M, _p, n, d):
-    """``_A`` = the sum over the pairs of ±g (r0 + r1), r1 = r0 + D_a - D_b."""
+def dg(_Q, _D, _A, _M, _p, n, d, hx):
+    """``_A`` = the sum over the pairs of ±g (r0 + r1), r1 = r0 + D_a - D_b, then (``hx`` 1) the
+    external potential's discrete gradient G(q0_a, q0_a + D_a) of every particle."""
     for a in range(n):
         for k in range(d):
             _A[a, k] = 0.0
     for a in range(n):
         for b in range(a + 1, n):
             gpair(_Q, _D, _A, a, b, _M, _p)
+    if hx != 0:
+        for a in range(n):
+            gext(_Q, _D, _A, a, _M, _p)
 
 
 def finite(_Q, _P, n, d):
@@ -118,74 +124,80 @@ def sv_run(_Q, _P, _CQ, _CP, _F, _V, _M, _p, _n, _d, _h, _steps, _every, _T, _ki
 
 
 def em_run(_Q, _P, _CQ, _CP, _A, _D, _PT, _V, _M, _p, _n, _d, _h, _steps, _every, _T, _its, _maxiter, _tol,
-           _fst):
+           _gam, _ns, _hx, _fst):
     """Steps 0 … _steps-1 of the energy-momentum method from ``_Q``, ``_P`` (n, d), in place.
 
     ``_A``, ``_D``, ``_PT``, ``_V`` (n, d): work (the discrete gradient, the increment, the mean
-    momentum, the velocity); ``_its`` (_steps,): iterations per step; ``_fst`` (4,): status,
-    step, iterations and the last update of a failure.  Converged: the update at ``_tol`` times
-    the scale ``max |q| + max |Δq|``, or at round-off and no longer halving.
+    momentum, the velocity); ``_gam`` (_ns,): the composition's stage coefficients (each stage a
+    step of size ``_gam[k] h``; ``(1.0,)`` at order 2); ``_hx``: 1 when there is an external
+    potential; ``_its`` (_steps,): iterations per step (summed over the stages); ``_fst`` (5,):
+    status, step, iterations, the last update and the stage of a failure.  Converged: the update
+    at ``_tol`` times the scale ``max |q| + max |Δq|``, or at round-off and no longer halving.
     """
     n = _n
     d = _d
-    h = _h
     row = 1
     for s in range(_steps):
-        for a in range(n):
-            for k in range(d):
-                _D[a, k] = 0.0
-        dg(_Q, _D, _A, _M, _p, n, d)
-        for a in range(n):
-            for k in range(d):
-                _PT[a, k] = _P[a, k] - (0.5 * h) * _A[a, k]
-        for a in range(n):
-            vel(_PT, _V, a, _M, _p)
-        for a in range(n):
-            for k in range(d):
-                _D[a, k] = h * _V[a, k]
-        last = math.inf
-        done = 0
-        it = 0
-        size = 0.0
-        while it < _maxiter:
-            it += 1
-            dg(_Q, _D, _A, _M, _p, n, d)
+        _its[s] = 0.0
+        for st in range(_ns):
+            h = _gam[st] * _h
+            for a in range(n):
+                for k in range(d):
+                    _D[a, k] = 0.0
+            dg(_Q, _D, _A, _M, _p, n, d, _hx)
             for a in range(n):
                 for k in range(d):
                     _PT[a, k] = _P[a, k] - (0.5 * h) * _A[a, k]
             for a in range(n):
                 vel(_PT, _V, a, _M, _p)
-            size = 0.0
-            qmax = 0.0
-            dmax = 0.0
             for a in range(n):
                 for k in range(d):
-                    dn = h * _V[a, k]
-                    size = max(size, abs(dn - _D[a, k]))
-                    _D[a, k] = dn
-                    qmax = max(qmax, abs(_Q[a, k]))
-                    dmax = max(dmax, abs(dn))
-            scale = qmax + dmax
-            if scale == 0.0:
-                scale = 1.0
-            if not (size < math.inf):
-                _fst[0] = 2.0
+                    _D[a, k] = h * _V[a, k]
+            last = math.inf
+            done = 0
+            it = 0
+            size = 0.0
+            while it < _maxiter:
+                it += 1
+                dg(_Q, _D, _A, _M, _p, n, d, _hx)
+                for a in range(n):
+                    for k in range(d):
+                        _PT[a, k] = _P[a, k] - (0.5 * h) * _A[a, k]
+                for a in range(n):
+                    vel(_PT, _V, a, _M, _p)
+                size = 0.0
+                qmax = 0.0
+                dmax = 0.0
+                for a in range(n):
+                    for k in range(d):
+                        dn = h * _V[a, k]
+                        size = max(size, abs(dn - _D[a, k]))
+                        _D[a, k] = dn
+                        qmax = max(qmax, abs(_Q[a, k]))
+                        dmax = max(dmax, abs(dn))
+                scale = qmax + dmax
+                if scale == 0.0:
+                    scale = 1.0
+                if not (size < math.inf):
+                    _fst[0] = 2.0
+                    _fst[1] = s
+                    _fst[2] = it
+                    _fst[4] = st
+                    return
+                if settled(size, scale, last, _tol) != 0:
+                    done = 1
+                    break
+                last = size
+            if done == 0:
+                _fst[0] = 1.0
                 _fst[1] = s
                 _fst[2] = it
+                _fst[3] = size
+                _fst[4] = st
                 return
-            if settled(size, scale, last, _tol) != 0:
-                done = 1
-                break
-            last = size
-        if done == 0:
-            _fst[0] = 1.0
-            _fst[1] = s
-            _fst[2] = it
-            _fst[3] = size
-            return
-        _its[s] = it
-        add(_Q, _CQ, _D, 1.0, n, d)
-        add(_P, _CP, _A, -h, n, d)
+            _its[s] += it
+            add(_Q, _CQ, _D, 1.0, n, d)
+            add(_P, _CP, _A, -h, n, d)
         if finite(_Q, _P, n, d) == 0:
             _fst[0] = 2.0
             _fst[1] = s

@@ -72,3 +72,39 @@ def test_cli_errors_are_one_line(capsys, argv, words):
     code = cli.main(["run", "nbody-ring", *argv])
     out, err = capsys.readouterr()
     assert code != 0 and words in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_trap_runs_and_verifies_energy_momentum_above_order_2(capsys):
+    """The trap scene (a central W): energy-momentum at order 4 keeps H and L to round-off at N = 6, and
+    its certificates claim H and L (not P, the trap pulls); Störmer–Verlet, the control, does not keep H."""
+    assert "trap" in particles_scene_names() and load_particles_scene("trap").orders == {
+        "energy-momentum": 2, "stormer-verlet": 4}
+    code, em, err = _run(capsys, "trap", "--method", "energy-momentum", "--order", "4", "--steps", "200",
+                         "--param", "N=6")
+    assert code == 0, err
+    assert em["order"] == 4 and em["traits"]["stages"] == 5 and em["traits"]["external_discrete_gradient"] == "central"
+    H, L = em["invariants"]["H"], em["invariants"]["L"]
+    assert H["max_abs_error"] <= 1e-13 * abs(H["initial"]) and L["max_abs_error"] <= 1e-13 * abs(L["initial"])
+    code, sv, err = _run(capsys, "trap", "--method", "stormer-verlet", "--order", "2", "--steps", "200",
+                         "--param", "N=6")
+    assert code == 0, err
+    assert sv["invariants"]["H"]["max_abs_error"] > 1e-8 * abs(sv["invariants"]["H"]["initial"])
+    assert cli.main(["verify", "trap", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["all_proved"] and set(rep["proved_invariants"]["energy-momentum"]) == {"H", "L"}
+
+
+def test_a_scene_order_table_names_what_is_valid(tmp_path):
+    from pathlib import Path
+
+    from methodgen.errors import SceneError
+
+    text = Path(load_particles_scene("trap").source).read_text(encoding="utf-8")
+    for bad, words in (('order = {gauss = 4}', "does not run"), ('order = {energy-momentum = 5}', "2, 4, 6, 8"),
+                       ('order = 3', "2, 4, 6, 8")):
+        path = tmp_path / "bad.toml"
+        path.write_text(text.replace('order = {energy-momentum = 2, stormer-verlet = 4}', bad))
+        with pytest.raises(SceneError, match=words):
+            load_particles_scene(path)
+    path.write_text(text.replace('order = {energy-momentum = 2, stormer-verlet = 4}', "order = 6"))
+    assert load_particles_scene(path).orders == {"energy-momentum": 6, "stormer-verlet": 6}

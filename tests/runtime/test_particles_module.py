@@ -113,8 +113,8 @@ def test_compiled_pair_loops_are_the_python_run_bit_for_bit(family, modules, met
             T, _, status = drv.run_sv(mod._vel, mod._fpair, mod._fext, Q.copy(), P.copy(), M, (1.0,), 0.01, 30, 1,
                                       mod.KICKS, mod.DRIFTS, mod.HAS_EXTERNAL, python=python)
         else:
-            T, _, status = drv.run_em(mod._vel, mod._gpair, Q.copy(), P.copy(), M, (1.0,), 0.01, 30, 1, 100,
-                                      4 * 2.220446049250313e-16, python=python)
+            T, _, status = drv.run_em(mod._vel, mod._gpair, mod._gext, Q.copy(), P.copy(), M, (1.0,), 0.01, 30, 1,
+                                      100, 4 * 2.220446049250313e-16, mod.GAMMAS, mod.HAS_EXTERNAL, python=python)
         assert status[0] == 0
         runs.append(T)
     assert np.array_equal(runs[0], runs[1])

@@ -34,7 +34,7 @@ def cmd_scenes(args) -> int:
         s = load_particles_scene(name)
         particles.append({"name": s.name, "description": s.description, "methods": list(s.methods),
                           "size": s.family.size.name, "default_size": s.size, "min_size": s.family.nmin,
-                          "order": s.order})
+                          "order": s.order, "orders": dict(s.orders)})
     if args.json:
         print(json.dumps({"scenes": rows, "lattices": lattices, "particles": particles}))
     else:
