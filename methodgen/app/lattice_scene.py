@@ -211,12 +211,16 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
 
 
 def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None,
-                      t_final=None, solver="simplified", check_resolution=True, backend="numpy", progress=None) -> dict:
+                      t_final=None, solver="simplified", check_resolution=True, backend="numpy", progress=None,
+                      section=None, plot=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
     ``size``: N for this run (default the scene's; a 2-D lattice's (N, M), or N for N × N);
     ``params``: parameter values for this run; ``backend``: "numpy" or "compiled"
-    (:func:`methodgen.codegen.lattice_emit.build_lattice`).
+    (:func:`methodgen.codegen.lattice_emit.build_lattice`).  ``section`` (``"q[1] = 0, p[1] > 0"``,
+    a 1-D lattice): a Poincaré section instead -- every crossing within the steps, each located on
+    the method's own map (:func:`methodgen.app.family_section.run_family_section`); ``plot``: a file
+    to draw it to.
     """
     from ..codegen.lattice_emit import build_lattice
 
@@ -236,6 +240,16 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
     build_seconds = time.perf_counter() - t0
     y0 = scene.y0(n, params)
+    if section is not None:
+        from .family_section import run_family_section
+
+        if two_d:
+            raise InputError("--section: a 2-D lattice takes no text sections (its state has no flat names); "
+                             "give its module's solve(..., events=...) a callable g(t, y) with y of shape (2, N, M)")
+        meta = dict(scene=scene.name, method=method, backend=backend, dims=1, N=n, build_seconds=build_seconds)
+        return {**meta, **run_family_section(module, y0, h, steps, section, params=params, plot=plot,
+                                             title=f"{scene.name}, {method}, N = {n}, h = {h:g}", solver=solver,
+                                             check_resolution=check_resolution), "steps": steps}
     # the invariant errors over ≤ ~1000 rows (≤ ~100 on a 2-D lattice: each row is a whole grid)
     every = max(1, steps // (100 if two_d else 1000))
     t0 = time.perf_counter()

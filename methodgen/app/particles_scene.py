@@ -207,12 +207,14 @@ def load_particles_scene(name_or_path) -> ParticleScene:
 
 
 def run_particles_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None, order=None,
-                        t_final=None, backend="numpy", progress=None) -> dict:
+                        t_final=None, backend="numpy", progress=None, section=None, plot=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
     ``size``: N for this run (default the scene's); ``order``: the method's composition order (2, 4,
     6, 8; default the scene's for the method, else 2); ``backend``: "numpy" or "compiled"
-    (:func:`methodgen.codegen.particle_emit.build_particles`).
+    (:func:`methodgen.codegen.particle_emit.build_particles`).  ``section`` (``"y[2] = 0, py[2] > 0"``):
+    a Poincaré section instead -- every crossing within the steps, each located on the method's own
+    map (:func:`methodgen.app.family_section.run_family_section`); ``plot``: a file to draw it to.
     """
     from ..codegen.particle_emit import build_particles
 
@@ -230,6 +232,12 @@ def run_particles_scene(name_or_path, method=None, h=None, steps=None, *, size=N
     module = build_particles(scene.family, method, order=order, backend=backend, progress=progress)
     build_seconds = time.perf_counter() - t0
     y0, arrays = scene.state(n, params)
+    meta = dict(scene=scene.name, method=method, order=module.ORDER, backend=backend, N=n, build_seconds=build_seconds)
+    if section is not None:
+        from .family_section import run_family_section
+
+        return {**meta, **run_family_section(module, y0, h, steps, section, params=params, arrays=arrays, plot=plot,
+                                             title=f"{scene.name}, {method}, N = {n}, h = {h:g}"), "steps": steps}
     every = max(1, steps // 1000)
     info: dict = {}
     t0 = time.perf_counter()

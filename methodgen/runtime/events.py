@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..codegen.zeroin import zeroin
 from ..problem.parse import parse_expr
 
-__all__ = ["Event", "event", "section_event", "poincare", "solve_family"]
+__all__ = ["Event", "event", "section_event", "poincare", "solve_family", "family_state_names"]
 
 _COMPARISON = re.compile(r"^(?P<lhs>[^<>=!]+?)\s*(?P<op><=|>=|<|>)\s*(?P<rhs>[^<>=!]+)$")
 _EQUATION = re.compile(r"^(?P<lhs>[^<>=!]+?)\s*=\s*(?P<rhs>[^<>=!]+)$")
@@ -287,6 +287,21 @@ class _Layout:
                 f"{self.size}, {self.size} - 1 …, or a Sum's index)")
 
 
+def family_state_names(module, n: int) -> list:
+    """The names of a family module's flat state components at N = ``n`` sites, in the state's
+    order: ``x[1], y[1], x[2], …, px[1], …`` for particles, ``q[1] … q[N], p[1] … p[N]`` for a 1-D
+    lattice (the text an event or a section names them by); None for another module or a 2-D
+    lattice (its state has no flat text names)."""
+    fam = _family(module)
+    if fam is None or fam.kind == "lattice-2d":
+        return None
+    out = [None] * (len(fam.fields) * int(n))
+    for f, name in enumerate(fam.fields):
+        for k in range(1, int(n) + 1):
+            out[fam.flat(f, k, int(n))] = f"{name}[{k}]"
+    return out
+
+
 def _family(module):
     """The :class:`_Layout` of a lattice or particle family's module, None for another module."""
     if hasattr(module, "Q_FIELDS") and hasattr(module, "SIZE_NAME"):
@@ -367,6 +382,11 @@ class _FamilyExpr:
             if name in layout.fields or name in layout.arrays:
                 raise InputError(f"{what} {self.shown!r}: {name!r} is indexed in this {layout.kind} module: write "
                                  f"{name}[k]; valid: {layout.valid()}")
+        for name in re.findall(r"(?<![\w.])([A-Za-z]\w*)\s*\[", text):
+            if name not in layout.fields and name not in layout.arrays:
+                arrays = f"; its arrays {', '.join(layout.arrays)}" if layout.arrays else ""
+                raise InputError(f"{what} {self.shown!r}: {name!r} is not a field of this {layout.kind} module (its "
+                                 f"fields are {', '.join(layout.fields)}{arrays}); valid: {layout.valid()}")
         self._at = {}
         # parse now (a bad text is refused when the event is made, not at the first step), at a
         # size its integer indices allow (the arrays' size where given): the largest literal index,

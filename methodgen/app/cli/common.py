@@ -99,6 +99,20 @@ def dump_json(obj) -> str:
     return json.dumps(json_clean(obj), allow_nan=False, default=_json_default)
 
 
+def section_lines(rep: dict) -> list:
+    """The text report of a Poincaré section run (``run --section``): the crossings, the largest
+    |g| at them and the invariants' errors there (and where the plot went)."""
+    errs = ", ".join(f"{k} {v:.2e}" for k, v in rep["invariant_errors_at_crossings"].items()) or "—"
+    g = "—" if rep["max_abs_g"] is None else f"{rep['max_abs_g']:.2e}"
+    size = f" (N = {rep['N']})" if "N" in rep else ""
+    out = [f"{rep['scene']}, {rep['method']}{size}: {rep['crossings']} crossings of {rep['section']!r} in "
+           f"{rep['steps_done']} steps of h = {rep['h']:g} ({rep['seconds']:.2f} s); max |g| {g}; "
+           f"invariant errors at the crossings: {errs}"]
+    if "plot" in rep:
+        out.append(f"plot written to {rep['plot']}")
+    return out
+
+
 def refuse_for_splitting(method: str, **flags) -> None:
     """One-line InputError for the first option given (not None) that a Wisdom–Holman splitting
     does not take: ``flags`` maps option names (``order`` → ``--order``) to their values."""

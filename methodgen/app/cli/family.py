@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import sys
 
-from .common import EXIT_NUMERICAL, dump_json
+from .common import EXIT_NUMERICAL, dump_json, section_lines
 
 #: the generated modules' step failures: reported as one line, never as a traceback
 _STEP_FAILURES = ("ConvergenceError", "NonFiniteError", "ResolutionError")
@@ -29,6 +29,9 @@ def run_and_report(args, scene_name: str, run, header, work) -> int:
         return EXIT_NUMERICAL
     if args.json:
         print(dump_json(rep))
+        return 0
+    if "section" in rep:
+        print("\n".join(section_lines(rep)))
         return 0
     print(header(rep))
     print(f"{'invariant':>10} {'initial':>24} {'final':>24} {'max abs error':>14}")

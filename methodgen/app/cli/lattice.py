@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from ...errors import InputError
-from .common import parse_params
+from .common import check_output_file, parse_params
 from .family import run_and_report, verify_and_report
 
 #: the run options a lattice run takes; any other given option is refused, naming these
 _LATTICE_RUN_OPTIONS = {"method", "h", "steps", "t_final", "param", "json", "scene", "func", "command",
-                        "check_resolution", "backend", "defaults_of"}
+                        "check_resolution", "backend", "defaults_of", "section", "plot"}
 
 
 def run(args) -> int:
@@ -20,7 +20,10 @@ def run(args) -> int:
     if given:
         flags = ", ".join("--" + k.replace("_", "-") for k in sorted(given))
         raise InputError(f"{flags}: not available for a lattice scene; a lattice run takes --method, --h, "
-                         "--steps, --t-final, --param NAME=VALUE (N=… for the size), --backend, --no-check-resolution and --json")
+                         "--steps, --t-final, --param NAME=VALUE (N=… for the size), --backend, --no-check-resolution, "
+                         "--section (with --plot) and --json")
+    if args.plot is not None and args.section is None:
+        raise InputError("--plot: a lattice run draws a Poincaré section only (--section 'q[1] = 0, p[1] > 0')")
     scene = load_lattice_scene(args.scene)
     sizes = [s.name for s in getattr(scene.lattice, "sizes", (scene.lattice.size,))]
     names = [*sizes, *scene.lattice.params]
@@ -48,7 +51,9 @@ def run(args) -> int:
         args, scene.name,
         lambda: run_lattice_scene(args.scene, args.method, args.h, args.steps, size=size, params=values or None,
                                   t_final=args.t_final, check_resolution=args.check_resolution,
-                                  backend="compiled" if args.backend == "numba" else "numpy"),
+                                  backend="compiled" if args.backend == "numba" else "numpy",
+                                  section=args.section,
+                                  plot=None if args.plot is None else str(check_output_file(args.plot, "--plot"))),
         header, lambda rep: f", {rep['newton_iterations_mean']:.2f} Newton iterations")
 
 

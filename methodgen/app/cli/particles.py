@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from ...errors import InputError
-from .common import parse_params
+from .common import check_output_file, parse_params
 from .family import run_and_report, verify_and_report
 
 #: the run options a particle run takes; any other given option is refused, naming these
 _PARTICLES_RUN_OPTIONS = {"method", "h", "steps", "t_final", "param", "json", "scene", "func", "command",
-                          "backend", "defaults_of", "order"}
+                          "backend", "defaults_of", "section", "plot", "order"}
 
 
 def run(args) -> int:
@@ -21,7 +21,10 @@ def run(args) -> int:
     if given:
         flags = ", ".join("--" + k.replace("_", "-") for k in sorted(given))
         raise InputError(f"{flags}: not available for a particle scene; a particle run takes --method, --order, "
-                         "--h, --steps, --t-final, --param NAME=VALUE (N=… for the size), --backend and --json")
+                         "--h, --steps, --t-final, --param NAME=VALUE (N=… for the size), --backend, --section (with --plot) "
+                         "and --json")
+    if args.plot is not None and args.section is None:
+        raise InputError("--plot: a particle run draws a Poincaré section only (--section 'y[2] = 0, py[2] > 0')")
     scene = load_particles_scene(args.scene)
     fam = scene.family
     values = parse_params(args.param, [fam.size.name, *fam.params])
@@ -50,7 +53,9 @@ def run(args) -> int:
         args, scene.name,
         lambda: run_particles_scene(args.scene, args.method, args.h, args.steps, size=n, params=values or None,
                                     order=order, t_final=args.t_final,
-                                    backend="compiled" if args.backend == "numba" else "numpy"),
+                                    backend="compiled" if args.backend == "numba" else "numpy",
+                                    section=args.section,
+                                  plot=None if args.plot is None else str(check_output_file(args.plot, "--plot"))),
         header, lambda rep: "" if rep["iterations_mean"] is None else f", {rep['iterations_mean']:.2f} iterations")
 
 

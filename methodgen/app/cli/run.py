@@ -25,7 +25,7 @@ from ...symbolic.nbody import FAMILIES as WH_FAMILIES
 from ..stats import ErrorMax
 from .common import (EXIT_INPUT, EXIT_NUMERICAL, NUMERICAL_ERRORS, add_order_args, add_resolution_arg, add_variant_args,
                      apply_overrides, check_output_file, refuse_for_splitting, cli_advice, dump_json, effective_stages, finite_or_none, parse_params, parse_y0, positive_int,
-                     print_note, resolve_order, resolve_stages, resolve_time_transform, step_size,
+                     print_note, resolve_order, section_lines, resolve_stages, resolve_time_transform, step_size,
                      transformed_context)
 
 
@@ -677,13 +677,7 @@ def cmd_run(args) -> int:
     if args.json:
         print(dump_json(rep))
     elif "section" in rep:
-        errs = ", ".join(f"{k} {v:.2e}" for k, v in rep["invariant_errors_at_crossings"].items()) or "—"
-        g = "—" if rep["max_abs_g"] is None else f"{rep['max_abs_g']:.2e}"
-        print(f"{rep['scene']}, {rep['method']}: {rep['crossings']} crossings of {rep['section']!r} in "
-              f"{rep['steps_done']} steps of h = {rep['h']:g} ({rep['seconds']:.2f} s); max |g| {g}; "
-              f"invariant errors at the crossings: {errs}")
-        if "plot" in rep:
-            print(f"plot written to {rep['plot']}")
+        print("\n".join(section_lines(rep)))
         return 0
     else:
         _print_run(rep)
