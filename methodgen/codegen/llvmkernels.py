@@ -1212,7 +1212,8 @@ def _names_of(py_func) -> dict:
 attach = kir.attach
 
 
-def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, vectorize=True) -> "LLVMKernel":
+def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, vectorize=True,
+                   lazy=False) -> "LLVMKernel":
     """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the numba
     signature ``sig``, its names resolved in ``globals_`` (default: its module's).  Raises
     :class:`Unsupported` when its source uses anything the translator does not know.
@@ -1226,10 +1227,23 @@ def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, v
     pipeline (both by default).  Code of many short loops over run-time lengths (a few bodies
     of an N-body loop) gains nothing from either and pays for them in compile time: the
     Wisdom–Holman runtime turns them off.  They never change the bits (no fast-math: LLVM
-    does not reassociate)."""
+    does not reassociate).
+
+    ``lazy``: return the kernel named (its symbol, from the cache key) but compile it only when
+    its machine code is first needed (:meth:`LLVMKernel.materialize`).  A generated module's
+    kernels are made so: the fused loop inlines their kernel IR and never calls their own
+    machine code, so compiling each at import was a second compilation of the same code (0.42 s
+    of the outer solar system's cold first use)."""
     sig = _t.plain(sig)   # (numba's signatures are accepted too)
     options = (bool(unroll), bool(vectorize))
     with _LOCK:     # one engine per process: modules are added to it one at a time
+        if lazy and not c_entry:
+            key, name = _symbol(py_func, sig, globals_, c_entry, options)
+            if name not in _LOADED:
+                out = LLVMKernel(py_func, sig, None, _engine(), name)
+                out._globals = globals_
+                out._pending = (key, options)
+                return out
         return _compile_kernel(py_func, sig, globals_, c_entry, options)
 
 
@@ -1248,15 +1262,21 @@ def _add_c_entry(module, fn, sig, name):
         b.ret(got)                  # the kernel's value (float64 or int64)
 
 
-def _compile_kernel(py_func, sig, globals_=None, c_entry=False, options=(True, True)):
-    engine = _engine()
+def _symbol(py_func, sig, globals_, c_entry, options):
+    """``(cache key or None, symbol)`` of a compilation: named by the key, the same in every
+    process (a cached object's), or unique in this process's engine where it cannot be cached."""
+    _engine()
     key = _objcache.key(py_func, sig, globals_, c_entry, _STATE,
                         options="" if options == (True, True) else f"unroll={options[0]},vectorize={options[1]}")
     if key is not None:
-        name = f"mg_{key[:24]}_{py_func.__name__}"      # the same in every process: a cached object's
-    else:
-        _STATE["count"] += 1
-        name = f"mg{_STATE['count']}_{py_func.__name__}"   # unique in the engine
+        return key, f"mg_{key[:24]}_{py_func.__name__}"
+    _STATE["count"] += 1
+    return None, f"mg{_STATE['count']}_{py_func.__name__}"
+
+
+def _compile_kernel(py_func, sig, globals_=None, c_entry=False, options=(True, True), named=None):
+    engine = _engine()
+    key, name = named if named is not None else _symbol(py_func, sig, globals_, c_entry, options)
     got = _LOADED.get(name)
     if got is None:
         obj = _objcache.load(key, name) if key is not None else None
@@ -1363,7 +1383,7 @@ class LLVMKernel:
     such call, its machine code cached as any other) called through ctypes -- the kernel's own
     arithmetic, no numba (the Python stepper, tests and diagnostics; the runtime never does)."""
 
-    __slots__ = ("py_func", "engine", "_py", "c_call", "_sig", "_addr", "_type", "symbol", "_globals")
+    __slots__ = ("py_func", "engine", "_py", "c_call", "_sig", "_addr", "_type", "symbol", "_globals", "_pending")
 
     def __init__(self, py_func, sig, addr, engine, symbol=""):
         self._sig = sig               # methodgen.codegen.ktypes.Signature
@@ -1377,9 +1397,22 @@ class LLVMKernel:
         # the machine code's symbol: named by the cache key of the text it was translated
         # from (or unique in the process), so it identifies the code, as an id() cannot
         self.symbol = symbol
+        self._pending = None          # (cache key, options) of a lazy kernel not compiled yet
+
+    def materialize(self) -> "LLVMKernel":
+        """Compile (or load from the machine-code cache) a lazy kernel's machine code, once; its
+        symbol is the one it was named by.  Raises :class:`Unsupported` where the translator
+        refuses its kernel IR (``METHODGEN_KERNELS=numba`` compiles such a module with numba)."""
+        if self._addr is None:
+            with _LOCK:
+                if self._addr is None:
+                    key, options = self._pending
+                    got = _compile_kernel(self.py_func, self._sig, self._globals, False, options, (key, self.symbol))
+                    self._addr, self.engine, self._pending = got._addr, got.engine, None
+        return self
 
     def __wrapper_address__(self):
-        return self._addr
+        return self.materialize()._addr
 
     def signature(self):
         """numba's signature of the kernel (imports numba)."""
@@ -1451,7 +1484,8 @@ def kernel(sig, table=None):
             attach(py_func, table)
         if table is not None and enabled():
             try:
-                return compile_kernel(py_func, sig, globals_=getattr(py_func, "__kir_names__", None))
+                # named now, compiled on first use: the fused loop inlines the tree instead
+                return compile_kernel(py_func, sig, globals_=getattr(py_func, "__kir_names__", None), lazy=True)
             except Unsupported:
                 pass
         numba = _numba_for(py_func)

@@ -308,6 +308,23 @@ def test_the_numba_route_can_be_forced(tmp_path, monkeypatch):
     assert isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
 
 
+def test_a_table_kernel_is_named_at_once_and_compiled_on_first_use(tmp_path):
+    """A generated kernel (one with a kernel-IR table) is not compiled when its module is loaded
+    (the fused loop inlines its tree): it gets its symbol then -- the one an eager compilation
+    names it by -- and its machine code on first use, the same code.  Control: another kernel's
+    symbol differs."""
+    fn, table = _table_kernel(tmp_path, "k_lazy")
+    k = lk.kernel(RES, table)(fn)
+    assert isinstance(k, lk.LLVMKernel) and k._addr is None            # named, not compiled
+    eager = lk.compile_kernel(fn, RES, globals_=getattr(fn, "__kir_names__", None))
+    assert eager.symbol == k.symbol and eager._addr
+    Y = np.array([[1.5, 2.5, 3.5], [-1.0, 0.5, 0.25]])
+    assert np.array_equal(_rows(k, Y, 1), Y[:, :1] + Y[:, 1:2])        # compiled on this first use
+    assert k._addr == eager._addr                                       # the same machine code
+    other = _load(tmp_path, "k_lazy_other", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] - _y[1]\n").k
+    assert lk.compile_kernel(other, RES).symbol != k.symbol
+
+
 def test_a_table_of_another_function_is_refused(tmp_path):
     """A kernel table is the definition of the function it is attached to (name and parameters),
     or it is refused: a module cannot compile one function's tree for another."""
