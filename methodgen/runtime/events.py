@@ -93,12 +93,7 @@ def _compile(module, text, params, what: str):
         expr = text.xreplace({s: table[str(s)] for s in text.free_symbols})
     else:
         expr = parse_expr(text, table, what=what)
-    values = dict(module.DEFAULT_PARAMS)
-    if params:
-        unknown = sorted(set(params) - set(values))
-        if unknown:
-            raise InputError(f"unknown parameter(s) {unknown} for {what}; valid: {sorted(values)}")
-        values.update(params)
+    values = _param_values(module, params, what)
     expr = expr.subs({table[k]: sp.Float(v) for k, v in values.items() if k in table})
     free = sorted(str(s) for s in expr.free_symbols - set(state))
     if free:
@@ -357,6 +352,18 @@ class _Names(Mapping):
 _LITERAL_INDEX = re.compile(r"\[\s*(\d+)\s*\]")
 
 
+def _param_values(module, params, what) -> dict:
+    """The module's parameter values with ``params`` over its defaults; an unknown name is refused,
+    naming the valid ones."""
+    values = dict(module.DEFAULT_PARAMS)
+    if params:
+        unknown = sorted(set(params) - set(values))
+        if unknown:
+            raise InputError(f"unknown parameter(s) {unknown} for {what}; valid: {sorted(values)}")
+        values.update(params)
+    return values
+
+
 class _FamilyExpr:
     """A numpy function of a family's flat states (..., len(fields) N) for an expression in its
     indexed fields: parsed (whitelist parser) and compiled once per size N met, the index of
@@ -365,13 +372,7 @@ class _FamilyExpr:
     def __init__(self, module, layout, text, params, arrays, what, shown=None):
         self.layout, self.text, self.what = layout, text, what
         self.shown = text if shown is None else shown        # the user's text, for the messages
-        values = dict(module.DEFAULT_PARAMS)
-        if params:
-            unknown = sorted(set(params) - set(values))
-            if unknown:
-                raise InputError(f"unknown parameter(s) {unknown} for {what}; valid: {sorted(values)}")
-            values.update(params)
-        self.values = {k: float(v) for k, v in values.items()}
+        self.values = {k: float(v) for k, v in _param_values(module, params, what).items()}
         self.arrays = {}
         for name, a in dict(arrays or {}).items():
             if name not in layout.arrays:
