@@ -12,19 +12,30 @@ the peak A (the scene's own is 2).  Each setting runs ``steps`` steps from the b
 (check_resolution=False: the large amplitudes at h = 0.1 are what is measured, resolved or not;
 maxiter=400, so that slow convergence shows as a count instead of a failure); the time per step
 is the min over ``--repeats`` runs, the solvers alternated within each repeat (the machine is
-shared: the load, ``os.getloadavg()``, is printed before and after).  ``newton-full`` (SuperLU at
+shared: the load, ``os.getloadavg()``, is printed before and after; BLAS runs one thread, see
+below).  ``newton-full`` (SuperLU at
 every iteration, ``NEWTON_REFACTOR = True``) is timed at amplitude 10 to choose between the two
 Newton variants.  Also printed: the relative energy error |H - H0|/|H0| at the end of the run.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import time
+import sys
 
-import numpy as np
+# One BLAS thread (set before numpy loads): scipy's GMRES orthogonalises with BLAS level-1 calls,
+# which OpenBLAS threads at these lengths; on this shared 2-core machine the threads' spinning made
+# the Krylov timings erratic (the same 128² step: 37 ms to 640 ms between runs).  Pass --blas-threads
+# to override.
+if "--blas-threads" not in sys.argv:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 STEPS = {32: 20, 64: 10, 128: 5}
 
@@ -48,13 +59,14 @@ def main(argv=None):
     ap.add_argument("--backends", default="numpy,compiled")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--blas-threads", action="store_true", help="leave BLAS's thread count as the environment has it")
     args = ap.parse_args(argv)
     from methodgen.app.lattice_scene import load_lattice_scene
     from methodgen.codegen.lattice_emit import build_lattice
 
     sc = load_lattice_scene("klein-gordon-2d")
     mods = {b: build_lattice(sc.lattice, "avf", backend=b) for b in args.backends.split(",")}
-    print(f"load average before: {os.getloadavg()}")
+    print(f"load average before: {os.getloadavg()}; OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")
     out = []
     for n in map(int, args.sizes.split(",")):
         base = sc.y0((n, n))
