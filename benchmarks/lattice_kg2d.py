@@ -76,7 +76,8 @@ def fixed_point(mod, y0, h, steps, maxiter=500):
     try:
         with np.errstate(over="ignore", invalid="ignore"):   # (a diverging iteration overflows: reported below)
             for s in range(steps):
-                Y1, it = mod._step(Y, h, n, m, p, None, maxiter, 4 * mod._EPS, s, False, dy, dy2)
+                Y1, it = mod._step(Y, h, n, m, p, mod._Simplified(None, h, n, m, p), maxiter, 4 * mod._EPS, s, False, dy,
+                                   dy2)
                 dy2, dy, Y = dy, Y1 - Y, Y1
                 its.append(it)
     except (mod.ConvergenceError, mod.NonFiniteError) as exc:

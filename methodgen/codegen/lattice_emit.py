@@ -459,6 +459,36 @@ def _horner_pieces(dt: Differenced, tp) -> list:
     return [_horner(x, tuple(tp.z0) + tuple(tp.z1) + tuple(d for d, _, _ in dt.binds)) for x in dt.pieces]
 
 
+def _jacobian_lines(tp, dt: Differenced, lattice, printer) -> tuple[list, list[str]]:
+    """A 2-D term's site Jacobian ``∂A_a/∂z1_b`` (the derivative of its AVF pieces in the step's end
+    values, :attr:`Differenced.jac`) as vectorised numpy: ``(pairs, lines)``, ``pairs`` the nonzero
+    entries as ``(f_a, o_a, f_b, o_b)`` (the field and offset of slot a's piece and of slot b's end
+    value) and ``lines`` the body returning one (n, m) array per pair, in that order.  Only the slots
+    the entries use are gathered (an unused roll is a copy of a field).  The module's exact Newton
+    matrix and its matrix-free products are assembled from these (``_site_jacobian``)."""
+    t = tp.term
+    fields = lattice.fields
+    pairs, exprs = [], []
+    for a, (f, o) in enumerate(t.slots):
+        for b, (g, o2) in enumerate(t.slots):
+            e = dt.jac[a][b]
+            if e != 0:                 # identically zero (the site's structure): no entry at all
+                pairs.append((fields.index(f), tuple(o), fields.index(g), tuple(o2)))
+                exprs.append(e)
+    if not exprs:
+        return [], []
+    used = set().union(*[e.free_symbols for e in exprs])
+    binds = [bd for bd in dt.binds if bd[0] in used]
+    used |= {x for _, s, r in binds for x in (s, r)}
+    z0 = [(s, sl) for s, sl in zip(tp.z0, t.slots) if s in used]
+    z1 = [(s, sl) for s, sl in zip(tp.z1, t.slots) if s in used]
+    pre, outs = _cse_lines(exprs, printer, "_k")
+    lines = (_bind2(exprs, lattice) + _gathers2([s for s, _ in z0], [sl for _, sl in z0], "_Y0", fields)
+             + _gathers2([s for s, _ in z1], [sl for _, sl in z1], "_Z", fields) + _difference_lines(binds) + pre
+             + [f"return {_tuple([f'numpy.broadcast_to({x}, _Y0.shape[1:])' for x in outs])}"])
+    return pairs, lines
+
+
 def render2d(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     """The module text of a 2-D periodic lattice (``templates/lattice_2d_module.py.j2``): per term its
     values and its pieces as vectorised numpy over the N × M sites (rolls), the linear part's
@@ -487,8 +517,10 @@ def render2d(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
         lines = (_bind2(pieces, lat) + _gathers2(tp.z0, t.slots, "_Y0", fields)
                  + _gathers2(tp.z1, t.slots, "_Z", fields) + _difference_lines(dt.binds) + g_pre
                  + [f"return {_tuple([f'numpy.broadcast_to({x}, _Y0.shape[1:])' for x in g_out])}"])
+        pairs, jac_lines = _jacobian_lines(tp, dt, lat, printer)
         terms.append({"source": _docsafe(t.source), "index": len(terms), "slots": [(fields.index(f), o) for f, o in t.slots],
-                      "slot_names": [s.name for s in tp.z0], "energy_lines": values(t, tp.z0), "piece_lines": lines})
+                      "slot_names": [s.name for s in tp.z0], "energy_lines": values(t, tp.z0), "piece_lines": lines,
+                      "jac_pairs": pairs, "jac_lines": jac_lines})
     quantities = [("H", list(range(len(terms))))]
     extra = []
     for name, its_terms in lat.invariants.items():
@@ -504,7 +536,8 @@ def render2d(scheme: LatticeScheme, sig: str, backend: str = "numpy") -> str:
     K = linear_stencil(lat)
     stencil_lines = _bind2(list(K.values()), lat) + ["return ("] + [
         f"    ({f}, {g}, {a}, {b}, {printer.doprint(c)})," for (f, g, (a, b)), c in K.items()] + [")"]
-    code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t.get("piece_lines", [])]
+    code = "\n".join([ln for t in terms + extra for ln in t["energy_lines"] + t.get("piece_lines", [])
+                      + t.get("jac_lines", [])]
                      + stencil_lines + scalar)
     env = _environment()
     special, defaults, description, header = _front(

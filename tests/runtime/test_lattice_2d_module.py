@@ -151,8 +151,8 @@ def test_bad_input_names_what_is_valid(kg):
         kg.integrate(np.zeros((2, 2, 5)), 0.01, 1)
     with pytest.raises(KeyError, match="unknown parameter"):
         kg.integrate(state(4, 4), 0.01, 1, {"nope": 1.0})
-    with pytest.raises(ValueError, match="simplified Newton"):
-        kg.integrate(state(4, 4), 0.01, 1, solver="newton")
+    with pytest.raises(ValueError, match="the solvers are 'simplified', 'newton', 'krylov'"):
+        kg.integrate(state(4, 4), 0.01, 1, solver="block")
 
 
 @pytest.mark.parametrize("text,params", [(KG, PARAMS), (SG, {"L": 4.0})])
