@@ -204,3 +204,45 @@ def test_a_newton_failure_names_its_step_and_stage(sg, backend, tmp_path):
     assert f"step 0 (stage {exc.stage} of 9)" in str(exc) and "residual" in str(exc)
     assert np.isfinite(exc.residual) and exc.residual > 0
     assert exc.trajectory.shape == (1, 2 * N)                       # only the start: nothing after
+
+
+# --- the CLI and scene files ------------------------------------------------------------------------
+
+def _cli(capsys, *argv):
+    import json
+
+    from methodgen.app import cli
+
+    code = cli.main([*argv, "--json"])
+    out, err = capsys.readouterr()
+    return code, (json.loads(out) if out.strip() else None), err
+
+
+def test_cli_runs_a_lattice_at_order_4_and_refuses_other_orders(capsys):
+    pytest.importorskip("llvmlite")
+    code, rep, err = _cli(capsys, "run", "sine-gordon", "--order", "4", "--param", "N=16", "--steps", "40",
+                          "--backend", "numba")
+    assert code == 0, err
+    assert (rep["order"], rep["traits"]["order"], rep["traits"]["stages"]) == (4, 4, 5)
+    assert rep["invariants"]["H"]["max_abs_error"] <= 1e-13 * abs(rep["invariants"]["H"]["initial"])
+    code, rep2, err = _cli(capsys, "run", "sine-gordon", "--param", "N=16", "--steps", "40", "--backend", "numba")
+    assert code == 0 and rep2["order"] == 2 and rep2["y_final"] != rep["y_final"]      # control: the default
+    for bad in ("3", "10", "four"):
+        code, _, err = _cli(capsys, "run", "sine-gordon", "--order", bad)
+        assert code == 2 and "2, 4, 6, 8" in err, err
+
+
+def test_scene_order_one_number_or_per_method(tmp_path):
+    from methodgen.errors import SceneError
+
+    base = open(load_lattice_scene("sine-gordon").source).read()          # (methods avf and midpoint)
+    good = tmp_path / "o.toml"
+    good.write_text(base.replace("[run]\n", "[run]\norder = {avf = 4}\n", 1))
+    scene = load_lattice_scene(good)
+    assert (scene.order("avf"), scene.order("midpoint")) == (4, 2)
+    good.write_text(base.replace("[run]\n", "[run]\norder = 6\n", 1))
+    assert load_lattice_scene(good).orders == {"avf": 6, "midpoint": 6}
+    for value, fragment in (("3", "2, 4, 6, 8"), ("10", "2, 4, 6, 8"), ("true", "order"), ("{kdv = 4}", "does not run")):
+        good.write_text(base.replace("[run]\n", f"[run]\norder = {value}\n", 1))
+        with pytest.raises(SceneError, match=fragment):
+            load_lattice_scene(good)
