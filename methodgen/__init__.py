@@ -21,7 +21,7 @@ build_text(H, q, p, method, params=..., ...) -> module  (warm start: no SymPy wh
 verify(scheme) -> Report                        (exact certificates of the method's claims)
 load_scene(name_or_path) -> Scene
 Lattice(H, q="q", p="p", size="N", params=None, invariants=None)   (site sums of symbolic size N)
-build_lattice(lattice, "avf" | "midpoint", path=None, order=2) -> module     (one module for every N; order 4, 6, 8: composed)
+build_lattice(lattice, "avf" | "midpoint", path=None) -> module     (one module for every N)
 load_lattice_scene(name_or_path) -> LatticeScene
 Particles(H, q=[...], p=[...], size="N", arrays=["m"], params=None)   (one-body and pair sums of symbolic N)
 build_particles(fam, "stormer-verlet" | "energy-momentum", order=2, backend="numpy") -> module  (every N)
