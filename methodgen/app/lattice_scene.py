@@ -21,6 +21,8 @@ Format (TOML; the built-in ones are in ``methodgen/symbolic/scenes/lattice``)::
     p = "0"
     [run]
     method = "avf"                # or a list; avf, midpoint
+    order = 4                     # optional (1-D): 2, 4, 6, 8 -- the method composed symmetrically;
+                                  # or per method: order = {avf = 4, midpoint = 2}
     N = 256                       # the size (--param N=4096 on the command line)
     h = 0.01
     steps = 1000
@@ -50,7 +52,7 @@ __all__ = ["LatticeScene", "is_lattice_scene", "load_lattice_scene", "lattice_sc
 _TOP = {"name": str, "description": str, "lattice": dict, "params": dict, "invariants": dict, "initial": dict,
         "run": dict}
 _LATTICE = {"H": str, "q": str, "p": str, "size": (str, list), "fields": list, "skew": str}
-_RUN = {"method": (str, list), "N": int, "h": (int, float), "steps": int}
+_RUN = {"method": (str, list), "order": (int, dict), "N": int, "h": (int, float), "steps": int}
 
 
 def lattice_scene_names() -> list[str]:
@@ -76,6 +78,12 @@ class LatticeScene:
     h: float
     steps: int
     source: str
+    #: the composition order per method ([run] order; 2 where not given)
+    orders: dict = None
+
+    def order(self, method: str) -> int:
+        """The scene's order of ``method`` (2 unless ``[run] order`` gives one)."""
+        return (self.orders or {}).get(method, 2)
 
     def y0(self, n, params: dict | None = None) -> np.ndarray:
         """The initial state at size ``n``: ``(q[1..n], p[1..n])`` (a skew lattice's ``u[1..n]``) from
@@ -194,6 +202,7 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
         if m not in LATTICE_METHODS:
             raise SceneError(f"{where} [run]: method {m!r} is not available for a lattice; available: "
                              f"{', '.join(LATTICE_METHODS)}")
+    orders = _orders(run.get("order", 2), methods, two_d, where)
     if run["steps"] < 1 or not (math.isfinite(run["h"]) and run["h"] > 0):
         raise SceneError(f"{where} [run]: steps must be ≥ 1 and h > 0")
     size = (run["N"], run.get(sizes[1], run["N"])) if two_d else run["N"]
@@ -202,7 +211,7 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
     except InputError as exc:
         raise SceneError(f"{where} [run]: {exc}") from None
     scene = LatticeScene(name, data.get("description", ""), lat, initial, tuple(methods), size,
-                         float(run["h"]), run["steps"], where)
+                         float(run["h"]), run["steps"], where, orders)
     try:
         scene.y0((lat.nmin, lat.nmin) if two_d else lat.nmin)  # the formulas parse (whitelist) and evaluate
     except InputError as exc:
@@ -210,9 +219,26 @@ def load_lattice_scene(name_or_path) -> LatticeScene:
     return scene
 
 
+def _orders(order, methods, two_d: bool, where: str) -> dict:
+    """``[run] order`` (one number, or a table per method) as {method: order}, checked."""
+    from ..symbolic.lattice_scheme import LATTICE_ORDERS
+
+    given = order if isinstance(order, dict) else {m: order for m in methods}
+    for m, k in given.items():
+        if m not in methods:
+            raise SceneError(f"{where} [run]: order of {m!r}, a method the scene does not run; its methods are "
+                             f"{', '.join(methods)}")
+        if isinstance(k, bool) or k not in LATTICE_ORDERS:
+            raise SceneError(f"{where} [run]: order {k!r} for {m}: a lattice method is composed to order "
+                             f"{', '.join(map(str, LATTICE_ORDERS))}")
+        if two_d and k != 2:
+            raise SceneError(f"{where} [run]: order {k} for {m}: a 2-D lattice runs order 2 only")
+    return {m: given.get(m, 2) for m in methods}
+
+
 def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None,
                       t_final=None, solver="simplified", check_resolution=True, backend="numpy", progress=None,
-                      section=None, plot=None) -> dict:
+                      section=None, plot=None, order=None, composition=None) -> dict:
     """Build (or load) the scene's module and run it; a report as a dict (JSON-ready).
 
     ``size``: N for this run (default the scene's; a 2-D lattice's (N, M), or N for N × N);
@@ -220,7 +246,8 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     (:func:`methodgen.codegen.lattice_emit.build_lattice`).  ``section`` (``"q[1] = 0, p[1] > 0"``,
     a 1-D lattice): a Poincaré section instead -- every crossing within the steps, each located on
     the method's own map (:func:`methodgen.app.family_section.run_family_section`); ``plot``: a file
-    to draw it to.
+    to draw it to.  ``order`` (2, 4, 6, 8; default the scene's ``[run] order`` of the method, else
+    2) and ``composition`` (a family): the method composed symmetrically to that order.
     """
     from ..codegen.lattice_emit import build_lattice
 
@@ -237,7 +264,9 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
         steps = max(1, math.ceil(t_final / h - 1e-12))
         h = t_final / steps
     t0 = time.perf_counter()
-    module = build_lattice(scene.lattice, method, backend=backend, progress=progress)
+    order = scene.order(method) if order is None else order
+    module = build_lattice(scene.lattice, method, backend=backend, progress=progress, order=order,
+                           composition=composition)
     build_seconds = time.perf_counter() - t0
     y0 = scene.y0(n, params)
     if section is not None:
@@ -246,7 +275,8 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
         if two_d:
             raise InputError("--section: a 2-D lattice takes no text sections (its state has no flat names); "
                              "give its module's solve(..., events=...) a callable g(t, y) with y of shape (2, N, M)")
-        meta = dict(scene=scene.name, method=method, backend=backend, dims=1, N=n, build_seconds=build_seconds)
+        meta = dict(scene=scene.name, method=method, order=module.ORDER, backend=backend, dims=1, N=n,
+                    build_seconds=build_seconds)
         return {**meta, **run_family_section(module, y0, h, steps, section, params=params, plot=plot,
                                              title=f"{scene.name}, {method}, N = {n}, h = {h:g}", solver=solver,
                                              check_resolution=check_resolution), "steps": steps}
@@ -261,7 +291,7 @@ def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=Non
     inv = {k: {"initial": values[0][k], "final": values[-1][k],
                "max_abs_error": max(abs(v[k] - values[0][k]) for v in values)} for k in module.INVARIANT_NAMES}
     sizes = dict(N=n[0], M=n[1]) if two_d else dict(N=n)     # (the values of the sizes, whatever their names)
-    return dict(scene=scene.name, method=method, backend=backend, dims=2 if two_d else 1, **sizes, h=h, steps=steps, t_final=h * steps, success=True,
+    return dict(scene=scene.name, method=method, order=getattr(module, "ORDER", 2), backend=backend, dims=2 if two_d else 1, **sizes, h=h, steps=steps, t_final=h * steps, success=True,
                 build_seconds=build_seconds, seconds=seconds, seconds_per_step=seconds / steps,
                 newton_iterations_mean=float(np.mean(info["newton_iterations"])), invariants=inv,
                 traits=dict(module.TRAITS), module_file=str(module.__file__), y_final=rows[-1].ravel().tolist())

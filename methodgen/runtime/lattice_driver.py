@@ -16,8 +16,9 @@ from . import stepper as _stepper
 __all__ = ["run_steps", "gradient_2d"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
-#: Y (nf, n), T (rows, nf n), its, fst (4), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, D, P, F, cs
-SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _M, _M, _V, _V)
+#: Y (nf, n), T (rows, nf n), its, fst (5), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, D, P, F, cs,
+#: gammas, stages, DH (2 stages nf, n)
+SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _M, _M, _V, _V, _V, _i8, _M)
 
 _LOOPS: dict = {}
 #: the stepper's functions the step loop calls (bound with the problem's shape)
@@ -82,10 +83,14 @@ def _compiled(cache: dict, kernel, fn, sig, globals_, what: str, variant=()):
 
 
 def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False,
-              jac_half_width=1, stencil=None):
+              jac_half_width=1, stencil=None, gammas=(1.0,)):
     """``steps`` steps from ``Y`` (nf, n), updated in place: ``(rows, its, status)`` with rows
-    (steps // every + 1 + ..., nf n) (row 0 the start), Newton iterations per step, and
-    ``(code, step, iterations, value)`` of a failure (code 0: none).
+    (steps // every + 1 + ..., nf n) (row 0 the start), Newton iterations per step (summed over
+    its stages), and ``(code, step, iterations, value, stage)`` of a failure (code 0: none, and
+    stage 0; a failure's stage 1-based).
+
+    ``gammas``: the stage sizes in units of h (a module's ``GAMMAS``: a symmetric composition of
+    the order-2 step; (1.0,) is the order-2 step itself).
 
     ``jac_half_width``: the half-bandwidth wH in sites of the kernel's ∂∇̄H (its rows
     ``(2 wH + 1) nf²``); ``stencil``: a skew lattice's coefficients ``c_(-sw) … c_sw`` at this n
@@ -96,7 +101,11 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
     T = numpy.zeros((nrows, nf * n))
     T[0] = Y.reshape(-1)
     its = numpy.zeros(max(steps, 1))
-    fst = numpy.zeros(4)
+    fst = numpy.zeros(5)
+    gam = numpy.ascontiguousarray(gammas, dtype=numpy.float64)
+    if gam.ndim != 1 or gam.size < 1:
+        raise ValueError(f"gammas must be a non-empty sequence of stage sizes, got {gammas!r}")
+    DH = numpy.zeros((2 * gam.size * nf, n))
     W = numpy.zeros((_ls.W_ROWS, n))
     wh = int(jac_half_width)
     cs = numpy.zeros(1) if stencil is None else numpy.ascontiguousarray(stencil, dtype=numpy.float64)
@@ -110,7 +119,7 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
         p = numpy.zeros(1)
     loop, compiled = _loop(grad, python, shape)
     args = (Y, T, its, fst, p, int(n), float(h), int(steps), int(every), int(maxiter), float(tol),
-            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, D, P, F, cs)
+            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, D, P, F, cs, gam, int(gam.size), DH)
     if compiled:
         from .fused import _drive
         _drive(loop, *args)
@@ -119,7 +128,8 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
     code = int(fst[0])
     done = int(fst[1]) if code else steps
     kept = done // every + 1 + (1 if code == 0 and steps % every else 0)
-    return T[:kept], its[:steps].astype(numpy.int64), (code, int(fst[1]), int(fst[2]), float(fst[3]))
+    return (T[:kept], its[:steps].astype(numpy.int64),
+            (code, int(fst[1]), int(fst[2]), float(fst[3]), int(fst[4]) + 1 if code else 0))
 
 
 #: _Y0, _Z, _G (2, n·m), _n, _m, _p: a 2-D lattice module's site kernel _grad2d

@@ -24,8 +24,8 @@ before, the same arithmetic.  A non-periodic lattice is the case of zero corners
 
 Arrays: ``_Y`` (nf, n) the state; ``_W`` (``W_ROWS``, n): ``G`` (∇̄H), ``Z``, ``ZP`` (the iterate
 and the predictor), ``R`` (the residual, then the update), ``Y`` (the forward-substituted
-right-hand side), ``DY``, ``DY2`` (the last two steps' increments), nf rows each at the offsets
-below; ``_D`` ((2 wH + 1) nf², n): the kernel's ∂∇̄H, row ``(e + wH) nf² + f nf + f'`` the entry
+right-hand side), nf rows each at the offsets below; ``_DH`` (2 s nf, n): per stage k (of s) its
+increments at the last step and the one before, rows ``2 k nf`` and ``(2 k + 1) nf``; ``_D`` ((2 wH + 1) nf², n): the kernel's ∂∇̄H, row ``(e + wH) nf² + f nf + f'`` the entry
 ∂∇̄H_(f, j)/∂z_(f', j + e) at column j (wH the Jacobian's half-width); ``_P`` ((2 w + 1) nf², n):
 the Newton matrix in the same layout; ``_F`` (:func:`factor_size`): the blocks and the factors.
 The shape (nf, g, m, mB, the structure, the half-widths) is bound as translation-time constants
@@ -41,10 +41,20 @@ The predictor extrapolates the last two increments, ``z = y + 2 Δ₁ - Δ₂`` 
 Newton iterations than from the explicit Euler step, and no evaluation of ∇H of its own); the
 second step takes ``y + Δ₁``, the first the explicit Euler step.
 
+Order 4, 6, 8: a step is s stages, the order-2 step of sizes ``γ_k h`` (``_gam``; a symmetric
+composition, Σ γ = 1, negative γ included [Yos90, Suz90; HLW06 §II.4, §V.3]).  Stage k's
+predictor extrapolates stage k's own increments Δ₁, Δ₂ of the last two steps: the same map at
+points one step h apart along the solution, so O(h³) off as at order 2 (the previous stage's
+increment scaled by γ_k/γ_(k-1) would be O(h²) off: it is taken at another point, and a
+negative γ reverses it).  With s = 1, γ = (1,) this is the order-2 loop, the same arithmetic.
+
 References
 ----------
 G. H. Golub, C. F. Van Loan, *Matrix Computations*, 4th ed. (2013), §4.3 (banded systems),
 §4.5 (block tridiagonal systems), §2.1.4 (bordered systems).
+[Yos90] H. Yoshida, Phys. Lett. A 150 (1990) 262-268; [Suz90] M. Suzuki, Phys. Lett. A 146
+(1990) 319-323; [HLW06] E. Hairer, C. Lubich, G. Wanner, *Geometric Numerical Integration*,
+2nd ed. (2006), §II.4, §V.3 (symmetric compositions).
 """
 
 from __future__ import annotations
@@ -56,8 +66,8 @@ __all__ = ["lattice_run", "W_ROWS", "STATUS", "layout", "factor_size"]
 # flake8: noqa: F821  (``grad``, ``settled`` and the constants below are bound by the driver)
 
 #: rows of the work array _W (nf ≤ 2 rows each; the module's kernel reads Z at _IZ, writes G at _IG)
-_IG, _IZ, _IZP, _IR, _IY, _IDY, _IDY2 = 0, 2, 4, 6, 8, 10, 12
-W_ROWS = 14
+_IG, _IZ, _IZP, _IR, _IY = 0, 2, 4, 6, 8
+W_ROWS = 10
 # (named _I…: the translator reads a global integer constant only under a private name)
 #: the factor array _F: per group _NMAT blocks of mB × mB slots (row stride mB): the matrix's
 #: blocks A (to the group before), B, C (to the group after), the eliminated diagonal block's
@@ -388,126 +398,137 @@ def flow(_W, j, f, n, h, _cs):
 
 
 def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, _chk, _simpl, _maxdis, _W,
-                _D, _P, _F, _cs):
+                _D, _P, _F, _cs, _gam, _ns, _DH):
     """Steps 0 .. _steps-1 from the state ``_Y`` (nf, n), updated in place.
 
     ``_T`` (rows, nf n): row k + 1 is the state after step (k + 1)·_every - 1 (and the last row
-    the last state); ``_its`` (_steps,): Newton iterations; ``_fst`` (4,): status (STATUS), step,
-    iterations, and the failing value (the residual, or the predictor ratio) of a failure.
-    ``_chk``: the resolution check (predictor disagreement ≤ ``_maxdis``); ``_simpl``:
-    simplified Newton (the matrix at the predictor only); ``_cs`` a skew lattice's stencil
-    coefficients c_(-sw) … c_sw at this n.  The lattice's shape (nf, g, …) is bound as constants
-    (module docstring).
+    the last state); ``_its`` (_steps,): Newton iterations (summed over the stages); ``_fst`` (5,):
+    status (STATUS), step, iterations, the failing value (the residual, or the predictor ratio)
+    and the stage (0-based) of a failure.  ``_chk``: the resolution check (predictor disagreement
+    ≤ ``_maxdis``); ``_simpl``: simplified Newton (the matrix at the predictor only); ``_cs`` a skew
+    lattice's stencil coefficients c_(-sw) … c_sw at this n.  ``_gam`` (``_ns``,): the stage sizes
+    in units of _h (a symmetric composition; (1.0,) at order 2); ``_DH`` (2 _ns nf, n): each stage's
+    last two increments (module docstring).  The lattice's shape (nf, g, …) is bound as
+    constants (module docstring).
     """
     n = _n
-    h = _h
     nf = _NF
     nd = (2 * _WH + 1) * _NF * _NF
     row = 1
     for s in range(_steps):
-        if s == 0:
-            # the first step: the explicit Euler predictor Z = Y + h K ∇H(Y)
+        nits = 0
+        for k in range(_ns):
+            h = _h * _gam[k]            # (order 2: _gam[0] = 1, h = _h exactly)
+            idy = 2 * k * nf            # this stage's increments in _DH: the last step's, the one before
+            idy2 = idy + nf
+            if s == 0:
+                # the first step: the explicit Euler predictor Z = Y + h K ∇H(Y)
+                for j in range(n):
+                    for c in range(nf):
+                        _W[_IG + c, j] = 0.0
+                        _W[_IZ + c, j] = _Y[c, j]
+                grad(_Y, _W, _D, _n, _p, 0)
+                for j in range(n):
+                    for c in range(nf):
+                        _DH[idy + c, j] = flow(_W, j, c, n, h, _cs)
             for j in range(n):
                 for c in range(nf):
-                    _W[_IG + c, j] = 0.0
-                    _W[_IZ + c, j] = _Y[c, j]
-            grad(_Y, _W, _D, _n, _p, 0)
-            for j in range(n):
-                for c in range(nf):
-                    _W[_IDY + c, j] = flow(_W, j, c, n, h, _cs)
-        for j in range(n):
-            for c in range(nf):
-                z = _Y[c, j] + _W[_IDY + c, j]
-                if s >= 2:
-                    z = _Y[c, j] + (2.0 * _W[_IDY + c, j] - _W[_IDY2 + c, j])
-                _W[_IZ + c, j] = z
-                _W[_IZP + c, j] = z
-        last = math.inf
-        refac = 0
-        done = 0
-        it = 0
-        size = 0.0
-        while it < _maxiter:
-            it += 1
-            jac = 1 if (it == 1 or _simpl == 0 or refac == 1) else 0
-            for j in range(n):
-                for c in range(nf):
-                    _W[_IG + c, j] = 0.0
-            if jac == 1:
-                for k in range(nd):
-                    for j in range(n):
-                        _D[k, j] = 0.0
-            grad(_Y, _W, _D, _n, _p, jac)
-            for j in range(n):
-                for c in range(nf):
-                    _W[_IR + c, j] = _W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)
-            if jac == 1:
-                newton(_D, _P, n, h, _cs)
-                if factor(_P, _F, n) != 0:
-                    _fst[0] = 4.0
+                    z = _Y[c, j] + _DH[idy + c, j]
+                    if s >= 2:
+                        z = _Y[c, j] + (2.0 * _DH[idy + c, j] - _DH[idy2 + c, j])
+                    _W[_IZ + c, j] = z
+                    _W[_IZP + c, j] = z
+            last = math.inf
+            refac = 0
+            done = 0
+            it = 0
+            size = 0.0
+            while it < _maxiter:
+                it += 1
+                jac = 1 if (it == 1 or _simpl == 0 or refac == 1) else 0
+                for j in range(n):
+                    for c in range(nf):
+                        _W[_IG + c, j] = 0.0
+                if jac == 1:
+                    for kd in range(nd):
+                        for j in range(n):
+                            _D[kd, j] = 0.0
+                grad(_Y, _W, _D, _n, _p, jac)
+                for j in range(n):
+                    for c in range(nf):
+                        _W[_IR + c, j] = _W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)
+                if jac == 1:
+                    newton(_D, _P, n, h, _cs)
+                    if factor(_P, _F, n) != 0:
+                        _fst[0] = 4.0
+                        _fst[1] = s
+                        _fst[2] = it
+                        _fst[4] = k
+                        return
+                solve(_W, _F, n)
+                size = 0.0
+                scale = 1.0
+                for j in range(n):
+                    for c in range(nf):
+                        d = _W[_IR + c, j]
+                        z = _W[_IZ + c, j] + d
+                        _W[_IZ + c, j] = z
+                        size = max(size, abs(d))
+                        scale = max(scale, abs(z))
+                if not (size < math.inf):
+                    _fst[0] = 2.0
                     _fst[1] = s
                     _fst[2] = it
+                    _fst[4] = k
                     return
-            solve(_W, _F, n)
-            size = 0.0
-            scale = 1.0
-            for j in range(n):
-                for c in range(nf):
-                    d = _W[_IR + c, j]
-                    z = _W[_IZ + c, j] + d
-                    _W[_IZ + c, j] = z
-                    size = max(size, abs(d))
-                    scale = max(scale, abs(z))
-            if not (size < math.inf):
-                _fst[0] = 2.0
+                if settled(size, scale, last, _tol) != 0:
+                    done = 1
+                    break
+                # simplified Newton converging slowly (the matrix at the predictor too far off): the
+                # matrix at the iterate from now on, for this stage
+                if size > 0.25 * last:
+                    refac = 1
+                last = size
+            if done == 0:
+                # the residual at the last iterate, for the message
+                for j in range(n):
+                    for c in range(nf):
+                        _W[_IG + c, j] = 0.0
+                grad(_Y, _W, _D, _n, _p, 0)
+                res = 0.0
+                for j in range(n):
+                    for c in range(nf):
+                        res = max(res, abs(_W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)))
+                _fst[0] = 1.0
                 _fst[1] = s
                 _fst[2] = it
+                _fst[3] = res
+                _fst[4] = k
                 return
-            if settled(size, scale, last, _tol) != 0:
-                done = 1
-                break
-            # simplified Newton converging slowly (the matrix at the predictor too far off): the
-            # matrix at the iterate from now on, for this step
-            if size > 0.25 * last:
-                refac = 1
-            last = size
-        if done == 0:
-            # the residual at the last iterate, for the message
+            if _chk != 0:
+                moved = 0.0
+                off = 0.0
+                for j in range(n):
+                    for c in range(nf):
+                        moved = max(moved, abs(_W[_IZ + c, j] - _Y[c, j]))
+                        off = max(off, abs(_W[_IZ + c, j] - _W[_IZP + c, j]))
+                ratio = 0.0
+                if moved > 0.0:
+                    ratio = off / moved
+                if ratio > _maxdis:
+                    _fst[0] = 3.0
+                    _fst[1] = s
+                    _fst[2] = it
+                    _fst[3] = ratio
+                    _fst[4] = k
+                    return
             for j in range(n):
                 for c in range(nf):
-                    _W[_IG + c, j] = 0.0
-            grad(_Y, _W, _D, _n, _p, 0)
-            res = 0.0
-            for j in range(n):
-                for c in range(nf):
-                    res = max(res, abs(_W[_IZ + c, j] - _Y[c, j] - flow(_W, j, c, n, h, _cs)))
-            _fst[0] = 1.0
-            _fst[1] = s
-            _fst[2] = it
-            _fst[3] = res
-            return
-        if _chk != 0:
-            moved = 0.0
-            off = 0.0
-            for j in range(n):
-                for c in range(nf):
-                    moved = max(moved, abs(_W[_IZ + c, j] - _Y[c, j]))
-                    off = max(off, abs(_W[_IZ + c, j] - _W[_IZP + c, j]))
-            ratio = 0.0
-            if moved > 0.0:
-                ratio = off / moved
-            if ratio > _maxdis:
-                _fst[0] = 3.0
-                _fst[1] = s
-                _fst[2] = it
-                _fst[3] = ratio
-                return
-        for j in range(n):
-            for c in range(nf):
-                _W[_IDY2 + c, j] = _W[_IDY + c, j]
-                _W[_IDY + c, j] = _W[_IZ + c, j] - _Y[c, j]
-                _Y[c, j] = _W[_IZ + c, j]
-        _its[s] = it
+                    _DH[idy2 + c, j] = _DH[idy + c, j]
+                    _DH[idy + c, j] = _W[_IZ + c, j] - _Y[c, j]
+                    _Y[c, j] = _W[_IZ + c, j]
+            nits += it
+        _its[s] = nits
         if (s + 1) % _every == 0 or s + 1 == _steps:
             for c in range(nf):
                 for j in range(n):

@@ -57,7 +57,8 @@ import sympy as sp
 from ..errors import InputError
 from ..problem.lattice import Lattice, SiteTerm, slot_symbol
 
-__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "discretize_lattice", "certificates",
+__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "LATTICE_ORDERS", "discretize_lattice", "stage_composition",
+           "certificates",
            "skew_certificates", "proved_invariants", "linear_stencil"]
 
 #: the methods a lattice of symbolic size can be discretised with, and what they claim
@@ -65,6 +66,9 @@ LATTICE_METHODS = {
     "avf": "average vector field (energy-preserving, symmetric, order 2)",
     "midpoint": "implicit midpoint rule (symplectic, symmetric, order 2; keeps quadratic invariants)",
 }
+
+#: the orders a lattice method is run at: its order-2 step, composed symmetrically to 4, 6, 8
+LATTICE_ORDERS = (2, 4, 6, 8)
 
 QUADRATURE_NODES = 8
 
@@ -109,12 +113,20 @@ class LatticeScheme:
     terms: tuple[TermPieces, ...]
     exact_energy: bool
     notes: tuple[str, ...] = field(default=())
+    #: the order of the step: 2, or 4, 6, 8 by a symmetric composition of the order-2 step
+    order: int = 2
+    #: the composition family (:mod:`methodgen.symbolic.compositions`; "base" at order 2)
+    composition: str = "base"
+    #: the stage sizes γ_1 … γ_s as float64 (Σ γ = 1, symmetric, negative ones included; (1.0,)
+    #: at order 2): the step is the order-2 step taken s times, of sizes γ_k h
+    gammas: tuple = (1.0,)
 
     @property
     def traits(self) -> dict:
         avf = self.method == "avf"
         skew = self.lattice.structure == "skew"
-        return {"order": 2, "symmetric": True, "symplectic": not avf and not skew,
+        return {"order": self.order, "stages": len(self.gammas), "composition": self.composition,
+                "symmetric": True, "symplectic": not avf and not skew,
                 "energy_preserving": avf and self.exact_energy,
                 "preserved": ("H",) if avf and self.exact_energy else (),
                 "structure": self.lattice.structure,
@@ -166,17 +178,44 @@ def _midpoint_pieces(h: sp.Expr, z0, z1) -> tuple[list, list]:
     return [sp.diff(h, s).xreplace(mid) for s in z0], ["midpoint"]
 
 
-def discretize_lattice(lattice: Lattice, method: str) -> LatticeScheme:
+def discretize_lattice(lattice: Lattice, method: str, order: int = 2, composition: str | None = None) -> LatticeScheme:
     """Derive ``method``'s pieces for every site term of ``lattice`` (independent of N).
+
+    Parameters
+    ----------
+    lattice : Lattice
+    method : {"avf", "midpoint"}
+    order : {2, 4, 6, 8}
+        Above 2, the order-2 step Φ_h (symmetric: its pieces are, :func:`certificates`) is composed
+        symmetrically, ``Ψ_h = Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h}`` with ``Σ γ = 1``, ``γ_k = γ_{s+1-k}``
+        (negative γ included), of order ``order`` [Yos90]_, [Suz90]_, [HLW06]_ §II.4, §V.3.  The
+        pieces -- and so every certificate -- are those of Φ, a stage of any size: a composition
+        of maps each keeping an invariant keeps it, so what is proved kept is unchanged.  The
+        order of Ψ rests on the order conditions of the coefficients
+        (:mod:`methodgen.symbolic.compositions`), not on a certificate of the lattice method.
+    composition : str, optional
+        The family (:data:`methodgen.symbolic.compositions.FAMILIES`; default
+        :data:`~methodgen.symbolic.compositions.DEFAULT_FAMILY` of the order).
 
     Raises
     ------
     InputError
-        ``method`` is not one of :data:`LATTICE_METHODS`.
+        ``method`` is not one of :data:`LATTICE_METHODS`; an order not 2, 4, 6 or 8; an unknown
+        family or one without the order.
+
+    References
+    ----------
+    .. [Yos90] H. Yoshida, "Construction of higher order symplectic integrators", Phys. Lett. A
+       150 (1990) 262-268.
+    .. [Suz90] M. Suzuki, "Fractal decomposition of exponential operators with applications to
+       many-body theories and Monte Carlo simulations", Phys. Lett. A 146 (1990) 319-323.
+    .. [HLW06] E. Hairer, C. Lubich, G. Wanner, Geometric Numerical Integration, 2nd ed.,
+       Springer 2006, §II.4, §V.3.
     """
     if method not in LATTICE_METHODS:
         raise InputError(f"method {method!r} is not available for a lattice of symbolic size; "
                          f"available: {', '.join(LATTICE_METHODS)}")
+    comp = stage_composition(order, composition, offered=LATTICE_ORDERS, what=f"{method} for a lattice")
     make = _avf_pieces if method == "avf" else _midpoint_pieces
     terms, exact = [], True
     for t in lattice.terms:
@@ -190,7 +229,49 @@ def discretize_lattice(lattice: Lattice, method: str) -> LatticeScheme:
     if method == "avf" and not exact:
         notes = (f"H kept only up to the error of {QUADRATURE_NODES}-point Gauss-Legendre quadrature in "
                  "the terms that are neither polynomial nor a function of one affine form",)
-    return LatticeScheme(lattice, method, tuple(terms), exact, notes)
+    return LatticeScheme(lattice, method, tuple(terms), exact, notes, order=order, composition=comp.family,
+                         gammas=comp.floats())
+
+
+def stage_composition(order, family: str | None = None, *, offered=LATTICE_ORDERS, what: str = "the method"):
+    """The symmetric composition (:func:`methodgen.symbolic.compositions.composition`, its one
+    implementation) that raises a symmetric order-2 step to ``order``, checked as user input: the :class:`Composition` whose stages the caller runs as steps of size ``γ_k h``.
+
+    Parameters
+    ----------
+    order : int
+        One of ``offered`` (a bool is refused: ``True`` is not an order).
+    family : str, optional
+        A family of :data:`methodgen.symbolic.compositions.FAMILIES` offering ``order`` (default
+        :data:`~methodgen.symbolic.compositions.DEFAULT_FAMILY`); ignored
+        at order 2 (the base step itself, one stage γ = 1).
+    offered : tuple of int
+        The orders the caller runs.
+    what : str
+        The method's name, for the messages.
+
+    Raises
+    ------
+    InputError
+        An order not offered (the message names them), an unknown family or one without the order.
+    """
+    from .compositions import FAMILIES, composition
+
+    names = ", ".join(map(str, offered))
+    if isinstance(order, bool) or not isinstance(order, int) or order not in offered:
+        raise InputError(f"{what} is a symmetric method of order 2, composed symmetrically to a higher order: "
+                         f"the orders are {names}; got {order!r}")
+    if order == 2:
+        return composition(2)
+    if family is not None and family not in FAMILIES:
+        # (splittings are kick/drift stages of H = T + U, processed compositions three modules:
+        # neither is a composition of one symmetric step)
+        raise InputError(f"composition {family!r} is not a composition family of a symmetric step; the families "
+                         f"are {', '.join(sorted(FAMILIES))}")
+    try:
+        return composition(order, family)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
 
 
 def certificates(scheme: LatticeScheme) -> list:

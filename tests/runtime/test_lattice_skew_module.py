@@ -268,7 +268,7 @@ def test_compiled_loop_is_its_python_source_bitwise(compiled):
         T, its, st = run_steps(compiled._grad_sites, Y, 0.01, 5, 1, np.array([L]), 50, 4 * 2.2e-16,
                                True, True, 1.0, python=python, jac_half_width=1, stencil=c)
         out.append((T, its, st))
-    assert out[0][2] == (0, 0, 0, 0.0)
+    assert out[0][2] == (0, 0, 0, 0.0, 0)
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
     assert np.max(np.abs(out[0][0][-1] - out[0][0][0])) > 1e-4          # (it moved)
 

@@ -202,7 +202,7 @@ def test_compiled_loop_is_its_python_source_bitwise_and_the_numpy_modules_step(w
         Y = y0.reshape(nf, n).copy()
         out.append(run_steps(mod._grad_sites, Y, 0.01, 5, 1, np.array(p), 50, 4 * 2.2e-16, True, False, 1.0,
                              python=python, jac_half_width=mod.JAC_HALF_WIDTH, stencil=stencil))
-    assert out[0][2] == (0, 0, 0, 0.0)
+    assert out[0][2] == (0, 0, 0, 0.0, 0)
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
     assert np.max(np.abs(out[0][0][-1] - out[0][0][0])) > 1e-4                 # (it moved)
     a = mod.integrate(y0, 0.01, 5, solver="newton")
