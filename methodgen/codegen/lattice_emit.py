@@ -44,6 +44,8 @@ TEMPLATE = "lattice_module.py.j2"
 TEMPLATE_2D = "lattice_2d_module.py.j2"
 #: the errors of a lattice module's step, included by both templates
 ERRORS_TEMPLATE = "lattice_errors.py.j2"
+#: the info["carried"] record of a family module (continuing a run), included by the templates
+CARRY_TEMPLATE = "lattice_carry.py.j2"
 
 
 def _sources_hash() -> str:
@@ -54,7 +56,7 @@ def _sources_hash() -> str:
     for path in (root / "problem" / "lattice.py", root / "symbolic" / "lattice_scheme.py",
                  root / "codegen" / "lattice_emit.py", root / "runtime" / "lattice_stepper.py",
                  root / "runtime" / "lattice_driver.py",
-                 template_dir() / TEMPLATE, template_dir() / TEMPLATE_2D, template_dir() / ERRORS_TEMPLATE):
+                 template_dir() / TEMPLATE, template_dir() / TEMPLATE_2D, template_dir() / ERRORS_TEMPLATE, template_dir() / CARRY_TEMPLATE):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 

@@ -42,6 +42,8 @@ __all__ = ["render", "particles_signature", "build_particles", "BACKENDS"]
 
 TEMPLATE = "particles_module.py.j2"
 ERRORS_TEMPLATE = "lattice_errors.py.j2"
+#: the info["carried"] record of a family module (continuing a run), included by the templates
+CARRY_TEMPLATE = "lattice_carry.py.j2"
 BACKENDS = ("numpy", "compiled")
 
 
@@ -51,7 +53,7 @@ def _sources_hash() -> str:
     h = hashlib.sha256()
     for path in (root / "problem" / "particles.py", root / "symbolic" / "particle_scheme.py",
                  root / "codegen" / "particle_emit.py", root / "runtime" / "particle_stepper.py",
-                 root / "runtime" / "particle_driver.py", template_dir() / TEMPLATE, template_dir() / ERRORS_TEMPLATE):
+                 root / "runtime" / "particle_driver.py", template_dir() / TEMPLATE, template_dir() / ERRORS_TEMPLATE, template_dir() / CARRY_TEMPLATE):
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 

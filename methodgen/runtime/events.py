@@ -499,6 +499,10 @@ def solve_family(integrate, y0, t0, h, steps, params, events, *, save_every=1, o
     """``solve(..., events=...)`` of a lattice (1-D, 2-D) or particle family's module: the run in
     chunks, g tested at every step, each crossing located on the method's own map.
 
+    Each chunk continues the one before with its carried state (one ``info`` through all of
+    them: the compensation, the predictor's history; ``integrate(..., info=...)``), so the rows
+    are bitwise those of the run without events.
+
     The crossings of g between the saved states y_n, y_(n+1) of the run (a sign change; with
     ``direction`` only the one way) are located by Brent's method on the sub-step τ in (0, h]:
     each evaluation is one step of size τ of the module's own method from y_n
@@ -605,10 +609,14 @@ def solve_family(integrate, y0, t0, h, steps, params, events, *, save_every=1, o
     y, done = y0, 0
     status, message = 0, None
     g_prev = [float(_values(f, np.array([t0]), y0[None])[0]) for f in fns]
+    # one info through all chunks: each integrate call continues from the carried state (the
+    # compensation, the predictor's history) the one before left in it, so that the rows are
+    # bitwise the run's without events
+    info = {}
     while done < steps and status == 0:
         m = min(chunk, steps - done)
         chunk = min(2 * chunk, cap)
-        info = {}
+        info.pop(iterations, None)
         try:
             part = integrate(y, h, m, params, info=info, **options)
         except failures as exc:

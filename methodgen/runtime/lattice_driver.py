@@ -17,8 +17,8 @@ __all__ = ["run_steps", "gradient_2d"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 #: Y (nf, n), T (rows, nf n), its, fst (5), p, n, h, steps, every, maxiter, tol, chk, simpl, maxdis, W, D, P, F, cs,
-#: gammas, stages, DH (2 stages nf, n)
-SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _M, _M, _V, _V, _V, _i8, _M)
+#: gammas, stages, DH (2 stages nf, n), s0 (the steps behind DH: 0, 1, 2)
+SIG = _t.void(_M, _M, _V, _V, _V, _i8, _f8, _i8, _i8, _i8, _f8, _i8, _i8, _f8, _M, _M, _M, _V, _V, _V, _i8, _M, _i8)
 
 _LOOPS: dict = {}
 #: the stepper's functions the step loop calls (bound with the problem's shape)
@@ -83,7 +83,7 @@ def _compiled(cache: dict, kernel, fn, sig, globals_, what: str, variant=()):
 
 
 def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simplified, maxdis, *, python=False,
-              jac_half_width=1, stencil=None, gammas=(1.0,)):
+              jac_half_width=1, stencil=None, gammas=(1.0,), history=None):
     """``steps`` steps from ``Y`` (nf, n), updated in place: ``(rows, its, status)`` with rows
     (steps // every + 1 + ..., nf n) (row 0 the start), Newton iterations per step (summed over
     its stages), and ``(code, step, iterations, value, stage)`` of a failure (code 0: none, and
@@ -95,7 +95,13 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
     ``jac_half_width``: the half-bandwidth wH in sites of the kernel's ∂∇̄H (its rows
     ``(2 wH + 1) nf²``); ``stencil``: a skew lattice's coefficients ``c_(-sw) … c_sw`` at this n
     (then Y is (1, n)), None for a canonical lattice.  The Newton matrix's sites are grouped by
-    g = max(wH + sw, 1) (:mod:`methodgen.runtime.lattice_stepper`)."""
+    g = max(wH + sw, 1) (:mod:`methodgen.runtime.lattice_stepper`).
+
+    ``history``: None (a new run), or each stage's last two increments, an array (2, stages, nf, n)
+    -- ``history[0, k]`` stage k's increment at the last step, ``history[1, k]`` at the one before,
+    NaN where the run has not taken that step -- read as the run's past and overwritten with
+    the history at the end (on success), so that a run continued in chunks is bitwise the run in
+    one piece."""
     nf, n = Y.shape
     nrows = steps // every + (1 if steps % every else 0) + 1
     T = numpy.zeros((nrows, nf * n))
@@ -106,6 +112,17 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
     if gam.ndim != 1 or gam.size < 1:
         raise ValueError(f"gammas must be a non-empty sequence of stage sizes, got {gammas!r}")
     DH = numpy.zeros((2 * gam.size * nf, n))
+    s0 = 0
+    if history is not None:
+        if history.shape != (2, gam.size, nf, n):
+            raise ValueError(f"history must have shape {(2, gam.size, nf, n)} (two increments per stage), "
+                             f"got {history.shape}")
+        # the steps behind it: NaN marks an increment the run has not taken (all of a stage's
+        # or none: the module's record)
+        s0 = 0 if numpy.isnan(history[0, 0, 0, 0]) else 1 if numpy.isnan(history[1, 0, 0, 0]) else 2
+        for k in range(gam.size):
+            for r in range(s0):
+                DH[(2 * k + r) * nf:(2 * k + r + 1) * nf] = history[r, k]
     W = numpy.zeros((_ls.W_ROWS, n))
     wh = int(jac_half_width)
     cs = numpy.zeros(1) if stencil is None else numpy.ascontiguousarray(stencil, dtype=numpy.float64)
@@ -119,7 +136,8 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
         p = numpy.zeros(1)
     loop, compiled = _loop(grad, python, shape)
     args = (Y, T, its, fst, p, int(n), float(h), int(steps), int(every), int(maxiter), float(tol),
-            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, D, P, F, cs, gam, int(gam.size), DH)
+            int(bool(check_resolution)), int(bool(simplified)), float(maxdis), W, D, P, F, cs, gam, int(gam.size), DH,
+            int(s0))
     if compiled:
         from .fused import _drive
         _drive(loop, *args)
@@ -128,6 +146,11 @@ def run_steps(grad, Y, h, steps, every, p, maxiter, tol, check_resolution, simpl
     code = int(fst[0])
     done = int(fst[1]) if code else steps
     kept = done // every + 1 + (1 if code == 0 and steps % every else 0)
+    if history is not None and code == 0:
+        got = min(s0 + steps, 2)
+        for k in range(gam.size):
+            for r in range(2):
+                history[r, k] = DH[(2 * k + r) * nf:(2 * k + r + 1) * nf] if r < got else numpy.nan
     return (T[:kept], its[:steps].astype(numpy.int64),
             (code, int(fst[1]), int(fst[2]), float(fst[3]), int(fst[4]) + 1 if code else 0))
 

@@ -39,7 +39,9 @@ D_(e-k)(s + k)`` (half-width wH + sw); a canonical one ``P_e = δ_e0 I - h J D_e
 
 The predictor extrapolates the last two increments, ``z = y + 2 Δ₁ - Δ₂`` (error O(h³): fewer
 Newton iterations than from the explicit Euler step, and no evaluation of ∇H of its own); the
-second step takes ``y + Δ₁``, the first the explicit Euler step.
+second step takes ``y + Δ₁``, the first the explicit Euler step.  The increments (``_DH``) and the
+count of steps behind them (``_s0``) come in and go out, so that a run continued in chunks
+(``integrate(..., info=...)``) is bitwise the run in one piece.
 
 Order 4, 6, 8: a step is s stages, the order-2 step of sizes ``γ_k h`` (``_gam``; a symmetric
 composition, Σ γ = 1, negative γ included [Yos90, Suz90; HLW06 §II.4, §V.3]).  Stage k's
@@ -398,7 +400,7 @@ def flow(_W, j, f, n, h, _cs):
 
 
 def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, _chk, _simpl, _maxdis, _W,
-                _D, _P, _F, _cs, _gam, _ns, _DH):
+                _D, _P, _F, _cs, _gam, _ns, _DH, _s0):
     """Steps 0 .. _steps-1 from the state ``_Y`` (nf, n), updated in place.
 
     ``_T`` (rows, nf n): row k + 1 is the state after step (k + 1)·_every - 1 (and the last row
@@ -408,8 +410,10 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
     ≤ ``_maxdis``); ``_simpl``: simplified Newton (the matrix at the predictor only); ``_cs`` a skew
     lattice's stencil coefficients c_(-sw) … c_sw at this n.  ``_gam`` (``_ns``,): the stage sizes
     in units of _h (a symmetric composition; (1.0,) at order 2); ``_DH`` (2 _ns nf, n): each stage's
-    last two increments (module docstring).  The lattice's shape (nf, g, …) is bound as
-    constants (module docstring).
+    last two increments (module docstring), on entry those of the run this call continues;
+    ``_s0``: the steps that run took (0 for a new run; 1: ``_DH`` holds the last increments only;
+    2: both), so that a run continued in chunks takes the predictors of the run in one piece.
+    The lattice's shape (nf, g, …) is bound as constants (module docstring).
     """
     n = _n
     nf = _NF
@@ -421,8 +425,8 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             h = _h * _gam[k]            # (order 2: _gam[0] = 1, h = _h exactly)
             idy = 2 * k * nf            # this stage's increments in _DH: the last step's, the one before
             idy2 = idy + nf
-            if s == 0:
-                # the first step: the explicit Euler predictor Z = Y + h K ∇H(Y)
+            if s + _s0 == 0:
+                # a run's first step: the explicit Euler predictor Z = Y + h K ∇H(Y)
                 for j in range(n):
                     for c in range(nf):
                         _W[_IG + c, j] = 0.0
@@ -434,7 +438,7 @@ def lattice_run(_Y, _T, _its, _fst, _p, _n, _h, _steps, _every, _maxiter, _tol, 
             for j in range(n):
                 for c in range(nf):
                     z = _Y[c, j] + _DH[idy + c, j]
-                    if s >= 2:
+                    if s + _s0 >= 2:
                         z = _Y[c, j] + (2.0 * _DH[idy + c, j] - _DH[idy2 + c, j])
                     _W[_IZ + c, j] = z
                     _W[_IZP + c, j] = z

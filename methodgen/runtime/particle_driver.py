@@ -72,36 +72,58 @@ def _prepare(Q, P, M, p):
     return Q, P, M, p if p.size else numpy.zeros(1)
 
 
-def run_sv(vel, fpair, fext, Q, P, M, p, h, steps, every, kicks, drifts, has_external, *, python=False):
+def _compensation(comp, n, d):
+    """The compensations CQ, CP (n, d) a run starts from: ``comp`` (2, n, d), the run's it
+    continues (copied; :func:`_keep` writes the end's back), or zeros for a new run."""
+    if comp is None:
+        return [numpy.zeros((n, d)), numpy.zeros((n, d))]
+    if comp.shape != (2, n, d):
+        raise ValueError(f"comp must have shape {(2, n, d)} (the compensations of q and p), got {comp.shape}")
+    return [numpy.array(comp[0], dtype=numpy.float64), numpy.array(comp[1], dtype=numpy.float64)]
+
+
+def _keep(comp, CQ, CP, fst):
+    """The end's compensations into ``comp`` (where given) after a run that did not fail."""
+    if comp is not None and int(fst[0]) == 0:
+        comp[0], comp[1] = CQ, CP
+
+
+def run_sv(vel, fpair, fext, Q, P, M, p, h, steps, every, kicks, drifts, has_external, *, python=False, comp=None):
     """Störmer–Verlet composition steps from ``Q``, ``P`` (n, d), updated in place: ``(rows, its,
-    (code, step, iterations, value, stage))`` with rows (steps // every + 1 + …, 2nd), row 0 the start."""
+    (code, step, iterations, value, stage))`` with rows (steps // every + 1 + …, 2nd), row 0 the start.
+
+    ``comp``: None (a new run: no compensation), or the compensations of q and p, (2, n, d), of
+    the run this call continues, overwritten with the end's (on success): a run continued in
+    chunks is then bitwise the run in one piece."""
     Q, P, M, p = _prepare(Q, P, M, p)
     n, d = Q.shape
     T = _rows(steps, every, n, d, Q, P)
     fst = numpy.zeros(5)
-    work = [numpy.zeros((n, d)) for _ in range(4)]     # CQ, CP, F, V
+    work = _compensation(comp, n, d) + [numpy.zeros((n, d)) for _ in range(2)]     # CQ, CP, F, V
     kick = numpy.ascontiguousarray(kicks, dtype=numpy.float64)
     drift = numpy.ascontiguousarray(drifts, dtype=numpy.float64)
     loop, compiled = _loop("sv_run", {"vel": vel, "fpair": fpair, "fext": fext}, fpair, _LOOPS_SV, SIG_SV, python)
     _call(loop, compiled, (Q, P, *work, M, p, int(n), int(d), float(h), int(steps), int(every), T, kick, drift,
                            int(len(drift)), int(has_external), fst))
+    _keep(comp, work[0], work[1], fst)
     return _finish(T, fst, steps, every, numpy.zeros(max(steps, 1)))
 
 
 def run_em(vel, gpair, gext, Q, P, M, p, h, steps, every, maxiter, tol, gammas=(1.0,), has_external=0, *,
-           python=False):
+           python=False, comp=None):
     """Energy-momentum steps from ``Q``, ``P`` (n, d), updated in place (as :func:`run_sv`; ``its``
-    the fixed-point iterations per step, summed over the stages): each step the stages of size
-    ``γ_k h`` (``gammas``, the composition's coefficients); ``has_external``: 1 to add the external
-    potential's discrete gradient (``gext``) per particle."""
+    the fixed-point iterations per step, summed over the stages; ``comp`` as there): each step the
+    stages of size ``γ_k h`` (``gammas``, the composition's coefficients); ``has_external``: 1 to
+    add the external potential's discrete gradient (``gext``) per particle."""
     Q, P, M, p = _prepare(Q, P, M, p)
     n, d = Q.shape
     T = _rows(steps, every, n, d, Q, P)
     fst = numpy.zeros(5)
     its = numpy.zeros(max(steps, 1))
-    work = [numpy.zeros((n, d)) for _ in range(6)]     # CQ, CP, A, D, PT, V
+    work = _compensation(comp, n, d) + [numpy.zeros((n, d)) for _ in range(4)]     # CQ, CP, A, D, PT, V
     gam = numpy.ascontiguousarray(gammas, dtype=numpy.float64)
     loop, compiled = _loop("em_run", {"vel": vel, "gpair": gpair, "gext": gext}, gpair, _LOOPS_EM, SIG_EM, python)
     _call(loop, compiled, (Q, P, *work, M, p, int(n), int(d), float(h), int(steps), int(every), T, its,
                            int(maxiter), float(tol), gam, int(gam.size), int(has_external), fst))
+    _keep(comp, work[0], work[1], fst)
     return _finish(T, fst, steps, every, its)
