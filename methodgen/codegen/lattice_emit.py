@@ -67,7 +67,8 @@ def lattice_signature(lattice: Lattice, method: str, backend: str = "numpy", ord
     versions, the printers and helpers it shares with other modules, and its own sources; above
     order 2 the order and the composition family (``composition`` resolved: the default family
     and its name give one module), so that modules of different orders never share a file."""
-    from ..symbolic.lattice_scheme import LATTICE_ORDERS, stage_composition
+    from ..symbolic.compositions import stage_composition
+    from ..symbolic.lattice_scheme import LATTICE_ORDERS
 
     comp = stage_composition(order, composition, offered=LATTICE_ORDERS, what=f"{method} for a lattice")
     sizes = ",".join(s.name for s in getattr(lattice, "sizes", (lattice.size,)))

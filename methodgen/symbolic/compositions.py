@@ -53,7 +53,7 @@ from .series import exp as _exp
 from .series import log as _log
 from .series import mul as _mul
 
-__all__ = ["Composition", "FAMILIES", "ALL_FAMILIES", "ORDERS", "DEFAULT_FAMILY", "composition", "order_defects",
+__all__ = ["Composition", "FAMILIES", "ALL_FAMILIES", "ORDERS", "DEFAULT_FAMILY", "composition", "stage_composition", "order_defects",
            "sequence_defects",
            "achieved_order", "error_constant", "efficiency", "triple_jump_exact"]
 
@@ -258,3 +258,45 @@ def triple_jump_exact(order: int, parts: int = 3) -> list[sp.Expr]:
         out.append((parts - 1) * g1 + g2 - 1)
         out.append((parts - 1) * g1 ** (2 * k + 1) + g2 ** (2 * k + 1))
     return out
+
+
+def stage_composition(order, family: str | None = None, *, offered=(2, 4, 6, 8), what: str = "the method"):
+    """The symmetric composition (:func:`composition`) that raises a symmetric order-2 step to
+    ``order``, checked as user input (the lattice and particle families' one check): the
+    :class:`Composition` whose stages the caller runs as steps of size ``γ_k h``.
+
+    Parameters
+    ----------
+    order : int
+        One of ``offered`` (a bool is refused: ``True`` is not an order).
+    family : str, optional
+        A family of :data:`methodgen.symbolic.compositions.FAMILIES` offering ``order`` (default
+        :data:`~methodgen.symbolic.compositions.DEFAULT_FAMILY`); ignored
+        at order 2 (the base step itself, one stage γ = 1).
+    offered : tuple of int
+        The orders the caller runs.
+    what : str
+        The method's name, for the messages.
+
+    Raises
+    ------
+    InputError
+        An order not offered (the message names them), an unknown family or one without the order.
+    """
+    from ..errors import InputError
+
+    names = ", ".join(map(str, offered))
+    if isinstance(order, bool) or not isinstance(order, int) or order not in offered:
+        raise InputError(f"{what} is a symmetric method of order 2, composed symmetrically to a higher order: "
+                         f"the orders are {names}; got {order!r}")
+    if order == 2:
+        return composition(2)
+    if family is not None and family not in FAMILIES:
+        # (splittings are kick/drift stages of H = T + U, processed compositions three modules:
+        # neither is a composition of one symmetric step)
+        raise InputError(f"composition {family!r} is not a composition family of a symmetric step; the families "
+                         f"are {', '.join(sorted(FAMILIES))}")
+    try:
+        return composition(order, family)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None

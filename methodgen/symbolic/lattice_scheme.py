@@ -56,8 +56,9 @@ import sympy as sp
 
 from ..errors import InputError
 from ..problem.lattice import Lattice, SiteTerm, slot_symbol
+from .compositions import stage_composition
 
-__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "LATTICE_ORDERS", "discretize_lattice", "stage_composition",
+__all__ = ["TermPieces", "LatticeScheme", "LATTICE_METHODS", "LATTICE_ORDERS", "discretize_lattice",
            "certificates",
            "skew_certificates", "proved_invariants", "linear_stencil"]
 
@@ -231,47 +232,6 @@ def discretize_lattice(lattice: Lattice, method: str, order: int = 2, compositio
                  "the terms that are neither polynomial nor a function of one affine form",)
     return LatticeScheme(lattice, method, tuple(terms), exact, notes, order=order, composition=comp.family,
                          gammas=comp.floats())
-
-
-def stage_composition(order, family: str | None = None, *, offered=LATTICE_ORDERS, what: str = "the method"):
-    """The symmetric composition (:func:`methodgen.symbolic.compositions.composition`, its one
-    implementation) that raises a symmetric order-2 step to ``order``, checked as user input: the :class:`Composition` whose stages the caller runs as steps of size ``γ_k h``.
-
-    Parameters
-    ----------
-    order : int
-        One of ``offered`` (a bool is refused: ``True`` is not an order).
-    family : str, optional
-        A family of :data:`methodgen.symbolic.compositions.FAMILIES` offering ``order`` (default
-        :data:`~methodgen.symbolic.compositions.DEFAULT_FAMILY`); ignored
-        at order 2 (the base step itself, one stage γ = 1).
-    offered : tuple of int
-        The orders the caller runs.
-    what : str
-        The method's name, for the messages.
-
-    Raises
-    ------
-    InputError
-        An order not offered (the message names them), an unknown family or one without the order.
-    """
-    from .compositions import FAMILIES, composition
-
-    names = ", ".join(map(str, offered))
-    if isinstance(order, bool) or not isinstance(order, int) or order not in offered:
-        raise InputError(f"{what} is a symmetric method of order 2, composed symmetrically to a higher order: "
-                         f"the orders are {names}; got {order!r}")
-    if order == 2:
-        return composition(2)
-    if family is not None and family not in FAMILIES:
-        # (splittings are kick/drift stages of H = T + U, processed compositions three modules:
-        # neither is a composition of one symmetric step)
-        raise InputError(f"composition {family!r} is not a composition family of a symmetric step; the families "
-                         f"are {', '.join(sorted(FAMILIES))}")
-    try:
-        return composition(order, family)
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
 
 
 def certificates(scheme: LatticeScheme) -> list:

@@ -317,19 +317,16 @@ def discretize_particles(fam: Particles, method: str, order: int = 2, compositio
     MethodNotApplicable
         energy-momentum for a pair term that is not a function of ``|q_a - q_b|²`` alone.
     """
-    from .compositions import composition as _composition
+    from .compositions import stage_composition
 
     if method not in PARTICLE_METHODS:
         raise InputError(f"method {method!r} is not available for particles of symbolic size; available: "
                          f"{', '.join(PARTICLE_METHODS)}")
-    if isinstance(order, bool) or order not in ORDERS:
-        raise InputError(f"{method} for particles is of order 2, composed symmetrically to order 4, 6 or 8: "
-                         f"the orders are {', '.join(map(str, ORDERS))}; got {order!r}")
+    comp = stage_composition(order, composition, offered=ORDERS, what=f"{method} for particles")
     qa, qb = fam.q_slots
     pa = fam.p_slots[0]
     velocity = _grad(fam.kinetic, pa)
     ext = tuple(-x for x in _grad(fam.external, qa))
-    comp = _composition(order, composition) if order > 2 else _composition(2)
     import mpmath as mp
 
     with mp.workdps(40):
