@@ -223,17 +223,11 @@ def _orders(order, methods, two_d: bool, where: str) -> dict:
     """``[run] order`` (one number, or a table per method) as {method: order}, checked."""
     from ..symbolic.lattice_scheme import LATTICE_ORDERS
 
-    given = order if isinstance(order, dict) else {m: order for m in methods}
-    for m, k in given.items():
-        if m not in methods:
-            raise SceneError(f"{where} [run]: order of {m!r}, a method the scene does not run; its methods are "
-                             f"{', '.join(methods)}")
-        if isinstance(k, bool) or k not in LATTICE_ORDERS:
-            raise SceneError(f"{where} [run]: order {k!r} for {m}: a lattice method is composed to order "
-                             f"{', '.join(map(str, LATTICE_ORDERS))}")
+    orders = _files.run_orders(order, methods, LATTICE_ORDERS, where, "a lattice method is")
+    for m, k in orders.items():
         if two_d and k != 2:
             raise SceneError(f"{where} [run]: order {k} for {m}: a 2-D lattice runs order 2 only")
-    return {m: given.get(m, 2) for m in methods}
+    return orders
 
 
 def run_lattice_scene(name_or_path, method=None, h=None, steps=None, *, size=None, params=None,

@@ -178,16 +178,7 @@ def load_particles_scene(name_or_path) -> ParticleScene:
         if m not in PARTICLE_METHODS:
             raise SceneError(f"{where} [run]: method {m!r} is not available for particles; available: "
                              f"{', '.join(PARTICLE_METHODS)}")
-    order = run.get("order", 2)
-    given = order if isinstance(order, dict) else {m: order for m in methods}
-    for m, k in given.items():
-        if m not in methods:
-            raise SceneError(f"{where} [run]: order of {m!r}, a method the scene does not run; its methods are "
-                             f"{', '.join(methods)}")
-        if isinstance(k, bool) or k not in ORDERS:
-            raise SceneError(f"{where} [run]: order {k!r} for {m}: the particle methods are composed to order "
-                             f"{', '.join(map(str, ORDERS))}")
-    orders = {m: given.get(m, 2) for m in methods}
+    orders = _files.run_orders(run.get("order", 2), methods, ORDERS, where, "the particle methods are")
     if run["steps"] < 1 or not (math.isfinite(run["h"]) and run["h"] > 0):
         raise SceneError(f"{where} [run]: steps must be ≥ 1 and h > 0")
     barycentric = run.get("barycentric", False)

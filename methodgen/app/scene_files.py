@@ -96,3 +96,19 @@ def check_keys(table: dict, allowed: dict, where: str) -> None:
         elif not isinstance(v, allowed[k]) or isinstance(v, bool):
             kinds = allowed[k] if isinstance(allowed[k], tuple) else (allowed[k],)
             raise SceneError(f"{where}: {k!r} must be {' or '.join(t.__name__ for t in kinds)}, got {v!r}")
+
+
+def run_orders(order, methods, offered, where: str, what: str) -> dict:
+    """A family scene's ``[run] order`` -- one number for every method, or a table per method -- as
+    ``{method: order}`` (2 where a table leaves a method out), checked: a method the scene does not
+    run, or an order not in ``offered``, is refused (SceneError) naming what is valid (``what``:
+    who is composed, for the message)."""
+    given = order if isinstance(order, dict) else {m: order for m in methods}
+    for m, k in given.items():
+        if m not in methods:
+            raise SceneError(f"{where} [run]: order of {m!r}, a method the scene does not run; its methods are "
+                             f"{', '.join(methods)}")
+        if isinstance(k, bool) or k not in offered:
+            raise SceneError(f"{where} [run]: order {k!r} for {m}: {what} composed to order "
+                             f"{', '.join(map(str, offered))}")
+    return {m: given.get(m, 2) for m in methods}
