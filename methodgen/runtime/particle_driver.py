@@ -22,7 +22,7 @@ SIG_SV = _t.void(_M, _M, _M, _M, _M, _M, _M, _V, _i8, _i8, _f8, _i8, _i8, _M, _V
 #: Q, P, CQ, CP, A, D, PT, V (n, d), M, p, n, d, h, steps, every, T, its, maxiter, tol, gammas, ns, hx, fst
 SIG_EM = _t.void(_M, _M, _M, _M, _M, _M, _M, _M, _M, _V, _i8, _i8, _f8, _i8, _i8, _M, _V, _i8, _f8, _V, _i8, _i8,
                  _V)
-_HELPERS = ("add", "forces", "dg", "finite", "save")
+_HELPERS = ("add", "forces", "dg", "half_kick_velocity", "finite", "save")
 _LOOPS_SV: dict = {}
 _LOOPS_EM: dict = {}
 

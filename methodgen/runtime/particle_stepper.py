@@ -77,6 +77,16 @@ def dg(_Q, _D, _A, _M, _p, n, d, hx):
             gext(_Q, _D, _A, a, _M, _p)
 
 
+def half_kick_velocity(_P, _A, _PT, _V, _M, _p, h, n, d):
+    """``_V`` = ∇T(p - (h/2) A) at every particle (``_PT`` the kicked momenta): the energy-momentum
+    step's velocity, for its predictor and for each fixed-point iterate."""
+    for a in range(n):
+        for k in range(d):
+            _PT[a, k] = _P[a, k] - (0.5 * h) * _A[a, k]
+    for a in range(n):
+        vel(_PT, _V, a, _M, _p)
+
+
 def finite(_Q, _P, n, d):
     """1 when every entry of the state is finite."""
     ok = 1
@@ -145,11 +155,7 @@ def em_run(_Q, _P, _CQ, _CP, _A, _D, _PT, _V, _M, _p, _n, _d, _h, _steps, _every
                 for k in range(d):
                     _D[a, k] = 0.0
             dg(_Q, _D, _A, _M, _p, n, d, _hx)
-            for a in range(n):
-                for k in range(d):
-                    _PT[a, k] = _P[a, k] - (0.5 * h) * _A[a, k]
-            for a in range(n):
-                vel(_PT, _V, a, _M, _p)
+            half_kick_velocity(_P, _A, _PT, _V, _M, _p, h, n, d)
             for a in range(n):
                 for k in range(d):
                     _D[a, k] = h * _V[a, k]
@@ -160,11 +166,7 @@ def em_run(_Q, _P, _CQ, _CP, _A, _D, _PT, _V, _M, _p, _n, _d, _h, _steps, _every
             while it < _maxiter:
                 it += 1
                 dg(_Q, _D, _A, _M, _p, n, d, _hx)
-                for a in range(n):
-                    for k in range(d):
-                        _PT[a, k] = _P[a, k] - (0.5 * h) * _A[a, k]
-                for a in range(n):
-                    vel(_PT, _V, a, _M, _p)
+                half_kick_velocity(_P, _A, _PT, _V, _M, _p, h, n, d)
                 size = 0.0
                 qmax = 0.0
                 dmax = 0.0
