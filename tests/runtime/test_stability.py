@@ -214,11 +214,22 @@ def test_cli_save_in_chunks(tmp_path):
 
 
 def test_ctrl_c_keeps_the_trajectory(tmp_path):
+    # The interrupt must land in the integration, not in the imports: a fixed sleep did not
+    # (at a load of 12 on 2 cores the child was still importing after 4 s: exit -2, a traceback).
+    # With every phase reported (threshold 0) the child says when its module is loaded; the run
+    # starts right after it.
+    env = {**os.environ, "METHODGEN_PROGRESS_SECONDS": "0"}
     proc = subprocess.Popen([sys.executable, "-m", "methodgen", "run", "kepler", "--steps", "100000000"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(4.0)
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    head = []
+    while not (head and head[-1].startswith("methodgen: load ") and " done in " in head[-1]):
+        line = proc.stderr.readline()
+        assert line, "".join(head)          # the child ended before loading its module
+        head.append(line)
+    time.sleep(2.0)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
+    err = "".join(head) + err
     assert proc.returncode == 130, err
     assert "interrupted at step" in err and "saved" in err and "Traceback" not in err
     saved = tmp_path / "kepler_energy_momentum_partial.npz"
