@@ -41,14 +41,29 @@ def test_chain_is_tridiagonal_and_nbody_dense(method, loops):
         assert lower(nbody, "s", "m", loops=loops).band == (8, 8)
 
 
+@pytest.fixture(scope="module")
+def chain10(tmp_path_factory):
+    """``chain10(loops)`` -> (ir, module): the 10-mass FPU chain's energy-momentum module, lowered
+    and loaded once per choice of loops for the three solvers' tests (each test restores the
+    band it widens)."""
+    scheme = mg.discretize(fpu_chain(10), "energy-momentum")
+    cache = {}
+
+    def get(loops):
+        if loops not in cache:
+            cache[loops] = _module(scheme, tmp_path_factory.mktemp("band"), loops)
+        return cache[loops]
+
+    return get
+
+
 @pytest.mark.parametrize("loops", [None, False])
 @pytest.mark.parametrize("solver", ["newton", "reuse", "auto"])
-def test_banded_solve_is_bitwise_the_dense_one(tmp_path, loops, solver):
+def test_banded_solve_is_bitwise_the_dense_one(chain10, loops, solver):
     """The numpy module's elimination reads _KL/_KU at call time: widening them to the full
     matrix runs the dense elimination, and the trajectories are bitwise equal."""
     n = 10
-    scheme = mg.discretize(fpu_chain(n), "energy-momentum")
-    ir, mod = _module(scheme, tmp_path, loops)
+    ir, mod = chain10(loops)
     assert (mod._KL, mod._KU) == ir.band == (1, 1) and mod._N == n
     rng = np.random.default_rng(5)
     y0 = np.concatenate([0.6 * rng.normal(size=n), rng.normal(size=n)])
