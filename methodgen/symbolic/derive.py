@@ -61,8 +61,20 @@ class Separable:
             return False
         d = self.Minv.shape[0]
         c = self.Minv[0, 0]
-        return all(sp.simplify(self.Minv[i, j] - (c if i == j else 0)) == 0
-                   for i in range(d) for j in range(d))
+        return all(_is_zero_expr(self.Minv[i, j] - (c if i == j else 0)) for i in range(d) for j in range(d))
+
+
+def _is_zero_expr(e: sp.Expr) -> bool:
+    """``simplify(e) == 0``, without ``simplify`` where a cheaper test decides the same: 0 as
+    built, or a rational function (``cancel`` is canonical for those: 0 exactly when it is
+    identically 0).  A mass matrix's entries are such: ``1/m1 - 1/m0`` of the outer solar
+    system's bodies went through ``simplify`` (58 calls, and its first call imports
+    ``sympy.physics.units``: 0.4 s of a cold first use)."""
+    if e == 0:
+        return True
+    if e.is_rational_function():
+        return sp.cancel(e) == 0
+    return sp.simplify(e) == 0
 
 
 def _cache(fn):
