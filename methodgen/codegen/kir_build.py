@@ -246,13 +246,20 @@ class _Builder:
                 u = self.build(b)
                 power = (_PAREN, ("*", u, ("call", "math.sqrt", (u,))))
                 return power if x.p > 0 else (_PAREN, ("/", ("n", 1), power))
+        if x.is_Integer and 2 <= abs(x) <= MAX_PRODUCT_POWER:
+            # ScalarPrinter._print_Pow, VectorPrinter._print_Pow: an integer power as the
+            # compiled kernels compute it (exponentiation by squaring), so every flavour
+            # rounds alike; libm's pow (CPython's float **, numpy's power) rounds otherwise
+            node = _power_by_squaring(self.paren(b, PRECEDENCE["Mul"]), abs(int(x)))
+            return node if x > 0 else ("/", ("n", 1), node)
         if self.vector and x == -1:
             # VectorPrinter._print_Pow
             return ("/", ("n", 1), self.paren(b, PRECEDENCE["Pow"]))
         # ScalarPrinter._print_Pow, VectorPrinter._print_Pow
         if x.is_Rational and x.q == 2 and abs(x.p) != 1:
             root = ("call", self.sqrt, (self.build(b),))
-            power = ("**", root, ("n", abs(int(x.p))))
+            k = abs(int(x.p))
+            power = _power_by_squaring(root, k) if k <= MAX_PRODUCT_POWER else ("**", root, ("n", k))
             return power if x.p > 0 else ("/", ("n", 1), power)
         if self.vector and x.is_integer and x.is_negative:
             # NumPyPrinter._print_Pow: a negative integer power with a float exponent
@@ -268,6 +275,25 @@ class _Builder:
             if x is sp.S.NegativeOne:
                 return ("/", ("n", 1), self.paren(b, prec))
         return ("**", self.paren(b, prec), self.paren(x, prec))
+
+
+#: The largest |n| of an integer power printed as products (``x**n`` beyond it: libm's pow
+#: in Python, exponentiation by squaring in the compiled kernels).
+MAX_PRODUCT_POWER = 16
+
+
+def _power_by_squaring(base: tuple, n: int) -> tuple:
+    """``base**n`` (n ≥ 2) as the products of exponentiation by squaring, in the order of
+    :meth:`methodgen.codegen.llvmkernels` ``power`` (numba's ``static_power_impl``): the
+    same rounding as the compiled kernels' ``**``."""
+    res, val = None, base
+    while n:
+        if n & 1:
+            res = val if res is None else (_PAREN, ("*", res, val))
+        n >>= 1
+        if n:
+            val = (_PAREN, ("*", val, val))
+    return res
 
 
 def code(printer, expr: sp.Expr):

@@ -42,6 +42,7 @@ from ..symbolic.schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  #
 from ..problem.special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 from ..symbolic.timetransform import time_scale_guard
 from .kir import Code
+from .kir_build import MAX_PRODUCT_POWER
 from .kir_build import code as _code
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
@@ -72,6 +73,33 @@ def _special_printer(prefix: str):
     return method
 
 
+def _squaring(base: str, n: int) -> str:
+    """``base**n`` (n ≥ 2) as the products of exponentiation by squaring."""
+    res, val = None, base
+    while n:
+        if n & 1:
+            res = val if res is None else f"({res}*{val})"
+        n >>= 1
+        if n:
+            val = f"({val}*{val})"
+    return res
+
+
+def _root_power(root: str, k: int) -> str:
+    """A half-integer power's ``root**k`` as the compiled kernels round it."""
+    return _squaring(root, k) if k <= MAX_PRODUCT_POWER else f"{root}**{k}"
+
+
+def _product_power(printer, b, e):
+    """An integer power ``b**e`` (2 ≤ |e| ≤ MAX_PRODUCT_POWER) as the products of
+    exponentiation by squaring (:func:`methodgen.codegen.kir_build._power_by_squaring`: the
+    compiled kernels' rounding), or None for any other power."""
+    if not (e.is_Integer and 2 <= abs(e) <= MAX_PRODUCT_POWER):
+        return None
+    res = _squaring(printer.parenthesize(b, sp.printing.precedence.PRECEDENCE["Mul"]), abs(int(e)))
+    return res if e > 0 else f"1/{res}"
+
+
 class ScalarPrinter(PythonCodePrinter):
     """Python floats + :mod:`math`; half-integer powers through ``math.sqrt``."""
 
@@ -80,9 +108,11 @@ class ScalarPrinter(PythonCodePrinter):
 
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
+        product = _product_power(self, b, e)
+        if product is not None:
+            return product
         if e.is_Rational and e.q == 2 and abs(e.p) != 1:
-            root = f"math.sqrt({self._print(b)})"
-            power = root if abs(e.p) == 1 else f"{root}**{abs(e.p)}"
+            power = _root_power(f"math.sqrt({self._print(b)})", abs(e.p))
             return power if e.p > 0 else f"1/{power}"
         return super()._print_Pow(expr, rational=rational)
 
@@ -124,11 +154,13 @@ class VectorPrinter(NumPyPrinter):
 
     def _print_Pow(self, expr, rational=False):
         b, e = expr.args
+        product = _product_power(self, b, e)
+        if product is not None:
+            return product
         if e == -1:
             return f"1/{self.parenthesize(b, sp.printing.precedence.PRECEDENCE['Pow'])}"
         if e.is_Rational and e.q == 2 and abs(e.p) != 1:
-            root = f"numpy.sqrt({self._print(b)})"
-            power = f"{root}**{abs(e.p)}"
+            power = _root_power(f"numpy.sqrt({self._print(b)})", abs(e.p))
             return power if e.p > 0 else f"1/{power}"
         return super()._print_Pow(expr, rational=rational)
 
@@ -385,9 +417,74 @@ def _cse(exprs: tuple) -> tuple:
 _CSE_CACHE: dict = {}
 
 
+def _is_product_power(e) -> bool:
+    # printed as products (kir_build): u**n, 2 <= |n| <= MAX_PRODUCT_POWER, or u**(k/2), |k| >= 3
+    if not e.is_Pow or not e.exp.is_Rational:
+        return False
+    x = e.exp
+    if x.is_Integer:
+        return 2 <= abs(x) <= MAX_PRODUCT_POWER and not e.base.is_Atom
+    return x.q == 2 and 3 <= abs(x.p) <= MAX_PRODUCT_POWER
+
+
+def _bind_powers(temps: list, outs: list, tag: str = "") -> tuple[list, list]:
+    """Bind what a power printed as products repeats: the base of ``u**n`` (u not a
+    symbol) and the square root of ``u**(k/2)`` (|k| ≥ 3), each to a temporary placed before
+    its first use (``_pwN = u``, ``_sqN = sqrt(u)``, or a temporary that already holds it).
+    The compiled kernels evaluate the base or the root once and square it; so does the
+    printed Python then, with the same products and bits, instead of repeating the base in
+    every factor.
+
+    Parameters
+    ----------
+    temps : list of (Symbol, Expr)
+        CSE assignments in order.
+    outs : list of Expr
+        The reduced outputs.
+    tag : str
+        Part of the temporaries' names (``_pw<tag>N``): a second CSE pass of one kernel
+        (:func:`_chained_kernel`) binds its own.
+
+    Returns
+    -------
+    (temps, outs) with the bases and roots bound.
+    """
+    pw, sq = sp.numbered_symbols(f"_pw{tag}"), sp.numbered_symbols(f"_sq{tag}")
+    bound: dict = {}
+    fresh: list = []
+
+    def bind(expr, names):
+        r = bound.get(expr)
+        if r is None:
+            r = bound[expr] = next(names)
+            fresh.append((r, expr))
+        return r
+
+    def power(x):
+        if x.exp.is_Integer:
+            return sp.Pow(bind(x.base, pw), x.exp)
+        return sp.Pow(bind(sp.sqrt(x.base), sq), x.exp.p)
+
+    def rewrite(e):
+        if not isinstance(e, sp.Basic) or not e.has(sp.Pow):
+            return e
+        return e.replace(_is_product_power, power)
+
+    new_temps = []
+    for sym, e in temps:
+        e = rewrite(e)
+        new_temps += fresh
+        fresh.clear()
+        new_temps.append((sym, e))
+        bound.setdefault(e, sym)          # a later power of the same base or root uses it
+    outs = [rewrite(e) for e in outs]
+    new_temps += fresh
+    return new_temps, outs
+
+
 def _kernel(exprs: list[sp.Expr], shape: tuple[int, ...], printer, rename: dict) -> Kernel:
     exprs = tuple(sp.sympify(e).xreplace(rename) for e in exprs)
-    temps, reduced = _cse(exprs)
+    temps, reduced = _bind_powers(*_cse(exprs))
     tcode = tuple((str(s), _code(printer, e)) for s, e in temps)
     outputs = []
     for flat, e in enumerate(reduced):
@@ -408,10 +505,10 @@ def _chained_kernel(first: list, later: list, links: tuple, printer, rename: dic
     first = tuple(sp.sympify(e).xreplace(rename) for e in first)
     later = tuple(sp.sympify(e).xreplace(rename) for e in later)
     shared = tuple(sp.sympify(e).xreplace(rename) for e in shared)
-    t1, r1 = _cse(first)
+    t1, r1 = _bind_powers(*_cse(first))
     t2, r2 = (sp.cse(list(later + shared), symbols=sp.numbered_symbols("_e"), order="canonical")
               if later else ([], []))
-    r2 = r2[:len(later)]
+    t2, r2 = _bind_powers(t2, r2[:len(later)], "e")
     temps = [(str(s), _code(printer, e)) for s, e in t1]
     # (a link whose expression is itself -- Δq computed ahead of the loops -- is not reassigned)
     temps += [(str(s), _code(printer, e)) for s, e in zip(links, r1) if e != s]
