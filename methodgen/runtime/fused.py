@@ -174,6 +174,9 @@ def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, o
     same source as the compiled loop, the reference it is tested against (slow: an
     interpreter's loop)."""
     consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
+    # the stepper's work arrays (on the stack when compiled: the translator knows the name, and a
+    # function bound here would make the loop's machine code uncacheable)
+    consts["stack_array"] = numpy.zeros
     # the kernels as callables: their machine code (an LLVM kernel called from Python goes
     # through a C entry of the same translation), so that a comparison with the compiled loop
     # tests the stepper alone
@@ -200,7 +203,7 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, 
     fr = float(fcfg[F["NEWTON_FAILURE_RESOLUTION"]])
     resol = int(cfg[C["RESOLUTION"]])
     pm = int(cfg[C["PROJ"]])
-    consts = {"stack_array": numpy.zeros, "_PL": max(int(cfg[C["POST_LEN"]]), 1), "_STAGES": int(cfg[C["STAGES"]]),
+    consts = {"_PL": max(int(cfg[C["POST_LEN"]]), 1), "_STAGES": int(cfg[C["STAGES"]]),
               "_DIM": int(cfg[C["DIM"]]), "_NF": int(cfg[C["NF"]]), "_NDOMAIN": int(cfg[C["NDOMAIN"]]),
               "_PD": int(cfg[C["POST_DOMAIN"]]), "_TT_GUARD": int(cfg[C["TT_GUARD"]]),
               "_PT": int(cfg[C["POST_TT"]]), "_LERR": int(cfg[C["LERR"]]), "_PE": int(cfg[C["POST_EXTRA"]]),
