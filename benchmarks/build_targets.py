@@ -2,20 +2,16 @@
 
 Not a test: run it and read the table (wall seconds; compare only rows of one run).
 
-    python benchmarks/build_targets.py [--only kepler,henon-heiles-2d,...] [--kernels llvm|numba]
-                                       [--json FILE]
+    python benchmarks/build_targets.py [--only kepler,henon-heiles-2d,...] [--json FILE]
 
-Each configuration runs in a fresh process with a fresh ``METHODGEN_CACHE`` (numba's cache
-keeps the shared runtime, compiled once per machine: run once to warm it).  Measured: process
+Each configuration runs in a fresh process with a fresh ``METHODGEN_CACHE``.  Measured: process
 start → ``mg.build(system, method, backend="numba", ...)`` → the first step, the build alone
-(``build→step``), which kernels took the LLVM route (``llvm/numba`` counts) and the peak
+(``build→step``), how many kernels the module has (all compiled through LLVM IR) and the peak
 resident memory of the process.  heyoka's ``taylor_adaptive`` construction (tol 1e-15; for the
 outer solar system also ``compact_mode=True``) is timed in its own fresh process in the same run,
 cold (an empty disk cache of heyoka's compiled code) and warm (its cache filled by the run
 before).  The machine's cores and load average are printed (and kept in the JSON): quote them
 with every figure.
-``--kernels numba`` sets ``METHODGEN_KERNELS=numba`` (every kernel compiled by numba: the route
-before methodgen.codegen.llvmkernels).
 """
 
 from __future__ import annotations
@@ -61,7 +57,6 @@ PROBE = textwrap.dedent(r"""
     kinds = [type(getattr(m, a)).__name__ for a in dir(m) if a.startswith("_nb_") and not a.endswith("_rows")
              and callable(getattr(m, a))]
     print(json.dumps({"first": t2 - t0, "build": t2 - t1, "llvm": kinds.count("LLVMKernel"),
-                      "numba": kinds.count("CPUDispatcher"),
                       "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """)
 
@@ -92,20 +87,19 @@ def run(code, args, env):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", help="comma-separated system names")
-    ap.add_argument("--kernels", default="llvm", choices=("llvm", "numba"))
     ap.add_argument("--json")
     a = ap.parse_args()
     only = set(a.only.split(",")) if a.only else None
     rows = []
-    print(f"{'system':<20} {'method':<22} {'first use':>9} {'build→step':>10} {'target':>6} {'llvm/numba':>10} "
+    print(f"{'system':<20} {'method':<22} {'first use':>9} {'build→step':>10} {'target':>6} {'kernels':>7} "
           f"{'RSS MB':>7}")
     for cfg in CONFIGS:
         name, method, k = cfg.split(":")
         if only and name not in only:
             continue
-        env = dict(os.environ, METHODGEN_CACHE=tempfile.mkdtemp(), METHODGEN_KERNELS=a.kernels)
+        env = dict(os.environ, METHODGEN_CACHE=tempfile.mkdtemp())
         r = run(PROBE, [name, method, k, HERE], env)
-        r.update(system=name, method=f"{method} {k}", kernels=a.kernels)
+        r.update(system=name, method=f"{method} {k}")
         rows.append(r)
         t = TARGET.get((name, method), TARGET.get(name))
         if "error" in r:
@@ -113,7 +107,7 @@ def main() -> None:
         else:
             ok = "" if t is None else ("  met" if r["build"] <= t else "  MISSED")
             print(f"{name:<20} {method + ' ' + k:<22} {r['first']:9.2f} {r['build']:10.2f} {t or '-':>6}"
-                  f" {r['llvm']:>4}/{r['numba']:<5} {r['rss_mb']:7.0f}{ok}", flush=True)
+                  f" {r['llvm']:>7} {r['rss_mb']:7.0f}{ok}", flush=True)
     for name, compact in (("kepler", "0"), ("henon-heiles-2d", "0"), ("outer-solar-system", "0"),
                           ("outer-solar-system", "1")):
         if only and name not in only:

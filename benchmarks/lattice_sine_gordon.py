@@ -1,5 +1,6 @@
 """Sine-Gordon on a periodic lattice (issue 40): methodgen's lattice module against hand-written
-code and the peers, side by side in one run.  A benchmark, not a test.
+code and the peers, side by side in one run.  A benchmark, not a test (the hand-written AVF
+is numba code: install numba to run it; methodgen itself does not use numba).
 
     python benchmarks/lattice_sine_gordon.py [--sizes 256,4096] [--steps 200] [--peers]
 

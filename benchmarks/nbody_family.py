@@ -1,6 +1,7 @@
 """N-body families over a symbolic N: cold build and per-step cost against hand-written pair loops.
 
-Not a test: run it and read the table.
+Not a test: run it and read the table.  The hand-written baseline is numba code: install numba
+to run it (methodgen itself does not use numba).
 
     python benchmarks/nbody_family.py [--sizes 3 11 21 51] [--steps 5000]
 

@@ -1,7 +1,8 @@
 """Per-step cost of the generated N-body energy-momentum module against a hand-written
 numba pair-loop kernel of the same scheme (issue 16's "within 2x" target).
 
-Not a test: run it and read the table.
+Not a test: run it and read the table.  The hand-written baseline is numba code: install numba
+to run it (methodgen itself does not use numba).
 
     python benchmarks/nbody_pairloop.py [--bodies 2 6 8] [--steps 3000] [--h 0.002]
 

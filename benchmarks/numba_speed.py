@@ -1,6 +1,7 @@
 """Speed of the numba backend on the Kepler energy-momentum scheme (the ``kepler`` scene).
 
-Not a test: run it and read the table.
+Not a test: run it and read the table.  The hand-written baseline is numba code: install numba
+to run it (methodgen itself does not use numba).
 
     python benchmarks/numba_speed.py [--steps N] [--batch B] [--batch-steps N]
 

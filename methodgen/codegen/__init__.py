@@ -5,9 +5,9 @@
 :mod:`~methodgen.codegen.build` (from a system to an imported module, reusing files),
 :mod:`~methodgen.codegen.store` (where modules live and whose they are),
 :mod:`~methodgen.codegen.progress` (phase reports), :mod:`~methodgen.codegen.abi` (the contract
-between generated code and the runtime), and the compiler of a numba module's kernels through
-LLVM IR: :mod:`~methodgen.codegen.llvmkernels` over ``kernelsource``, ``ktypes``, ``llvmcache``
-and ``nbcache`` (machine-code caches).  The runtime calls that compiler when a generated module
+between generated code and the runtime), and the compiler of a compiled module's kernels through
+LLVM IR: :mod:`~methodgen.codegen.llvmkernels` over ``kir``, ``kernelsource``, ``ktypes`` and
+``llvmcache`` (the machine-code cache).  The runtime calls that compiler when a generated module
 is loaded, so it sits here, below the runtime: imports go from the runtime down to code
 generation, never up.
 """

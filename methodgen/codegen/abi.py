@@ -12,7 +12,7 @@ data with names; both sides read it from here instead of recomputing it:
 * :data:`KERNEL_TYPES` -- the kernels' signatures (in :mod:`methodgen.codegen.ktypes`' vocabulary).
 
 The code generator (:mod:`methodgen.codegen.lower`, the templates) and the runtimes
-(:mod:`methodgen.runtime.stepper`, :mod:`methodgen.runtime.fused`, :mod:`methodgen.runtime.nbruntime`, the numpy
+(:mod:`methodgen.runtime.stepper`, :mod:`methodgen.runtime.fused`, :mod:`methodgen.runtime.nbabi`, the numpy
 modules' loops) import it; it imports the standard library and :mod:`methodgen.codegen.ktypes` only.
 A change here changes the runtime's source digest (:data:`methodgen.runtime.nbabi.SOURCE_SHA256`), so
 machine code and modules generated for another contract are rebuilt, never mixed.
@@ -239,7 +239,7 @@ _f8 = _t.float64
 _V = _t.float64[::1]
 _M = _t.float64[:, ::1]
 
-#: Signatures of the kernels (see :mod:`methodgen.runtime.nbruntime`), as plain data.
+#: Signatures of the kernels (:mod:`methodgen.runtime.fused` inlines them), as plain data.
 KERNEL_TYPES = {
     "guess": _t.void(_V, _f8, _V, _V),
     "res": _t.void(_V, _V, _V, _f8, _V, _V),
@@ -264,13 +264,12 @@ KERNEL_TYPES = {
 def _runtime_digest() -> str:
     package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     h = hashlib.sha256()
-    for name in ("codegen/abi.py", "runtime/nbabi.py", "runtime/nbruntime.py"):
+    for name in ("codegen/abi.py", "runtime/nbabi.py"):
         with open(os.path.join(package, *name.split("/")), "rb") as f:
             h.update(hashlib.sha256(f.read()).digest())
     return h.hexdigest()
 
 
-#: SHA-256 over this file, ``runtime/nbabi.py`` and ``runtime/nbruntime.py`` (read, not imported): the stamp of
-#: numba's cached code of the runtime and the runtime a generated numba module names (a module
-#: generated for another refuses to load).
+#: SHA-256 over this file and ``runtime/nbabi.py`` (read, not imported): the runtime a generated
+#: compiled module names (a module generated for another refuses to load).
 RUNTIME_SHA256 = _runtime_digest()

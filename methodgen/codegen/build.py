@@ -161,9 +161,10 @@ def generate(scheme, path=None, backend: str = "numpy", *, progress=None) -> Mod
         ``~/.cache/methodgen``) under a name that includes the signature.  A file that
         is already up to date (same signature, intact content) is not rewritten.
     backend : {"numpy", "numba"}
-        ``"numba"``: kernels, Newton's method and the integration loop compiled
-        with ``numba.njit(cache=True)`` (same interface, same results to
-        round-off).  Without numba installed: a RuntimeWarning and the numpy module.
+        ``"numba"`` (the compiled backend; the name is historical): kernels, Newton's
+        method and the integration loop compiled through llvmlite (same interface, same
+        results to round-off).  Without llvmlite installed: a RuntimeWarning and the numpy
+        module.
     progress : callable or True, optional
         ``progress(phase, elapsed, done)`` for the phases lower, render, write and
         load (:mod:`methodgen.codegen.progress`); default: the installed reporter (silent in the API).
@@ -225,7 +226,7 @@ def build(system: Hamiltonian, method: str, path=None, backend: str = "numpy", *
     path : path-like, optional
         Target file; default: the per-user cache, named by the signature.
     backend : {"numpy", "numba"}
-        See :func:`generate`; without numba installed, ``"numba"`` warns
+        See :func:`generate`; without llvmlite installed, ``"numba"`` warns
         (RuntimeWarning) and builds the numpy module.
     order : {2, 4, 6, 8, 10}
     composition : str, optional

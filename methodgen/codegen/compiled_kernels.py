@@ -1,4 +1,4 @@
-"""A numba module's kernels as kernel IR (:mod:`methodgen.codegen.kir`) functions.
+"""A compiled module's kernels as kernel IR (:mod:`methodgen.codegen.kir`) functions.
 
 The compiled runtime calls a module's kernels with fixed signatures
 (:data:`methodgen.codegen.abi.KERNEL_TYPES`): inputs read from 1-D arrays (the state ``_y``, the
@@ -13,12 +13,13 @@ Built here: every kernel of the lowering (:func:`kernel_function`: straight-line
 families of like terms, :mod:`methodgen.codegen.lower_loops`, and over like rows,
 :mod:`methodgen.codegen.lower_rows`), an s-stage method's loops over its stages
 (:func:`stage_kernel`) and the lock-step block kernel (:func:`block_kernel`).  A kernel with an
-expression the IR has no node for (none of the built-in scenes has one) is printed by the
-template as text and compiled by numba.
+expression the IR has no node for cannot be compiled: :class:`~methodgen.errors.GenerationError`
+names it and the expression (the numpy backend runs any module).
 """
 
 from __future__ import annotations
 
+from ..errors import GenerationError
 from . import kir
 
 __all__ = ["kernel_function", "stage_kernel", "block_kernel", "kernel_text", "STACK_MAX"]
@@ -34,7 +35,7 @@ def _store(array: str, idx: tuple, code) -> tuple:
 
 def kernel_function(name: str, kern, ir, args, outs, step_alias: str | None = None):
     """The kernel ``name`` as a kernel-IR function -- straight-line code, loops over like terms
-    and over like rows, code ahead of the loops -- or None where an expression has no tree.
+    and over like rows, code ahead of the loops.
 
     Parameters
     ----------
@@ -51,15 +52,25 @@ def kernel_function(name: str, kern, ir, args, outs, step_alias: str | None = No
 
     Returns
     -------
-    tuple or None
+    tuple
         ``("def", name, params, body)``.
+
+    Raises
+    ------
+    methodgen.errors.GenerationError
+        An expression of the kernel has no kernel-IR tree (named in the message).
     """
     from .lower_rows import row_body_ir
 
     try:
         return _build(name, kern, ir, args, outs, step_alias, row_body_ir(kern, ir, args, outs))
-    except kir.Unsupported:
-        return None
+    except kir.Unsupported as exc:
+        raise _refused(name, exc) from None
+
+
+def _refused(name: str, exc: Exception) -> GenerationError:
+    return GenerationError(f"the compiled backend cannot print the kernel {name}: {exc} has no kernel-IR "
+                           "node (methodgen.codegen.kir); use backend=\"numpy\", which runs any module")
 
 
 def _build(name, kern, ir, args, outs, step_alias, rows=None):
@@ -293,13 +304,14 @@ def block_kernel(name: str, kern, ir, lanes: int):
     many updated components are not finite.  No branch in the lane loops and no reduction but
     that integer count, so LLVM vectorises them; the expressions are the one-lane kernel's and
     the runtime's update, operation for operation (the same results, bitwise).  None where the
-    post kernel is not straight-line or has an expression without a tree."""
+    post kernel is not straight-line; :class:`~methodgen.errors.GenerationError` for an
+    expression without a tree."""
     if kern.loops or kern.accs or kern.pre:
         return None
     try:
         return _block(name, kern, ir, lanes)
-    except kir.Unsupported:
-        return None
+    except kir.Unsupported as exc:
+        raise _refused(name, exc) from None
 
 
 def _block(name, kern, ir, lanes):

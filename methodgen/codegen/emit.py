@@ -53,7 +53,8 @@ __all__ = ["template_dir", "template_hash", "signature", "render", "write_atomic
            "resolve_backend", "write_module", "check_cache_folder", "cache_root_of", "untagged",
            "load_if_current"]
 
-#: Code generation backends: plain numpy, or numba-compiled kernels and integration loop.
+#: Code generation backends: plain numpy, or "numba": the compiled backend (kernels and
+#: integration loop compiled through llvmlite; the name is historical, kept for the API).
 BACKENDS = ("numpy", "numba")
 # Top-level template of each backend; numba templates are named numba_*.j2 so
 # that the numpy template hash (and with it every numpy signature) ignores them.
@@ -169,8 +170,7 @@ def _check_backend(backend: str) -> None:
 def compiled_available() -> bool:
     """True when the compiled backend can run: llvmlite is installed (the ``methodgen[fast]``
     extra).  Found on the path, not imported.  Its kernels and its stepper are machine code
-    printed through llvmlite; numba is needed only for a kernel the LLVM translator refuses
-    (:func:`methodgen.codegen.nbcache.numba` says so then) and for ``METHODGEN_KERNELS=numba``."""
+    printed through llvmlite."""
     return _findable("llvmlite")
 
 
@@ -185,7 +185,7 @@ def _findable(name: str) -> bool:
 
 
 def resolve_backend(backend: str, stacklevel: int = 3) -> str:
-    """Validate ``backend``; ``"numba"`` without numba installed falls back to ``"numpy"`` with a warning.
+    """Validate ``backend``; ``"numba"`` without llvmlite installed falls back to ``"numpy"`` with a warning.
 
     Raises
     ------
@@ -306,9 +306,8 @@ def _docsafe(text: str) -> str:
 
 
 def runtime_sha256() -> str:
-    """The shared runtime's ``SOURCE_SHA256`` (:data:`methodgen.runtime.nbabi.SOURCE_SHA256`: over
-    ``nbabi.py`` and ``nbruntime.py``), without importing
-    numba.  A numba module on the shared runtime records it and refuses another runtime."""
+    """The compiled runtime's ``SOURCE_SHA256`` (:data:`methodgen.runtime.nbabi.SOURCE_SHA256`: over
+    ``abi.py`` and ``nbabi.py``).  A compiled module records it and refuses another runtime."""
     from .abi import RUNTIME_SHA256
     return RUNTIME_SHA256
 
@@ -478,14 +477,6 @@ def _exec_source(path: Path, source: bytes) -> ModuleType:
     if spec is None:  # pragma: no cover - defensive
         raise GenerationError(f"cannot import {path}")
     module = importlib.util.module_from_spec(spec)
-    if b"\nimport numba\n" in source or b'\nBACKEND = "numba"\n' in source:
-        # numba modules: cache entries of their own under this private name (a plain
-        # `import` of the same file in another process must not load them).  A module on the
-        # shared runtime does not import numba itself: its guard is installed when methodgen
-        # first imports numba (methodgen.codegen.nbcache.numba; a run on the fused loop never does)
-        from .nbcache import defer_stamp_guard, install_stamp_guard
-        guard = install_stamp_guard if b"\nimport numba\n" in source else defer_stamp_guard
-        guard(str(path), hashlib.sha256(source).hexdigest(), owner=name, tag=digest)
     # generated code: the compiled route reads its kernel IR, never its text
     module.__dict__[GENERATED_ATTR] = True
     sys.modules[name] = module
@@ -571,10 +562,10 @@ def generate(scheme, path: str | os.PathLike | None = None, backend: str = "nump
         name that includes the signature.  A file that is already up to date
         (same signature, intact content) is not rewritten.
     backend : {"numpy", "numba"}
-        ``"numba"`` compiles kernels, Newton's method and the integration loop
-        with ``numba.njit(cache=True)`` (same interface and results to
-        round-off).  Without numba installed a RuntimeWarning is issued and the
-        numpy module is returned.
+        ``"numba"`` (the compiled backend; the name is historical): kernels,
+        Newton's method and the integration loop compiled to machine code through
+        llvmlite (same interface and results to round-off).  Without llvmlite
+        installed a RuntimeWarning is issued and the numpy module is returned.
     progress : callable, optional
         ``progress(phase, elapsed, done)`` for lower, render, write and load
         (:mod:`methodgen.codegen.progress`); default: the installed reporter.

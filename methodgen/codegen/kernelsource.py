@@ -145,7 +145,7 @@ def source_of(fn) -> tuple[str, str, bool]:
 
     Parameters
     ----------
-    fn : function or numba dispatcher (its ``py_func``), not of a generated module
+    fn : function, or an object holding one as ``py_func`` (an LLVM kernel), not of a generated module
 
     Returns
     -------

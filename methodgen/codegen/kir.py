@@ -116,7 +116,7 @@ def python(node) -> str:
     if op == "[]":
         return f"{node[1]}[{_index_text(node[2])}]"
     if op == "buffer":
-        return f"numba.carray(_rt.stack_buffer({_size(node[1])}), {_shape_text(node[1])})"
+        return f"stack_array({_shape_text(node[1])})"
     if op in ("zeros", "empty"):
         return f"numpy.{op}({_shape_text(node[1])})"
     if op in ("neg", "not"):
@@ -146,13 +146,6 @@ def python(node) -> str:
         if _bind(right) <= mine or (op == "*" and _is_fraction(right)):
             rt = f"({rt})"
     return f"{lt}{op}{rt}" if op in ("*", "/", "**") else f"{lt} {op} {rt}"
-
-
-def _size(shape) -> int:
-    n = 1
-    for k in shape:
-        n *= k
-    return n
 
 
 def _shape_text(shape) -> str:
@@ -193,8 +186,7 @@ def to_ast(node, ctx=None) -> ast.expr:
     if op == "[]":
         return ast.Subscript(ast.Name(node[1], ast.Load()), _index_ast(node[2]), ctx or ast.Load())
     if op == "buffer":
-        inner = ast.Call(_name("_rt.stack_buffer", ast.Load()), [ast.Constant(_size(node[1]))], [])
-        return ast.Call(_name("numba.carray", ast.Load()), [inner, _shape_ast(node[1])], [])
+        return ast.Call(_name("stack_array", ast.Load()), [_shape_ast(node[1])], [])
     if op in ("zeros", "empty"):
         return ast.Call(_name("numpy." + op, ast.Load()), [_shape_ast(node[1])], [])
     if op in _COMPARE:

@@ -1,20 +1,18 @@
-"""The kernel types of the compiled backend as plain data: numba's spellings without numba.
+"""The kernel types of the compiled backend as plain data.
 
-A warm start (a cached numba module imported and run on its fused loop) must not import
-numba: its import alone is 0.18 s of a 0.3 s start.  The kernels' signatures are needed on
-that path (:mod:`methodgen.codegen.llvmkernels` derives the LLVM types of a kernel from them), so
-they are written here in the subset of numba's type vocabulary the kernels use --
-``float64``, ``int64``, ``none``/``void``, C-contiguous ``float64[::1]``,
-``float64[:, ::1]`` … and signatures ``void(float64[::1], float64)`` -- with the same
-attributes (``Array.ndim``, ``.dtype``, ``.layout``; ``Signature.return_type``, ``.args``),
-and converted to numba's types (:func:`to_numba`) only where numba compiles something.
+:mod:`methodgen.codegen.llvmkernels` derives the LLVM types of a kernel from its signature.
+They are written in a small type vocabulary -- ``float64``, ``int64``, ``none``/``void``,
+C-contiguous ``float64[::1]``, ``float64[:, ::1]`` … and signatures
+``void(float64[::1], float64)`` (numba's spellings, which the kernels were first written in)
+-- with the attributes the translator reads (``Array.ndim``, ``.dtype``, ``.layout``;
+``Signature.return_type``, ``.args``).
 
 This module imports the standard library only.
 """
 
 from __future__ import annotations
 
-__all__ = ["Scalar", "Array", "Signature", "float64", "int64", "boolean", "none", "void", "plain", "to_numba"]
+__all__ = ["Scalar", "Array", "Signature", "float64", "int64", "boolean", "none", "void", "plain"]
 
 
 class Signature:
@@ -98,32 +96,8 @@ none = Scalar("none")
 void = none
 
 
-def _plain_type(t):
-    if isinstance(t, (Scalar, Array)):
-        return t
-    if hasattr(t, "ndim") and hasattr(t, "layout") and hasattr(t, "dtype"):   # numba's Array
-        return Array(_plain_type(t.dtype), t.ndim, t.layout)
-    name = {"bool": "boolean"}.get(str(t), str(t))     # (numba prints its boolean as "bool")
-    if name in ("float64", "int64", "boolean", "none"):
-        return Scalar(name)
-    raise TypeError(f"no plain kernel type for {t!r} (types: float64, int64, boolean, none, arrays of them)")
-
-
 def plain(sig) -> Signature:
-    """``sig`` (a :class:`Signature`, or numba's) as a :class:`Signature`."""
-    if isinstance(sig, Signature):
-        return sig
-    return Signature(_plain_type(sig.return_type), [_plain_type(a) for a in sig.args])
-
-
-def to_numba(t):
-    """numba's type (or signature) for a plain one (imports numba)."""
-    from numba import types as nt
-
-    if isinstance(t, Signature):
-        return to_numba(t.return_type)(*[to_numba(a) for a in t.args])
-    if isinstance(t, Array):
-        return nt.Array(to_numba(t.dtype), t.ndim, t.layout)
-    if isinstance(t, Scalar):
-        return getattr(nt, t.name)
-    return t      # already numba's
+    """``sig``, checked to be a :class:`Signature` of this module's types."""
+    if not isinstance(sig, Signature) or not all(isinstance(t, (Scalar, Array)) for t in (sig.return_type, *sig.args)):
+        raise TypeError(f"not a kernel signature of methodgen.codegen.ktypes: {sig!r}")
+    return sig

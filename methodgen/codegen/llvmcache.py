@@ -1,9 +1,8 @@
 """A disk cache of the machine code :mod:`methodgen.codegen.llvmkernels` compiles.
 
-A numba module's kernels and its fused loop are translated to LLVM IR and compiled in
+A compiled module's kernels and its fused loop are translated to LLVM IR and compiled in
 every process (for a cached Kepler energy-momentum module about 0.2 s: the translation in
-Python, LLVM's -O2 pipeline, code generation) -- most of a warm start once numba's import
-is paid.  This cache keeps the object code, so a later process adds it to its engine
+Python, LLVM's -O2 pipeline, code generation) -- most of a warm start.  This cache keeps the object code, so a later process adds it to its engine
 without translating or optimising anything.
 
 **What a cached object is for** (its key, SHA-256 of all of it): for a generated kernel, the
@@ -13,7 +12,8 @@ stepper, the Wisdom–Holman flows), the text of the file it was executed from (
 its code: :mod:`methodgen.codegen.kernelsource`); the kernel's name, line and signature,
 the translation-time constants a fused loop binds (values, and for functions their IR's digest
 or the text of their file), the C-entry flag and LLVM pipeline options; the SHA-256 of the
-translator, the IR's printer and the runtime (``llvmkernels.py``, ``kir.py``, ``nbruntime.py``);
+translator, the IR's printer, the types and the runtime's interface (``llvmkernels.py``, ``kir.py``,
+``ktypes.py``, ``nbabi.py``);
 llvmlite's and LLVM's versions; the target triple, the host CPU's name and features.  Anything
 else a kernel could depend on makes it uncacheable (:func:`key` returns None: compiled as before).
 
@@ -65,7 +65,7 @@ def _static(state) -> str:
         parts = [llvmlite.__version__, ".".join(map(str, llvm.llvm_version_info)), state["triple"],
                  state["cpu"], state["features"]]
         for name in ("codegen/llvmkernels.py", "codegen/kir.py", "codegen/ktypes.py", "runtime/nbabi.py",
-                     "runtime/nbruntime.py", "codegen/llvmcache.py"):
+                     "codegen/llvmcache.py"):
             with open(os.path.join(package, *name.split("/")), "rb") as f:
                 parts.append(hashlib.sha256(f.read()).hexdigest())
         _STATIC.append("\0".join(parts))

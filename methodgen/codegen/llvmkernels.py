@@ -1,17 +1,13 @@
-"""A numba module's kernels compiled to machine code through LLVM IR (llvmlite), not numba.
+"""A compiled module's kernels and methodgen's runtime compiled to machine code through LLVM IR (llvmlite).
 
-numba spends seconds typing and lowering a kernel of a few hundred statements (the outer
-solar system's energy-momentum Newton matrix: 3.4 s of a 9.5 s first use; most of it is
-numba's type inference trying overloads per operation, not LLVM).  The kernels of a numba
-module are float arithmetic on arrays of known shape, so this module writes their LLVM IR
-directly from the kernel's tree (:mod:`methodgen.codegen.kir`, as heyoka does from its expression
-graph), and from the hand-written runtime's Python source (the stepper, the Wisdom–Holman
-flows), and compiles it with LLVM in milliseconds.  The result is an :class:`LLVMKernel`: machine code
-with the signature of numba's C-ABI wrapper for the same kernel type, so the shared runtime
-calls it exactly as it calls a numba kernel (numba's wrapper-address protocol), and the
-fused loop (:mod:`methodgen.runtime.fused`) inlines its source.  Signatures are
-:mod:`methodgen.codegen.ktypes` (numba's accepted too); this module does not import numba unless a
-kernel falls back to it.
+The kernels of a compiled module are float arithmetic on arrays of known shape, so this module
+writes their LLVM IR directly from the kernel's tree (:mod:`methodgen.codegen.kir`, as heyoka
+does from its expression graph), and from the hand-written runtime's Python source (the
+stepper, the Wisdom–Holman flows, the lattice and particle step loops), and compiles it with
+LLVM in milliseconds.  The result is an :class:`LLVMKernel`: machine code for the kernel type's
+signature (:mod:`methodgen.codegen.ktypes`: arrays passed as pointers to a fixed structure,
+:func:`packed_structs`), which the fused loop (:mod:`methodgen.runtime.fused`) inlines and which
+Python calls through a C entry (ctypes).
 
 What is translated: assignments (scalar names live in stack slots that LLVM promotes to
 registers, so a value may be carried across iterations or branches), stores and ``+=``,
@@ -19,8 +15,8 @@ registers, so a value may be carried across iterations or branches), stores and 
 (a loop in the machine code) and over constant tuples (unrolled: a sum kept in its printed
 order), ``while``, ``break``, ``continue``, ``if``/``else`` on run-time or translation-time
 conditions, ``return``; views of
-the arguments (``X[a:b]``, rows ``A[i]``), stack buffers (``numba.carray(_rt.stack_buffer(n),
-shape)``) and ``numpy.zeros`` / ``numpy.empty`` of shapes known now; the module's constant
+the arguments (``X[a:b]``, rows ``A[i]``), work arrays on the stack (``stack_array(shape)``)
+and ``numpy.zeros`` / ``numpy.empty`` of shapes known now; the module's constant
 tables (numpy arrays of indices or weights) and integer constants; calls of the module's
 scalar helpers (translated once, inlined by LLVM) and of its array kernels (inlined here);
 the arithmetic, comparisons and the math functions below.  For a runtime written in this
@@ -32,18 +28,15 @@ the call), unpacked into names, elements or array views (``a, b = f(…)``, ``x,
 index left as Python leaves it; ``%`` and ``//`` of integers with Python's signs; the truth
 value of a number; ``math.isfinite``, ``math.floor``, numpy's ``inf``/``nan``; rows ``A[i]``
 of n-D views; and a kernel returning an int64 (a C entry returns its value).  Anything else
-(``for … else``, ``%`` of floats, an unknown function) raises :class:`Unsupported`, and
-:func:`kernel` then compiles the kernel with numba as before.  ``METHODGEN_KERNELS=numba``
-forces numba for every kernel (the control the tests use).
+(``for … else``, ``%`` of floats, an unknown function) raises :class:`Unsupported`, naming
+the function: there is no other compiler to hand it to (the numpy backend runs any module).
 
-Same arithmetic, same bits: every operation is the one numba emits for the same source
-without fastmath (IEEE add, sub, mul, div and negation; ``x**n`` for a constant integer n
-by repeated squaring from 1.0, then ``1.0/…`` for negative n, as
-``numba.cpython.numbers.static_power_impl``; other powers through ``llvm.pow``; ordered
-comparisons but ``!=``; ``max``/``min`` as numba's ``do_minmax``; ``math.sqrt``,
-``math.sin`` … through the same intrinsics or libm functions).  LLVM optimises without
-fast-math flags, so it does not reassociate.  One difference: ``x**-n`` at x = 0 is inf
-here (the modules' error model); numba's raises ``ZeroDivisionError`` inside the kernel.
+The arithmetic is IEEE without fast-math (add, sub, mul, div and negation; ``x**n`` for a
+constant integer n by repeated squaring from 1.0, then ``1.0/…`` for negative n; other powers
+through ``llvm.pow``; ordered comparisons but ``!=``; ``max``/``min`` left to right;
+``math.sqrt``, ``math.sin`` … through LLVM intrinsics or libm functions).  LLVM optimises
+without fast-math flags, so it does not reassociate.  ``x**-n`` at x = 0 is inf (the modules'
+error model).
 
 What is translated is an :mod:`ast` definition: for a generated kernel, built from its kernel
 IR (:func:`attach`: the tree the module holds as a table; a generated module's text is never
@@ -57,7 +50,6 @@ import ast
 import ctypes
 import ctypes.util
 import math
-import os
 import threading
 
 from . import kir
@@ -68,18 +60,13 @@ from llvmlite import ir
 from . import kernelsource as _ks
 from . import ktypes as _t
 from . import llvmcache as _objcache
-from . import nbcache as _nbcache
 
-__all__ = ["kernel", "compile_kernel", "assembly", "Unsupported", "LLVMKernel", "enabled", "packed_structs"]
+__all__ = ["kernel", "compile_kernel", "assembly", "Unsupported", "LLVMKernel", "packed_structs"]
 
 
 class Unsupported(Exception):
-    """The kernel's source uses something this translator does not know."""
-
-
-def enabled() -> bool:
-    """Whether straight-line kernels take this route (``METHODGEN_KERNELS`` is not ``numba``)."""
-    return os.environ.get("METHODGEN_KERNELS", "llvm").strip().lower() != "numba"
+    """The kernel's source uses something this translator does not know (the message names the
+    function and the construct)."""
 
 
 # --- LLVM set-up (once per process) ---------------------------------------------------
@@ -565,7 +552,7 @@ class _Translator:
             return acc
         if isinstance(node, ast.Subscript) and isinstance(node.value, ast.Name):
             if node.value.id in sc.arrays:
-                raise Unsupported("a float element as an index")
+                raise Unsupported("a float element as an index (or an integer operator: %, //, >>, & of a float)")
             gv, shape, kind = self.table(node.value.id)
             if kind != "i":
                 raise Unsupported("float table as an index")
@@ -602,11 +589,14 @@ class _Translator:
         return b.gep(gv, [ir.Constant(_I64, 0), flat])
 
     def table(self, name):
-        """A module-level numpy array (index tables, quadrature weights) as an LLVM constant."""
+        """A module-level numpy array (index tables, quadrature weights) or tuple of numbers (the
+        scalar helpers' Gauss–Legendre nodes and weights) as an LLVM constant."""
         got = self.tables.get(name)
         if got is None:
             import numpy
             arr = self.scope.globals.get(name)
+            if isinstance(arr, tuple) and arr and all(type(v) in (int, float) for v in arr):
+                arr = numpy.array(arr, dtype=numpy.float64 if float in map(type, arr) else numpy.int64)
             if not isinstance(arr, numpy.ndarray) or arr.size == 0 or arr.dtype.kind not in "iuf":
                 raise Unsupported(f"{name} is not a constant table")
             if arr.dtype.kind == "f":
@@ -625,7 +615,7 @@ class _Translator:
 
     def view(self, name, value) -> bool:
         """``name`` bound to an array: another array, ``X[a:b]`` (constant bounds), a row of a
-        matrix, a stack buffer (``numba.carray(_rt.stack_buffer(n), shape)``) or ``numpy.zeros``."""
+        matrix, a work array on the stack (``stack_array(shape)``) or ``numpy.zeros``."""
         sc = self.scope
         arr = self.array_arg(value)
         if arr is not None:
@@ -649,13 +639,11 @@ class _Translator:
                 if value.func.attr == "zeros":
                     self.zero(ast.Name(id=name))
                 return True
-            if owner == "numba" and value.func.attr == "carray" and len(value.args) == 2:
-                inner = value.args[0]
-                if not (isinstance(inner, ast.Call) and isinstance(inner.func, ast.Attribute)
-                        and inner.func.attr == "stack_buffer"):
-                    raise Unsupported("carray of something else than a stack buffer")
-                sc.arrays[name] = self.buffer(self.const_shape(value.args[1]))
-                return True
+        if (isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "stack_array"
+                and len(value.args) == 1 and not value.keywords):
+            # a work array on the stack, not cleared (run as Python: numpy.zeros of the shape)
+            sc.arrays[name] = self.buffer(self.const_shape(value.args[0]))
+            return True
         return False
 
     def is_numpy(self, name) -> bool:
@@ -750,7 +738,7 @@ class _Translator:
         """``for e in (c0, c1, …)`` (a literal tuple or a module-level tuple of numbers): the
         body once per element, in order (a sum kept in its printed order)."""
         if st.orelse or not isinstance(st.target, ast.Name):
-            raise Unsupported("loop")
+            raise Unsupported("loop (a for … else, or not over range(…) or a constant tuple)")
         if isinstance(st.iter, ast.Tuple):
             items = [self.const_eval(e) if not (isinstance(e, ast.Constant) and type(e.value) is float)
                      else e.value for e in st.iter.elts]
@@ -780,7 +768,7 @@ class _Translator:
         if (st.orelse or not isinstance(st.target, ast.Name) or not isinstance(it, ast.Call)
                 or not isinstance(it.func, ast.Name) or it.func.id != "range" or it.keywords
                 or not 1 <= len(it.args) <= 3):
-            raise Unsupported("loop")
+            raise Unsupported("loop (a for … else, or not over range(…) or a constant tuple)")
         step = 1
         args = list(it.args)
         if len(args) == 3:
@@ -1051,7 +1039,7 @@ class _Translator:
                 return v if kind == "f" else b.sitofp(v, _DBL)
             return self.call_helper(node)
         else:
-            raise Unsupported("call")
+            raise Unsupported(f"call of {ast.unparse(f)}")
         args = [self.expr(a) for a in node.args]
         if len(args) != (1 if table is _UNARY else 2):
             raise Unsupported("argument count of a math function")
@@ -1084,7 +1072,8 @@ class _Translator:
             sub = _Translator(self.module, fdef, sig, f"{self.name}.{name}", _names_of(py))
             sub.tables = self.tables
             sub.helpers = self.helpers
-            sub.run()
+            with _naming(name):
+                sub.run()
             fn = self.helpers[name] = sub.f.fn
             fn.linkage = "private"
             fn.attributes.add("alwaysinline")
@@ -1166,7 +1155,8 @@ class _Translator:
         self.inline_depth += 1
         self.loop_assigned = self._assigned_in_loops(fdef.body)
         try:
-            self.block(fdef.body)
+            with _naming(py.__name__):
+                self.block(fdef.body)
             b = self.b
             if not b.block.is_terminated:
                 b.branch(frame["exit"])         # off the end: returns None
@@ -1177,6 +1167,24 @@ class _Translator:
             self.frames.pop()
             self.inline_depth -= 1
             self.loop_assigned = saved_assigned
+
+
+class _naming:
+    """Context: an :class:`Unsupported` raised inside prefixed with the function it was raised
+    in (``in stepper: in _nb_res: binary operator``), so a refusal names the kernel."""
+
+    def __init__(self, name):
+        self.name = name
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        if isinstance(exc, Unsupported) and not getattr(exc, "_named", None) == self.name:
+            new = Unsupported(f"in {self.name}: {exc}")
+            new._named = self.name
+            raise new from None
+        return False
 
 
 def _function_def(py_func) -> ast.FunctionDef:
@@ -1214,14 +1222,14 @@ attach = kir.attach
 
 def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, vectorize=True,
                    lazy=False) -> "LLVMKernel":
-    """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the numba
-    signature ``sig``, its names resolved in ``globals_`` (default: its module's).  Raises
+    """``py_func`` (a kernel of a generated module) compiled through LLVM IR for the
+    signature ``sig`` (:mod:`methodgen.codegen.ktypes`), its names resolved in ``globals_`` (default: its module's).  Raises
     :class:`Unsupported` when its source uses anything the translator does not know.
 
-    ``c_entry``: also a C entry point taking each array argument as a pointer to numba's
+    ``c_entry``: also a C entry point taking each array argument as a pointer to its
     array structure (:func:`packed_structs`), callable from Python through ctypes
     (:meth:`LLVMKernel.c_call`; its result is the kernel's float64 or int64 value, if it
-    returns one) with no numba dispatcher loaded.
+    returns one).
 
     ``unroll``, ``vectorize``: LLVM's loop unrolling and loop / SLP vectorisation in the -O2
     pipeline (both by default).  Code of many short loops over run-time lengths (a few bodies
@@ -1229,12 +1237,12 @@ def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, v
     Wisdom–Holman runtime turns them off.  They never change the bits (no fast-math: LLVM
     does not reassociate).
 
-    ``lazy``: return the kernel named (its symbol, from the cache key) but compile it only when
-    its machine code is first needed (:meth:`LLVMKernel.materialize`).  A generated module's
-    kernels are made so: the fused loop inlines their kernel IR and never calls their own
-    machine code, so compiling each at import was a second compilation of the same code (0.42 s
-    of the outer solar system's cold first use)."""
-    sig = _t.plain(sig)   # (numba's signatures are accepted too)
+    ``lazy``: return the kernel named (its symbol, from the cache key) without compiling it.  A
+    generated module's kernels are made so: the fused loop inlines their kernel IR and never
+    calls their own machine code, so compiling each at import was a second compilation of the
+    same code (0.42 s of the outer solar system's cold first use); a call from Python compiles
+    its C entry (:meth:`LLVMKernel.__call__`)."""
+    sig = _t.plain(sig)
     options = (bool(unroll), bool(vectorize))
     with _LOCK:     # one engine per process: modules are added to it one at a time
         if lazy and not c_entry:
@@ -1242,7 +1250,6 @@ def compile_kernel(py_func, sig, globals_=None, c_entry=False, *, unroll=True, v
             if name not in _LOADED:
                 out = LLVMKernel(py_func, sig, None, _engine(), name)
                 out._globals = globals_
-                out._pending = (key, options)
                 return out
         return _compile_kernel(py_func, sig, globals_, c_entry, options)
 
@@ -1322,11 +1329,12 @@ def assembly(py_func, sig, globals_=None, *, unroll=True, vectorize=True) -> str
 
 def _optimised(py_func, sig, globals_, c_entry, name, options=(True, True)):
     """The kernel translated to LLVM IR and optimised (-O2): an llvmlite module."""
-    fdef = _function_def(py_func)
     module = ir.Module(name=py_func.__name__)
     module.triple = _STATE["triple"]
-    tr = _Translator(module, fdef, sig, name, _names_of(py_func) if globals_ is None else globals_)
-    tr.run()
+    with _naming(py_func.__name__):
+        fdef = _function_def(py_func)
+        tr = _Translator(module, fdef, sig, name, _names_of(py_func) if globals_ is None else globals_)
+        tr.run()
     if c_entry:
         _add_c_entry(module, tr.f.fn, sig, name + "_c")
     mod = llvm.parse_assembly(str(module))
@@ -1344,7 +1352,7 @@ def _optimised(py_func, sig, globals_, c_entry, name, options=(True, True)):
 
 
 def packed_structs(arrays):
-    """``(buffer, addresses)``: numba's structures of ``arrays`` (meminfo, parent, nitems,
+    """``(buffer, addresses)``: the array structures of ``arrays`` (meminfo, parent, nitems,
     itemsize, data, shape, strides: what a C entry point takes for each array argument) back to
     back in one int64 buffer, and the address of each; pass the addresses, and keep the buffer
     and the arrays alive while they are used.  One allocation for all of them (a ctypes
@@ -1375,20 +1383,17 @@ def packed_structs(arrays):
 class LLVMKernel:
     """A kernel compiled by :func:`compile_kernel`.
 
-    For the shared runtime it is a first-class function: it implements numba's
-    wrapper-address protocol (``__wrapper_address__``, ``signature``; registered as such by
-    :mod:`methodgen.runtime.nbruntime`, which imports numba -- this module does not).  The fused loop
-    (:mod:`methodgen.runtime.fused`) inlines its source instead.  Callable from Python too: the
-    same translation with a C entry (:func:`compile_kernel` with ``c_entry``, made on the first
-    such call, its machine code cached as any other) called through ctypes -- the kernel's own
-    arithmetic, no numba (the Python stepper, tests and diagnostics; the runtime never does)."""
+    The fused loop (:mod:`methodgen.runtime.fused`) inlines its kernel IR (a lazy kernel's own
+    machine code is never compiled: ``compile_kernel(lazy=True)``).  Callable from Python: the same
+    translation with a C entry (:func:`compile_kernel` with ``c_entry``, made on the first such
+    call, its machine code cached as any other) called through ctypes -- the kernel's own
+    arithmetic (the Python stepper, tests and diagnostics; the runtime never does)."""
 
-    __slots__ = ("py_func", "engine", "_py", "c_call", "_sig", "_addr", "_type", "symbol", "_globals", "_pending")
+    __slots__ = ("py_func", "engine", "_py", "c_call", "_sig", "_addr", "symbol", "_globals")
 
     def __init__(self, py_func, sig, addr, engine, symbol=""):
         self._sig = sig               # methodgen.codegen.ktypes.Signature
         self._addr = addr
-        self._type = None             # numba's FunctionType, made when numba asks
         self.py_func = py_func
         self.engine = engine          # owns the machine code
         self._py = None               # the C entry, for calls from Python (made on the first)
@@ -1397,33 +1402,6 @@ class LLVMKernel:
         # the machine code's symbol: named by the cache key of the text it was translated
         # from (or unique in the process), so it identifies the code, as an id() cannot
         self.symbol = symbol
-        self._pending = None          # (cache key, options) of a lazy kernel not compiled yet
-
-    def materialize(self) -> "LLVMKernel":
-        """Compile (or load from the machine-code cache) a lazy kernel's machine code, once; its
-        symbol is the one it was named by.  Raises :class:`Unsupported` where the translator
-        refuses its kernel IR (``METHODGEN_KERNELS=numba`` compiles such a module with numba)."""
-        if self._addr is None:
-            with _LOCK:
-                if self._addr is None:
-                    key, options = self._pending
-                    got = _compile_kernel(self.py_func, self._sig, self._globals, False, options, (key, self.symbol))
-                    self._addr, self.engine, self._pending = got._addr, got.engine, None
-        return self
-
-    def __wrapper_address__(self):
-        return self.materialize()._addr
-
-    def signature(self):
-        """numba's signature of the kernel (imports numba)."""
-        return _t.to_numba(self._sig)
-
-    def numba_type(self):
-        """numba's FunctionType of the kernel, made once (numba's typeof of this object)."""
-        if self._type is None:
-            from numba import types as nt
-            self._type = nt.FunctionType(self.signature())
-        return self._type
 
     def __call__(self, *args):
         """Call the machine code from Python: arrays (C-contiguous, of the signature's dtype) by
@@ -1461,34 +1439,22 @@ def _packed(a):
     return buf, [buf.__array_interface__["data"][0]]
 
 
-def _numba_for(py_func):
-    """numba, ready to compile a function of ``py_func``'s module: its cache guard installed and
-    its lazily compiled functions made dispatchers (:func:`methodgen.runtime.nbabi.materialize`)."""
-    g = getattr(py_func, "__globals__", None)
-    # a generated module's runtime interface (methodgen.runtime.nbabi, imported as _rt) prepares it;
-    # looked up in the module, not imported here (llvmkernels sits below the runtime)
-    prepare = getattr(g.get("_rt"), "materialize", None) if g is not None else None
-    if prepare is not None:
-        prepare(g)
-    return _nbcache.numba()
-
-
-def kernel(sig, table=None):
+def kernel(sig, table):
     """Decorator: a generated kernel compiled through LLVM IR from its kernel IR ``table``
     (:func:`attach`: the tree, never the module's text; its machine code keyed by the tree's
-    digest) when the route is :func:`enabled`, else with numba for ``sig`` (cached on disk).  A
-    kernel without a table (an expression the IR has no node for) is compiled by numba: the
-    generated text is never translated."""
+    digest), named now and compiled on first use (the fused loop inlines the tree instead).
+
+    Raises
+    ------
+    Unsupported
+        ``table`` is None: a module printed without the kernel's tree (there is no other
+        compiler to hand its text to).
+    """
     def deco(py_func):
-        if table is not None:
-            attach(py_func, table)
-        if table is not None and enabled():
-            try:
-                # named now, compiled on first use: the fused loop inlines the tree instead
-                return compile_kernel(py_func, sig, globals_=getattr(py_func, "__kir_names__", None), lazy=True)
-            except Unsupported:
-                pass
-        numba = _numba_for(py_func)
-        return numba.njit(_t.to_numba(_t.plain(sig)), cache=True, error_model="numpy")(py_func)
+        if table is None:
+            raise Unsupported(f"{py_func.__name__}: no kernel-IR table (the compiled backend compiles a "
+                              "kernel from its tree only; regenerate the module, or use backend=\"numpy\")")
+        attach(py_func, table)
+        return compile_kernel(py_func, sig, globals_=getattr(py_func, "__kir_names__", None), lazy=True)
 
     return deco

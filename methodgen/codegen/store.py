@@ -246,7 +246,7 @@ def check_cache_folder(path) -> Path | None:
     """Refuse a cache others could plant code in; no-op outside the cache.
 
     For a ``path`` in the per-user cache, the cache root, the file's folder and
-    its ``__pycache__`` (numba keeps compiled code there) must belong to the
+    its ``__pycache__`` (compiled code could be planted there) must belong to the
     user and not be writable by group or others — the rule of ssh's
     ``StrictModes`` and pip's cache.  Below a root that others cannot even
     enter (mode ``0700``), nothing else needs checking.

@@ -1,24 +1,21 @@
 """The stepper compiled for one module, with its kernels inlined (LLVM IR), and its driver.
 
-On the numba runtime (:func:`methodgen.runtime.nbabi.run`) every stage is a call through a
-function pointer, and an implicit stage's Newton iteration calls its residual and Jacobian
-kernels the same way: about 13 ns a call, a third of an explicit step of Kepler's
-Störmer–Verlet composed to order 10 (35 stages) and half of a Hénon–Heiles energy-momentum
-step of order 8 (80 calls).  When a module's kernels were compiled through LLVM IR
-(:mod:`methodgen.codegen.llvmkernels`), this module compiles, once per module (milliseconds, or loaded
-from the machine-code cache), :func:`methodgen.runtime.stepper.stepper` with the kernels inlined and
-the module's configuration (:mod:`methodgen.codegen.abi`) bound as constants, and runs it.
+A call through a function pointer per stage (and per Newton iteration of an implicit stage)
+cost about 13 ns, a third of an explicit step of Kepler's Störmer–Verlet composed to order 10
+(35 stages).  So this module compiles, once per module (milliseconds, or loaded from the
+machine-code cache), :func:`methodgen.runtime.stepper.stepper` with the module's kernels inlined
+(their kernel IR, :mod:`methodgen.codegen.llvmkernels`) and its configuration
+(:mod:`methodgen.codegen.abi`) bound as constants, and runs it.
 
-The stepper records every failure itself (status, step, iteration, value, stage: those of the
-numba runtime, bitwise).  Where a resolution verdict needs the spectral radius of a Newton
-matrix, it stops and asks; :func:`run_fused` computes ρ from the eigenvalues (LAPACK, as the
-numba runtime does) and calls it again from that stage.  Modules it does not apply to (a
-kernel numba compiled) run the same stepper as Python.  Explicit batches of at least
-``nbabi.MIN_BATCH`` take :func:`run_lockstep` (:func:`methodgen.runtime.stepper.lockstep`, the module's
-block kernel inlined).
+The stepper records every failure itself (status, step, iteration, value, stage).  Where a
+resolution verdict needs the spectral radius of a Newton matrix, it stops and asks;
+:func:`run_fused` computes ρ from the eigenvalues (LAPACK) and calls it again from that stage.
+Explicit batches of at least ``nbabi.MIN_BATCH`` take :func:`run_lockstep`
+(:func:`methodgen.runtime.stepper.lockstep`, the module's block kernel inlined).  The same stepper
+runs as Python with ``python=True`` (``METHODGEN_STEPPER=python``): the reference the compiled
+loop is tested against, bit for bit.
 
-The loop is called through its C entry point with ctypes (:func:`_drive`), so a run on this
-path does not import numba.
+The loop is called through its C entry point with ctypes (:func:`_drive`).
 """
 
 from __future__ import annotations
@@ -36,7 +33,7 @@ from . import stepper as _stepper
 from ..codegen import abi as _abi
 from ..codegen.abi import STATUS as _STATUS
 
-__all__ = ["run_fused", "enabled"]
+__all__ = ["run_fused", "run_lockstep", "run_rows"]
 
 _f8, _i8, _V, _M = _t.float64, _t.int64, _t.float64[::1], _t.float64[:, ::1]
 _T3 = _t.float64[:, :, ::1]
@@ -51,14 +48,8 @@ LOOP_SIG = _t.void(_M, _M, _M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, 
                    _M, _M, _M, _M, _M, _M, _V, _V, _M, _i8, _f8, _i8, _i8, _i8, _i8, _i8, _i8)
 
 
-def enabled() -> bool:
-    """The stepper is compiled unless the kernels take numba (``METHODGEN_KERNELS=numba``)."""
-    return _lk.enabled()
-
-
 def _drive(loop, *args):
-    """Run the compiled stepper through its C entry (ctypes: no numba dispatcher is loaded, so a
-    warm start does not pay for numba's target initialisation); arrays by reference, their
+    """Run the compiled stepper through its C entry (ctypes); arrays by reference, their
     structures packed into one buffer (:func:`methodgen.codegen.llvmkernels.packed_structs`), which
     lives until the call returns."""
     arrays = [a for a in args if isinstance(a, numpy.ndarray)]
@@ -125,8 +116,7 @@ KERNEL_NAMES = ("guess", "res", "resjac", "post", "hs", "check", "scale", "force
 
 
 def spectral_h_omega(J, resol: int) -> float:
-    """h·ω from the spectral radius ρ of ``J - I`` (its eigenvalues, LAPACK, complex input as the
-    numba runtime's): 2ρ for ``resol`` 1 ("full"), 2ρ^(1/2) for 2 ("reduced"); ∞ for a
+    """h·ω from the spectral radius ρ of ``J - I`` (its eigenvalues, LAPACK, complex input): 2ρ for ``resol`` 1 ("full"), 2ρ^(1/2) for 2 ("reduced"); ∞ for a
     non-finite matrix."""
     A = numpy.array(J, dtype=numpy.complex128) - numpy.eye(J.shape[0])
     if not numpy.isfinite(A).all():
@@ -144,8 +134,13 @@ LOCKSTEP_SIG = _t.void(_M, _M, _M, _T3, _V, _V, _V, _V, _f8, _i8, _i8, _i8, _i8,
 
 def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None):
     """The loop for this module's kernels and configuration, compiled on first use (or loaded
-    from the machine-code cache); None where it does not apply.  ``block``: ``(post_block,
-    lanes)`` for the lock-step loop (:func:`methodgen.runtime.stepper.lockstep`)."""
+    from the machine-code cache).  ``block``: ``(post_block, lanes)`` for the lock-step loop
+    (:func:`methodgen.runtime.stepper.lockstep`).
+
+    Raises
+    ------
+    methodgen.codegen.llvmkernels.Unsupported
+        The translator refuses the loop with these kernels (the message names the kernel)."""
     # keyed by what the loop is compiled from: the kernels' machine code (their symbols name
     # the text they were translated from; an id() is reused once a regenerated module's old
     # kernels are freed) and the constants bound into it
@@ -157,13 +152,10 @@ def _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, o
     if got is None:
         fn, sig = loop_function(kernels[:len(KERNEL_NAMES)], cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
                                 options, block)
-        try:
-            got = _lk.compile_kernel(fn, sig, globals_=fn.__globals__, c_entry=True)
-        except _lk.Unsupported:
-            got = False
+        got = _lk.compile_kernel(fn, sig, globals_=fn.__globals__, c_entry=True)
         # (the kernels are kept with the loop: an id() in the key is not reused while it lives)
         _LOOPS[key] = got = (got, kernels)
-    return (got[0] or None), key
+    return got[0], key
 
 
 def loop_function(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None):
@@ -176,26 +168,15 @@ def loop_function(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, op
     return types.FunctionType(entry.__code__, consts, entry.__name__), sig
 
 
-class _Stack:
-    """``numba.carray(_rt.stack_buffer(n), shape)`` of the stepper's source, executed as Python:
-    a zeroed numpy array of that shape."""
-
-    @staticmethod
-    def stack_buffer(n):
-        return numpy.zeros(n)
-
-    @staticmethod
-    def carray(buf, shape):
-        return buf.reshape(shape)
-
-
 def python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block=None):
     """:func:`methodgen.runtime.stepper.stepper` (with ``block``: :func:`methodgen.runtime.stepper.lockstep`) bound
     to a module's kernels (their Python functions) and configuration, to run as plain Python: the
     same source as the compiled loop, the reference it is tested against (slow: an
     interpreter's loop)."""
     consts = _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
-    consts.update(numba=_Stack, _rt=_Stack)
+    # the stepper's work arrays (on the stack when compiled: the translator knows the name, and a
+    # function bound here would make the loop's machine code uncacheable)
+    consts["stack_array"] = numpy.zeros
     # the kernels as callables: their machine code (an LLVM kernel called from Python goes
     # through a C entry of the same translation), so that a comparison with the compiled loop
     # tests the stepper alone
@@ -233,7 +214,7 @@ def _bound(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, 
               "_MEJ": float(fcfg[F["MAX_ENERGY_JUMP"]]), "_MAXRES": float(fcfg[F["MAX_RESOLUTION"]]),
               "_MAXDIS": float(fcfg[F["MAX_PREDICTOR_DISAGREEMENT"]]),
               "_AUTO_RATE": float(fcfg[F["AUTO_RATE"]]), "_AUTO_HOLD1": int(fcfg[F["AUTO_HOLD"]]) + 1,
-              # the threshold of nbruntime._resolution (x**2 there is x*x: numba's static power)
+              # the threshold of the resolution check, squared for "reduced" (x*x, as the stepper)
               "_RTHRESH": 0.5 * fr if resol == 1 else (0.5 * fr) * (0.5 * fr),
               "_TOL_ROUNDOFF": _abi.TOL_ROUNDOFF, "_TOL_PLATEAU": _abi.TOL_PLATEAU,
               "_KLERR": int(cfg[C["KLERR"]]), "_NK": max(int(cfg[C["KLERR"]]), 1),
@@ -271,33 +252,21 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     """Steps ``n0 .. n1-1`` on the module's compiled stepper (the arguments of
     :func:`methodgen.runtime.nbabi.run`; ``kernels`` as :data:`KERNEL_NAMES`; ``PJ`` (B, 2 PM) a projected
     module's levels and multipliers, updated):
-    True when it ran them (``Y``, ``C``, ``FRC``, ``traj``, ``its``, ``smode``, ``fstat``,
-    ``fval`` as the numba runtime leaves them, failures included); None when it does not apply.
-    ``python``: run the same stepper as plain Python (:func:`python_stepper`) instead."""
+    ``Y``, ``C``, ``FRC``, ``traj``, ``its``, ``smode``, ``fstat``, ``fval`` updated, failures
+    included.  ``python``: run the same stepper as plain Python (:func:`python_stepper`)
+    instead."""
     CFG = _abi.CFG
     kind = int(cfg[CFG["KIND"]])
-    guess, res, resjac, post_k, hs, check, scale, force, proj = kernels
     pm = int(cfg[CFG["PROJ"]])
-    if pm:
-        needed = [post_k, proj] + ([force] if int(cfg[CFG["NF"]]) else [])
-    else:
-        needed = [post_k] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
-            ([check] if int(cfg[CFG["LERR"]]) == 2 else []) + \
-            ([scale] if kind == 0 and int(cfg[CFG["HAS_SCALE"]]) else []) + \
-            ([resjac] if kind == 1 else [guess, res, resjac] if kind == 0 else [])
     if n1 <= n0:
         fstat[:, 0] = _STATUS["OK"]
-        return True
+        return
     options = (int(solver), int(bool(use_tol)), int(bool(check_resolution)), int(bool(compensated)))
     if python:
         loop = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
         drive = _call
     else:
-        if not enabled() or not all(isinstance(k, _lk.LLVMKernel) for k in needed):
-            return None
         loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options)
-        if loop is None:
-            return None
         drive = _drive
     # the stepper's arrays are C-contiguous float64: inputs of another layout are copied (the
     # state, compensation and force back at the end)
@@ -377,7 +346,6 @@ def run_fused(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, kick_a
     for mine, theirs in zip((Y, C, FRC), state):
         if mine is not theirs:
             theirs[...] = mine
-    return True
 
 
 def _call(loop, *args):
@@ -389,25 +357,15 @@ def run_lockstep(block, kernels, cfg, fcfg, lerr_index, domain_pos, gammas, rati
                  n0, n1, Y, C, FRC, h, p, check_resolution, compensated, fstat, fval, every, *, python=False):
     """Steps ``n0 .. n1-1`` of an explicit module's batch in lock-step
     (:func:`methodgen.runtime.stepper.lockstep`; ``block`` = the module's block kernel and its lanes, the
-    other arguments :func:`run_fused`'s): True when it ran them, None when it does not apply
-    (a kernel numba compiled).  ``python``: the same loop as plain Python."""
-    CFG = _abi.CFG
-    post_block, lanes = block
-    hs, check = kernels[4], kernels[5]
-    needed = [post_block] + ([hs] if int(cfg[CFG["EJUMP"]]) else []) + \
-        ([check] if int(cfg[CFG["LERR"]]) == 2 else [])
+    other arguments :func:`run_fused`'s).  ``python``: the same loop as plain Python."""
     if n1 <= n0:
         fstat[:, 0] = _STATUS["OK"]
-        return True
+        return
     options = (0, 0, int(bool(check_resolution)), int(bool(compensated)))
     if python:
         loop, drive = python_stepper(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block), _call
     else:
-        if not enabled() or not all(isinstance(k, _lk.LLVMKernel) for k in needed):
-            return None
         loop, _ = _compiled_loop(kernels, cfg, fcfg, lerr_index, domain_pos, gammas, ratios, options, block)
-        if loop is None:
-            return None
         drive = _drive
     p, kick_a, drift, kick_b = (numpy.ascontiguousarray(a, dtype=numpy.float64) for a in (p, kick_a, drift, kick_b))
     state = (Y, C, FRC)
@@ -428,7 +386,6 @@ def run_lockstep(block, kernels, cfg, fcfg, lerr_index, domain_pos, gammas, rati
     for mine, theirs in zip((Y, C, FRC), state):
         if mine is not theirs:
             theirs[...] = mine
-    return True
 
 
 #: signature of the compiled rows loop (:func:`methodgen.runtime.stepper.rows`): Z, Y, h, p, R, J, B
@@ -438,8 +395,7 @@ ROWS_SIG = _t.void(_M, _M, _f8, _V, _M, _M, _i8)
 def run_rows(kernel, jac, cfg, Z, Y, h, p, R, J=None):
     """The residual (``jac`` False: ``kernel`` is the module's ``res``) or the residual and the
     Newton matrix (True: its ``resjac``) at each row of ``Z``, ``Y`` (B, ·), into ``R`` (B, N)
-    and ``J`` (B, N, N): :func:`methodgen.runtime.stepper.rows`, compiled with the kernel inlined, or as
-    Python where the kernel is numba's."""
+    and ``J`` (B, N, N): :func:`methodgen.runtime.stepper.rows`, compiled with the kernel inlined."""
     n = int(cfg[_abi.CFG["N"]])
     kernels = [_Absent()] * len(KERNEL_NAMES)
     kernels[KERNEL_NAMES.index("resjac" if jac else "res")] = kernel
@@ -450,27 +406,15 @@ def run_rows(kernel, jac, cfg, Z, Y, h, p, R, J=None):
     Z, Y, p = (numpy.array(a, dtype=numpy.float64, order="C") for a in (Z, Y, p))
     R2 = numpy.zeros((B, max(n, 1)))
     J2 = numpy.zeros((B * max(n, 1), max(n, 1))) if jac else numpy.zeros((1, 1))
-    if enabled() and isinstance(kernel, _lk.LLVMKernel):
-        key = ("rows", getattr(kernel, "symbol", None) or ("id", id(kernel)), bool(jac), cfg.tobytes())
-        got = _LOOPS.get(key)
-        if got is None:
-            consts = _bound(kernels, cfg, fcfg, (), (), (1.0,), (1.0,), opts)
-            consts["_JAC"] = int(bool(jac))
-            try:
-                got = _lk.compile_kernel(types.FunctionType(_stepper.rows.__code__, consts, "rows"), ROWS_SIG,
-                                         globals_=consts, c_entry=True)
-            except _lk.Unsupported:
-                got = None
-            _LOOPS[key] = got = (got, kernel)
-        loop, drive = got[0], _drive
-    else:
-        loop = None
-    if loop is None:
+    key = ("rows", kernel.symbol, bool(jac), cfg.tobytes())
+    got = _LOOPS.get(key)
+    if got is None:
         consts = _bound(kernels, cfg, fcfg, (), (), (1.0,), (1.0,), opts)
-        consts.update(numba=_Stack, _rt=_Stack, _JAC=int(bool(jac)))
-        consts["resjac" if jac else "res"] = kernel
-        loop, drive = types.FunctionType(_stepper.rows.__code__, consts, "rows"), _call
-    drive(loop, Z, Y, float(h), p, R2, J2, B)
+        consts["_JAC"] = int(bool(jac))
+        got = _lk.compile_kernel(types.FunctionType(_stepper.rows.__code__, consts, "rows"), ROWS_SIG,
+                                 globals_=consts, c_entry=True)
+        _LOOPS[key] = got = (got, kernel)
+    _drive(got[0], Z, Y, float(h), p, R2, J2, B)
     R[...] = R2[:, :n]
     if jac:
         J[...] = J2.reshape(B, max(n, 1), max(n, 1))[:, :n, :n]

@@ -60,9 +60,6 @@ def _loop(grad, python: bool, shape: dict):
     fn = types.FunctionType(_ls.lattice_run.__code__, consts, "lattice_run")
     if python:
         return fn, False
-    from ..codegen import llvmkernels as _lk
-    if not _lk.enabled():
-        return fn, False
     return _compiled(_LOOPS, grad, fn, SIG, consts, "the lattice step loop", tuple(sorted(shape.items()))), True
 
 
@@ -164,9 +161,6 @@ def _kernel_2d(kernel, python: bool):
     """``kernel`` compiled (cached per kernel, as :func:`_loop`), or itself (plain Python) where
     llvmlite is missing or ``python``."""
     if python:
-        return kernel, False
-    from ..codegen import llvmkernels as _lk
-    if not _lk.enabled():
         return kernel, False
     return _compiled(_KERNELS_2D, kernel, kernel, SIG_2D, None, "the 2-D lattice site kernel"), True
 

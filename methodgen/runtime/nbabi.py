@@ -1,43 +1,34 @@
-"""The shared compiled runtime's interface, without numba: what a numba module needs to load
-and run on its fused loop.
+"""The compiled runtime's interface: what a compiled module (``backend="numba"``) needs to load
+and run.
 
-A generated numba module imports this module as ``_rt``.
-It re-exports the runtime's contract (:mod:`methodgen.codegen.abi`: the kernels' signatures
-:data:`KERNEL_TYPES`, the configuration arrays' names :data:`CFG`, :data:`FCFG`, the status
-codes) and holds :func:`run`, which runs a call on the
-module's fused loop (:mod:`methodgen.runtime.fused`: machine code from llvmlite, called through
-ctypes) and imports the numba runtime only when that loop does not apply or hands the call
-back.  So a cached module that runs fused never imports numba (0.18 s of a 0.3 s warm start).
+A generated compiled module imports this module as ``_rt``.  It re-exports the runtime's
+contract (:mod:`methodgen.codegen.abi`: the kernels' signatures :data:`KERNEL_TYPES`, the
+configuration arrays' names :data:`CFG`, :data:`FCFG`, the status codes) and holds :func:`run`,
+which runs a call on the module's fused loop (:mod:`methodgen.runtime.fused`: machine code from
+llvmlite, called through ctypes), or on the same stepper as Python under
+``METHODGEN_STEPPER=python``.  (The name is historical: the kernels' array ABI was numba's.)
 
-numba is imported, on first need, through :func:`methodgen.codegen.nbcache.numba`: by the lazy
-decorators :func:`jit` (a module's few numba-compiled functions), by a kernel the LLVM route
-cannot translate, and by :mod:`methodgen.runtime.nbruntime` (any name not defined here is looked up
-there: ``_rt.stack_buffer`` in a numba-compiled kernel).
-
-:data:`SOURCE_SHA256` covers this file, ``abi.py`` and ``nbruntime.py``: the compiled runtime reads the
-configuration through the positions defined in :mod:`methodgen.codegen.abi`, so a change of any is a new runtime
-(its cached machine code is rebuilt, and modules generated for the old one refuse to load).
+:data:`SOURCE_SHA256` covers this file and ``abi.py``: the compiled runtime reads the
+configuration through the positions defined in :mod:`methodgen.codegen.abi`, so a change of
+either is a new runtime (modules generated for the old one refuse to load).
 
 This module imports numpy and the standard library only.
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
 
 import numpy
 
 from ..codegen import abi as _abi
-from ..codegen import nbcache as _nbcache
 
 __all__ = ["KERNEL_TYPES", "CFG", "FCFG", "STATUS", "SOURCE_SHA256", "MIN_BATCH", "int_config", "float_config",
-           "no_kernel", "run", "use_block", "jit", "materialize", "res_rows", "jac_rows"]
+           "no_kernel", "run", "use_block", "res_rows", "jac_rows"]
 
 
-
-#: The runtime's stamp (:data:`methodgen.codegen.abi.RUNTIME_SHA256`): the stamp of its cached machine
-#: code and the runtime a generated module names.
+#: The runtime's stamp (:data:`methodgen.codegen.abi.RUNTIME_SHA256`): the runtime a generated
+#: module names.
 SOURCE_SHA256 = _abi.RUNTIME_SHA256
 
 # --- the contract (methodgen.codegen.abi), re-exported for the generated modules' ``_rt.`` -------------
@@ -69,7 +60,7 @@ def _config(names: dict, values: dict, dtype) -> numpy.ndarray:
         missing = sorted(set(names) - set(values))
         extra = sorted(set(values) - set(names))
         raise ValueError(f"runtime configuration: missing {missing}, unknown {extra} "
-                         f"(this module was generated for another methodgen.runtime.nbruntime)")
+                         f"(this module was generated for another methodgen runtime)")
     out = numpy.zeros(len(names), dtype=dtype)
     for name, value in values.items():
         out[names[name]] = value
@@ -117,54 +108,6 @@ def no_kernel(kind: str):
     return got
 
 
-# --- numba-compiled functions of a module, compiled on first need ---------------------------------
-
-class _Lazy:
-    """A function of a generated module to be compiled by ``numba.njit(**options)`` when first
-    called (or when anything else of its module is compiled by numba: :func:`materialize`).
-    ``py_func`` is the Python function, as on numba's dispatcher (the LLVM route reads it)."""
-
-    __slots__ = ("py_func", "options", "_real")
-
-    def __init__(self, py_func, options):
-        self.py_func = py_func
-        self.options = options
-        self._real = None
-
-    def real(self):
-        if self._real is None:
-            numba = _nbcache.numba()
-            self._real = numba.njit(**self.options)(self.py_func)
-        return self._real
-
-    def __call__(self, *args):
-        materialize(self.py_func.__globals__)
-        return self.real()(*args)
-
-    def __repr__(self):
-        return f"<lazily compiled {self.py_func.__qualname__}>"
-
-
-def jit(**options):
-    """Decorator: ``numba.njit(**options)`` applied when the function is first needed."""
-    def deco(py_func):
-        return _Lazy(py_func, options)
-    return deco
-
-
-def materialize(namespace: dict):
-    """Before numba compiles a function of the module whose globals are ``namespace``: numba
-    imported (with the module's cache guard), the runtime's types registered, and every lazily
-    compiled function of the module replaced by its numba dispatcher (numba resolves a called
-    global at compile time and must find a dispatcher there)."""
-    numba = _nbcache.numba()
-    from . import nbruntime  # noqa: F401  (registers LLVM kernels as first-class functions)
-    namespace.setdefault("numba", numba)
-    for name, value in list(namespace.items()):
-        if isinstance(value, _Lazy):
-            namespace[name] = value.real()
-
-
 # --- the run ------------------------------------------------------------------------------------
 
 def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
@@ -186,10 +129,8 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     module's ``(block kernel factory, lanes)``; a batch of at least :data:`MIN_BATCH` then runs
     in lock-step (:func:`methodgen.runtime.stepper.lockstep`, bitwise the same rows).
 
-    Where the stepper cannot be compiled with these kernels (a kernel the LLVM translator
-    refused, compiled by numba instead, or ``METHODGEN_KERNELS=numba``) it runs as plain Python
-    with them: the same source and results, about a hundred times slower, said once per module
-    in a warning.  ``METHODGEN_STEPPER=python`` runs it so always (the reference)."""
+    ``METHODGEN_STEPPER=python`` runs the same stepper as plain Python (the reference the
+    compiled loop is tested against: the same bits, about a hundred times slower)."""
     from . import fused
 
     args = ((guess, res, resjac, post_k, hs, check, scale, force_k or no_kernel("force"), proj_k or no_kernel("proj")), cfg, fcfg, lerr_index, domain_pos, gammas, ratios,
@@ -199,32 +140,9 @@ def run(guess, res, resjac, scale, post_k, hs, check, cfg, fcfg, lerr_index, dom
     if block is not None and use_block(cfg, Y.shape[0]):
         largs = ((block[0](), block[1]),) + args[:13] + (Y, C, FRC, h, p, check_resolution, compensated, fstat,
                                                           fval, every)
-        if not python:
-            if fused.run_lockstep(*largs):
-                return
-            _warn_python(post_k)
-        fused.run_lockstep(*largs, python=True)
+        fused.run_lockstep(*largs, python=python)
         return
-    if not python:
-        if fused.run_fused(*args):
-            return
-        _warn_python(post_k)
-    fused.run_fused(*args, python=True)
-
-
-_WARNED: set = set()
-
-
-def _warn_python(post_k) -> None:
-    """Say once per module that its stepper runs as Python (a kernel numba compiled)."""
-    import warnings
-
-    where = getattr(getattr(post_k, "py_func", post_k), "__module__", None) or "a module"
-    if where not in _WARNED:
-        _WARNED.add(where)
-        warnings.warn(f"{where}: the integration loop runs as Python (its kernels were compiled by numba, "
-                      "not through LLVM IR: METHODGEN_KERNELS=numba, or a construct the translator refuses): "
-                      "the same results, about a hundred times slower", RuntimeWarning, stacklevel=3)
+    fused.run_fused(*args, python=python)
 
 
 def res_rows(res, cfg, Z, Y, h, p, R):
@@ -237,14 +155,3 @@ def jac_rows(resjac, cfg, Z, Y, h, p, R, J):
     """The residual and the Jacobian at each row of Z, Y: :func:`methodgen.runtime.fused.run_rows`."""
     from . import fused
     fused.run_rows(resjac, True, cfg, Z, Y, h, p, R, J)
-
-
-def __getattr__(name):
-    # the numba runtime's other names (stack_buffer in a numba-compiled kernel, handle, …)
-    if name.startswith("__"):
-        raise AttributeError(name)
-    from . import nbruntime
-    try:
-        return getattr(nbruntime, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None

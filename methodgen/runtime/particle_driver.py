@@ -36,9 +36,6 @@ def _loop(entry: str, kernels: dict, key, cache: dict, sig, python: bool):
     fn = types.FunctionType(getattr(_ps, entry).__code__, consts, entry)
     if python:
         return fn, False
-    from ..codegen import llvmkernels as _lk
-    if not _lk.enabled():
-        return fn, False
     return _compiled(cache, key, fn, sig, consts, f"the particle step loop ({entry})"), True
 
 

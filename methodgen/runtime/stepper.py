@@ -19,9 +19,8 @@ arrays, and returns with ``_st[0] = 1``; the driver computes ρ (LAPACK) and cal
 from that stage with ρ in ``_dec[3]``.  The stage is then computed again from the same inputs
 (the same bits: its solver state was restored), and the check takes the given ρ.
 
-The status codes and the failure values are those of :mod:`methodgen.runtime.nbruntime` (the numba
-runtime it replaces), operation for operation, so the same bits, iterations, solver state and
-failures.
+The status codes and the failure values are :data:`methodgen.codegen.abi.STATUS` (those of
+the numba runtime this stepper replaced, operation for operation).
 
 References
 ----------
@@ -36,8 +35,9 @@ import math
 __all__ = ["stepper", "lockstep", "rows", "lane_status", "project", "small_solve", "solve", "resolution", "lu", "lu_solve", "amax",
            "compensated_add", "settled"]
 
-# The names below that this file does not define (``numba``, ``_rt``, the upper-case
-# constants and the kernels) are bound by methodgen.runtime.fused when it compiles the loop.
+# The names below that this file does not define (``stack_array``: a work array on the stack,
+# the upper-case constants and the kernels) are bound by methodgen.runtime.fused when it
+# compiles the loop (or runs it as Python: ``stack_array`` is then numpy.zeros).
 # flake8: noqa: F821
 
 
@@ -64,43 +64,43 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
     constants of the compiled loop, like the configuration: each combination is its own
     machine code, compiled when first used, holding only the branches it takes.
     """
-    _z = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
-    _zp = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
-    _dz = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
-    _r = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
-    _J = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ, _NZ))
-    _wa = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ, _NZ))
-    _wb = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))
-    _out = numba.carray(_rt.stack_buffer(_PL), (_PL,))
-    _ejs = numba.carray(_rt.stack_buffer(2), (2,))
-    _rr = numba.carray(_rt.stack_buffer(2), (2,))
-    _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
-    _LU0 = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ * _NZ,))   # "reuse": the factors at the
-    _pv0 = numba.carray(_rt.stack_buffer(_NZ), (_NZ,))                # stage's start (a stage asked again)
-    _okb = numba.carray(_rt.stack_buffer(1), (1,))
-    _ejn = numba.carray(_rt.stack_buffer(2), (2,))      # H and its size at a composed step's end
-    _g0 = numba.carray(_rt.stack_buffer(_NK), (_NK,))
+    _z = stack_array((_NZ,))
+    _zp = stack_array((_NZ,))
+    _dz = stack_array((_NZ,))
+    _r = stack_array((_NZ,))
+    _J = stack_array((_NZ, _NZ))
+    _wa = stack_array((_NZ, _NZ))
+    _wb = stack_array((_NZ,))
+    _out = stack_array((_PL,))
+    _ejs = stack_array((2,))
+    _rr = stack_array((2,))
+    _ck = stack_array((1 + _DIM,))
+    _LU0 = stack_array((_NZ * _NZ,))   # "reuse": the factors at the stage's start
+    _pv0 = stack_array((_NZ,))         # (a stage asked again)
+    _okb = stack_array((1,))
+    _ejn = stack_array((2,))      # H and its size at a composed step's end
+    _g0 = stack_array((_NK,))
     # the trajectory's state, compensation and carried force in stack buffers while it runs:
     # LLVM keeps them in registers across the stages (the caller's rows it must reload after
     # every store, not knowing that _Y, _C and _G do not overlap); written back at its end
     # a projected step's work (methodgen.symbolic.projection; PM = 1 where there is none)
-    _pres = numba.carray(_rt.stack_buffer(3), (3,))
-    _py1 = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _pc1 = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _pyt = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _pct = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _plag = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _pgv = numba.carray(_rt.stack_buffer(_PGV), (_PGV,))
-    _pgv1 = numba.carray(_rt.stack_buffer(_PGV), (_PGV,))
-    _pD0 = numba.carray(_rt.stack_buffer(_PM * _DIM), (_PM, _DIM))
-    _pD1 = numba.carray(_rt.stack_buffer(_PM * _DIM), (_PM, _DIM))
-    _pA = numba.carray(_rt.stack_buffer(_PM * _PM), (_PM, _PM))
-    _pW = numba.carray(_rt.stack_buffer(_PM * _PM), (_PM, _PM))
-    _pv = numba.carray(_rt.stack_buffer(7 * _PM), (7, _PM))    # r, r_old, λ_old, size, rhs, c, x
-    _plam = numba.carray(_rt.stack_buffer(_PM), (_PM,))
-    _yl = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _cl = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _gl = numba.carray(_rt.stack_buffer(_NG), (_NG,))
+    _pres = stack_array((3,))
+    _py1 = stack_array((_DIM,))
+    _pc1 = stack_array((_DIM,))
+    _pyt = stack_array((_DIM,))
+    _pct = stack_array((_DIM,))
+    _plag = stack_array((_DIM,))
+    _pgv = stack_array((_PGV,))
+    _pgv1 = stack_array((_PGV,))
+    _pD0 = stack_array((_PM, _DIM))
+    _pD1 = stack_array((_PM, _DIM))
+    _pA = stack_array((_PM, _PM))
+    _pW = stack_array((_PM, _PM))
+    _pv = stack_array((7, _PM))    # r, r_old, λ_old, size, rhs, c, x
+    _plam = stack_array((_PM,))
+    _yl = stack_array((_DIM,))
+    _cl = stack_array((_DIM,))
+    _gl = stack_array((_NG,))
     _hh = 0.5 * _h * _GAMMA0
     _limit = _n1
     _st[0] = 0.0
@@ -996,20 +996,20 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
     the one-trajectory loop.  The arguments are :func:`stepper`'s (``_Y``, ``_C``, ``_G``
     updated in place, ``_T`` the saved rows, ``_nxt0`` / ``_row0`` the first kept step and its
     row, ``_fst`` / ``_fval`` the failures)."""
-    _YS = numba.carray(_rt.stack_buffer(_DIM * _L), (_DIM * _L,))
-    _CS = numba.carray(_rt.stack_buffer(_DIM * _L), (_DIM * _L,))
-    _FS = numba.carray(_rt.stack_buffer(_NG * _L), (_NG * _L,))
-    _PS = numba.carray(_rt.stack_buffer(_PL * _L), (_PL * _L,))
-    _G0 = numba.carray(_rt.stack_buffer(_NK * _L), (_NK * _L,))     # (h_prev/2) f per lane ("carry")
-    _EJS = numba.carray(_rt.stack_buffer(2 * _L), (2 * _L,))        # H and its size at the step's start
-    _NE2 = numba.carray(_rt.stack_buffer(_L), (_L,))
-    _ND2 = numba.carray(_rt.stack_buffer(_L), (_L,))
-    _DEAD = numba.carray(_rt.stack_buffer(_L), (_L,))     # lane failed in this step (at stage DEAD - 1)
-    _SAVE = numba.carray(_rt.stack_buffer((2 * _DIM + _NG) * _L), ((2 * _DIM + _NG) * _L,))
-    _ck = numba.carray(_rt.stack_buffer(1 + _DIM), (1 + _DIM,))
-    _ejs = numba.carray(_rt.stack_buffer(2), (2,))
-    _yq = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))          # one lane's state (EJUMP 2)
-    _ls = numba.carray(_rt.stack_buffer(3), (3,))
+    _YS = stack_array((_DIM * _L,))
+    _CS = stack_array((_DIM * _L,))
+    _FS = stack_array((_NG * _L,))
+    _PS = stack_array((_PL * _L,))
+    _G0 = stack_array((_NK * _L,))     # (h_prev/2) f per lane ("carry")
+    _EJS = stack_array((2 * _L,))        # H and its size at the step's start
+    _NE2 = stack_array((_L,))
+    _ND2 = stack_array((_L,))
+    _DEAD = stack_array((_L,))     # lane failed in this step (at stage DEAD - 1)
+    _SAVE = stack_array(((2 * _DIM + _NG) * _L,))
+    _ck = stack_array((1 + _DIM,))
+    _ejs = stack_array((2,))
+    _yq = stack_array((_DIM,))          # one lane's state (EJUMP 2)
+    _ls = stack_array((3,))
     for _i in range(_L):
         _NE2[_i] = 0.0
         _ND2[_i] = 0.0
@@ -1201,8 +1201,8 @@ def rows(_Z, _Y, _h, _p, _R, _J, _nb):
     each of the ``_nb`` rows of ``_Z`` (B, N) and ``_Y`` (B, DIM), without compensation: ``_R``
     (B, N), ``_J`` (B·N, N), the matrix of row b in rows ``b·N .. b·N + N - 1`` (a module's
     ``residual()`` and ``jacobian()``)."""
-    _c = numba.carray(_rt.stack_buffer(_DIM), (_DIM,))
-    _Jb = numba.carray(_rt.stack_buffer(_NZ * _NZ), (_NZ, _NZ))
+    _c = stack_array((_DIM,))
+    _Jb = stack_array((_NZ, _NZ))
     for _i in range(_DIM):
         _c[_i] = 0.0
     for _b in range(_nb):

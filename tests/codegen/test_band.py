@@ -97,7 +97,7 @@ def test_negative_control_a_band_too_narrow_gives_a_wrong_solve(tmp_path):
 
 
 def test_numba_banded_solve_agrees_with_numpy(tmp_path):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     n = 12
     scheme = mg.discretize(fpu_chain(n), "energy-momentum")
     _, np_mod = _module(scheme, tmp_path)

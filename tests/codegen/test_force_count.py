@@ -119,7 +119,7 @@ def test_negative_control_an_extra_evaluation_is_seen(sv_module, pendulum, monke
 def test_numba_post_kernel_source(pendulum):
     """The numba module's post kernel evaluates ∇U and U as often as the numpy one (read off
     the generated source: numba kernels cannot be instrumented)."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     mod = mg.build(pendulum.run_system, "stormer-verlet", order=2, backend="numba")
     src = inspect.getsource(mod)
     body = re.search(r"\ndef _nb_post\(.*?(?=\n(?:@|def |# ---))", src, re.S)

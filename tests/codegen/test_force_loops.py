@@ -158,7 +158,7 @@ def test_looped_code_does_not_grow_with_the_instances():
 def test_sv_looped_numba_module_agrees_with_numpy(sv):
     """The compiled looped post kernel (Δq written into the output ahead of the loops) runs
     the numpy module's trajectory to round-off (fast sibling: the numpy tests above)."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scheme = mg.discretize(nbody_system(4), "stormer-verlet")
     m = mg.build(scheme.system, "stormer-verlet", backend="numba")
     ref = mg.build(scheme.system, "stormer-verlet")

@@ -3,12 +3,13 @@
 The scalar helpers' text lives in ``methodgen/codegen/special_helpers.py`` (their one source);
 the template copies each into a module under its own guard, beside its numpy form.
 
-A module defines exactly the helpers its kernels call (``ModuleIR.helpers``); the numba
-module compiles exactly those.  Two ways to break this, both seen: a template block that
-defines a helper under another helper's name (``_f_dsinc`` emitted with ``sinc``, so
-numba left it a plain Python function: "Untyped global name '_f_dsinc'"), and a helper
-scan that misses the loop templates' Jacobian terms (the only place ``dsinc`` appears in
-an energy-momentum loop over ``cos(u_i - u_j)``).
+A module defines exactly the helpers its kernels call (``ModuleIR.helpers``); the compiled
+route translates the package's same helpers (``methodgen.codegen.special_helpers``) into the
+kernels that call them.  Two ways to break this, both seen: a template block that defines a
+helper under another helper's name (``_f_dsinc`` emitted with ``sinc``, which left the
+numba-compiled module of the time without it: "Untyped global name '_f_dsinc'"), and a helper
+scan that misses the loop templates' Jacobian terms (the only place ``dsinc`` appears in an
+energy-momentum loop over ``cos(u_i - u_j)``).
 """
 
 from __future__ import annotations
@@ -115,31 +116,31 @@ def test_cos_ring_keeps_energy_on_numpy():
     assert np.abs(H - H[0]).max() < 1e-14
 
 
-# --- the compiled helpers (numba) ------------------------------------------------------
+# --- the compiled helpers (LLVM) -------------------------------------------------------
 
 #: Arguments at which each helper is compared: around its thresholds and removable points.
 SCALARS = [0.0, 1e-9, -3e-5, 9.999e-3, 1.0001e-2, -0.3, 0.7, 2.5]
 
 
-def _numba_helper_module(tmp_path, compiled=None):
-    """All helpers, compiled as numba_module.py.j2 compiles them (those in ``compiled``,
-    default all), and one jitted function that calls every one of them (one compile for
-    the lot)."""
-    numba_tpl = (TEMPLATES / "numba_module.py.j2").read_text()
-    # (the module's spelling is the same njit, applied lazily through methodgen.runtime.nbabi.jit)
-    inline = re.search(r"^_inline = _rt\.jit\((.*)\)$", numba_tpl, re.M)
-    inline = f"_inline = numba.njit({inline.group(1)})"
-    loop = re.search(r"\{% for name in ir.helpers %\}\n.*?\{% endfor %\}\n", numba_tpl, re.S).group(0)
-    names = sorted(_template_names())
+def _compiled_helpers(tmp_path, names, without=()):
+    """One function calling every helper of ``names`` on ``(x, y)``, compiled through LLVM IR
+    with the helpers resolved as a compiled kernel resolves them (the package's
+    ``special_helpers``, less ``without``): ``(call(x, y, out), plain twins module)``."""
+    from methodgen.codegen import ktypes as kt
+    from methodgen.codegen import llvmkernels as lk
+    from methodgen.codegen import special_helpers
+
     plain = _plain_module(tmp_path, names)
-    calls = []
+    lines = ["def _call_all(xy, out):", "    x = xy[0]", "    y = xy[1]"]
     for i, name in enumerate(names):
         arity = len(inspect.signature(getattr(plain, f"_f_{name}")).parameters)
-        calls.append(f"    out[{i}] = _f_{name}(" + ", ".join(["x", "y"][:arity]) + ")")
-    text = ("import math\nimport numba\nimport numpy\n" + inline + "\n" + _render(names)
-            + _environment().from_string(loop).render(ir=SimpleNamespace(helpers=tuple(compiled or names)))
-            + "\n\n@numba.njit(cache=True)\ndef _call_all(x, y, out):\n" + "\n".join(calls) + "\n")
-    return _load(tmp_path / f"nb_helpers{len(compiled or names)}.py", text), plain, names
+        lines.append(f"    out[{i}] = _f_{name}(" + ", ".join(["x", "y"][:arity]) + ")")
+    mod = _load(tmp_path / f"call_all{len(without)}.py", "\n".join(lines) + "\n")
+    names_in = {k: v for k, v in vars(special_helpers).items() if k.startswith("_f_") and k[3:] not in without}
+    names_in["math"] = __import__("math")
+    V = kt.float64[::1]
+    ll = lk.compile_kernel(mod._call_all, kt.none(V, V), globals_=names_in, c_entry=True)
+    return (lambda x, y, out: ll(np.array([x, y], dtype=float), out)), plain
 
 
 def _plain_module(tmp_path, names):
@@ -165,14 +166,15 @@ def _pairs():
                 (2.5, 1.5), (np.nextafter(3.0, 0.0), 3.5), (np.nextafter(3.0, 4.0), 2.5)]
 
 
-def test_every_helper_compiles_and_agrees_on_numba(tmp_path):
+def test_every_helper_compiles_and_agrees(tmp_path):
     """Numerical: each compiled helper equals its Python twin and its numpy (``_v_``) twin
-    within 4 ulp (the compiled libm may differ in the last bits)."""
-    pytest.importorskip("numba")
-    nb, plain, names = _numba_helper_module(tmp_path)
+    within 4 ulp (the compiled libm calls may differ in the last bits)."""
+    pytest.importorskip("llvmlite")
+    names = sorted(_template_names())
+    call, plain = _compiled_helpers(tmp_path, names)
     out = np.empty(len(names))
     for x, y in _pairs():
-        nb._call_all(x, y, out)
+        call(x, y, out)
         for i, name in enumerate(names):
             f, v = getattr(plain, f"_f_{name}"), getattr(plain, f"_v_{name}")
             arity = len(inspect.signature(f).parameters)
@@ -187,20 +189,44 @@ def test_every_helper_compiles_and_agrees_on_numba(tmp_path):
                 else:
                     assert abs(got - want) <= 4 * np.spacing(abs(want)) + 1e-300, (name, args, got, want)
     # exp's divided differences at the overflow threshold: the compiled helpers give mpmath's
-    # value (Python's math raised OverflowError where numba returned inf, and numpy nan)
+    # value (Python's math raised OverflowError where compiled code returns inf, and numpy nan)
     from test_thin_barrier import THRESHOLD, _agree, _mp
     for x, y in THRESHOLD:
-        nb._call_all(x, y, out)
+        call(x, y, out)
         for kind in ("expdd", "dexpdd"):
             want = _mp(kind, x, y)
             assert _agree(out[names.index(kind)], want), (kind, x, y, out[names.index(kind)], want)
 
 
-def test_a_helper_left_uncompiled_is_the_reported_crash(tmp_path):
-    """Negative control: a helper defined but not compiled (what the shared template block
-    did to ``_f_dsinc``) is numba's "Untyped global name" error, so the test above would see it."""
-    numba = pytest.importorskip("numba")
+def test_a_helper_missing_is_refused_by_name(tmp_path):
+    """Negative control: a helper the compiled route cannot resolve (what the shared template
+    block once did to ``_f_dsinc``) is refused by name, so the test above would see it."""
+    from methodgen.codegen import llvmkernels as lk
+
+    pytest.importorskip("llvmlite")
     names = sorted(_template_names())
-    nb, _, _ = _numba_helper_module(tmp_path, [n for n in names if n != "dsinc"])
-    with pytest.raises(numba.core.errors.TypingError, match="Untyped global name '_f_dsinc'"):
-        nb._call_all(0.3, 0.4, np.empty(len(names)))
+    with pytest.raises(lk.Unsupported, match=r"in _call_all: call of _f_dsinc"):
+        _compiled_helpers(tmp_path, names, without=("dsinc",))
+
+
+@pytest.mark.parametrize("method", ["energy-momentum", "avf"])
+def test_a_sinc_module_compiles_and_runs(method, monkeypatch, tmp_path):
+    """H = p²/2 + sin(q)/q: its energy-momentum and AVF Jacobians call ``_f_dsincdd``, whose
+    Gauss–Legendre nodes and weights are tuples.  The translator refused them ("_GL8_W is not a
+    constant table"), so the compiled module failed on its first step (its fallback, the stepper
+    run as Python, called the same refused kernel).  Now it runs: bitwise the stepper run as
+    Python, and the numpy module's trajectory to round-off.  Control: a step one ulp longer
+    changes the bits."""
+    pytest.importorskip("llvmlite")
+    system = Hamiltonian("p**2/2 + sin(q)/q", ["q"], ["p"], name="sincwell")
+    scheme = mg.discretize(system, method)
+    mod = mg.generate(scheme, tmp_path / f"sincwell_{method.replace('-', '_')}_numba.py", backend="numba")
+    ref = mg.generate(scheme, tmp_path / f"sincwell_{method.replace('-', '_')}.py", backend="numpy")
+    assert "_f_dsincdd" in open(mod.__file__).read()
+    y0 = np.array([0.3, 0.1])
+    got = mod.integrate(y0, 0.05, 200)
+    np.testing.assert_allclose(got, ref.integrate(y0, 0.05, 200), rtol=0, atol=1e-12)
+    monkeypatch.setenv("METHODGEN_STEPPER", "python")
+    assert np.array_equal(mod.integrate(y0, 0.05, 200), got)
+    monkeypatch.delenv("METHODGEN_STEPPER")
+    assert not np.array_equal(mod.integrate(y0, np.nextafter(0.05, 1.0), 200), got)

@@ -1,13 +1,18 @@
-"""Straight-line kernels compiled through LLVM IR (methodgen.codegen.llvmkernels).
+"""Kernels and the runtime compiled through LLVM IR (methodgen.codegen.llvmkernels).
 
-A numba module's kernels for the shared runtime are translated from their Python source
-to LLVM IR and compiled by LLVM directly (numba's typing of a large kernel took seconds).
-They must compute bitwise what numba compiles from the same source, fall back to numba for
-anything the translator does not know, and never translate a construct wrongly.
+A compiled module's kernels (from their kernel IR) and methodgen's hand-written runtime (from
+its source) are translated to LLVM IR and compiled by LLVM.  They must compute bitwise what
+their source means -- the source run as Python with the translator's documented arithmetic
+(IEEE operations, libm's functions, integer powers by squaring: :func:`_reference`) -- refuse,
+naming the function, anything the translator does not know, and never translate a construct
+wrongly.
 """
 
 from __future__ import annotations
 
+import ast
+import ctypes
+import ctypes.util
 import importlib.util
 import math
 import os
@@ -20,55 +25,94 @@ import methodgen as mg
 from methodgen.codegen.emit import module_filename
 from methodgen.codegen.lower import uses_loops
 
-numba = pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
+from methodgen.codegen import abi  # noqa: E402
 from methodgen.codegen import llvmkernels as lk  # noqa: E402
-from methodgen.runtime import nbruntime as rt  # noqa: E402
 from methodgen.codegen import ktypes as kt  # noqa: E402
 
-RES = rt.KERNEL_TYPES["res"]
+RES = abi.KERNEL_TYPES["res"]
 
 
 def _load(tmp_path, name, source):
     """A module of kernels written to a file (the translator reads a kernel's source)."""
     path = tmp_path / f"{name}.py"
-    path.write_text("import math\nimport numba\nimport numpy\n\n" + textwrap.dedent(source))
+    path.write_text("import math\nimport numpy\n\n" + textwrap.dedent(source))
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
 
 
-_ROWS = []
-
-
-def _res_rows():
-    """A numba-compiled loop calling a kernel of signature ``res`` as a first-class function
-    (numba's public API; an LLVM kernel is one through methodgen.runtime.nbruntime's registration)."""
-    if not _ROWS:
-        t = numba.types
-        V, M = t.float64[::1], t.float64[:, ::1]
-
-        @numba.njit(t.void(t.FunctionType(RES), M, M, t.float64, V, M), error_model="numpy")
-        def rows(res, Z, Y, h, p, R):
-            c = np.zeros(Y.shape[1])
-            for b in range(Z.shape[0]):
-                res(Z[b], Y[b], c, h, p, R[b])
-
-        _ROWS.append(rows)
-    return _ROWS[0]
-
-
 def _rows(kernel, Y, n_out):
-    """The kernel (signature ``res``) at each row of Y, called from compiled code (a
-    first-class function call)."""
+    """The kernel (signature ``res``) at each row of Y: an LLVM kernel through its C entry, or a
+    Python function (:func:`_reference`)."""
     R = np.zeros((Y.shape[0], n_out))
-    _res_rows()(kernel, np.zeros_like(Y), np.ascontiguousarray(Y), 0.1, np.array([2.0, -3.0]), R)
+    Y = np.ascontiguousarray(Y)
+    p = np.array([2.0, -3.0])
+    for b in range(Y.shape[0]):
+        kernel(np.zeros(Y.shape[1]), Y[b].copy(), np.zeros(Y.shape[1]), 0.1, p, R[b])
     return R
 
 
-def _numba(fn):
-    return numba.njit(RES, error_model="numpy")(fn)
+# --- the reference: the source run as Python, with the translator's arithmetic ----------------
+
+_LIBM = ctypes.CDLL(ctypes.util.find_library("m"))
+
+
+def _libm(name, nargs):
+    f = getattr(_LIBM, name)
+    f.restype, f.argtypes = ctypes.c_double, [ctypes.c_double] * nargs
+    return f
+
+
+class _Math:
+    """``math`` as compiled code computes it: libm's functions (IEEE values, no exceptions)."""
+
+    def __getattr__(self, name):
+        if name == "isfinite" or not callable(getattr(math, name)):
+            return getattr(math, name)       # (and the constants inf, nan, pi, e)
+        return _libm(name, 2 if name in ("atan2", "copysign", "pow", "hypot") else 1)
+
+
+def _div(a, b):
+    with np.errstate(all="ignore"):
+        out = np.float64(a) / np.float64(b)
+    return float(out)
+
+
+def _pow(x, n):
+    """``x**n`` as translated: a constant integer power by squaring from 1.0 (then 1/… for n < 0);
+    other powers by libm's pow."""
+    if type(n) is int and abs(n) <= 0x10000:
+        res, val, e = 1.0, float(x), abs(n)
+        while e:
+            if e & 1:
+                res = res * val
+            e >>= 1
+            val = val * val
+        return _div(1.0, res) if n < 0 else res
+    return _libm("pow", 2)(float(x), float(n))
+
+
+class _Ops(ast.NodeTransformer):
+    def visit_BinOp(self, node):
+        self.generic_visit(node)
+        if isinstance(node.op, (ast.Pow, ast.Div)):
+            fn = "_pow" if isinstance(node.op, ast.Pow) else "_div"
+            return ast.copy_location(ast.Call(ast.Name(fn, ast.Load()), [node.left, node.right], []), node)
+        return node
+
+
+def _reference(mod, name):
+    """``name`` of the kernel module ``mod`` (:func:`_load`), its whole source run as Python with
+    ``**`` and ``/`` as the translator computes them and ``math`` as libm."""
+    tree = _Ops().visit(ast.parse(open(mod.__file__).read()))
+    ast.fix_missing_locations(tree)
+    ns = {"_pow": _pow, "_div": _div, "stack_array": np.zeros}
+    exec(compile(tree, mod.__file__, "exec"), ns)
+    ns["math"] = _Math()
+    return ns[name]
 
 
 ARITH = """
@@ -88,7 +132,7 @@ def arith(_z, _y, _c, _h, _p, _r):
 """
 
 
-def test_arithmetic_and_math_functions_are_bitwise_numbas(tmp_path):
+def test_arithmetic_and_math_functions_are_bitwise_the_reference(tmp_path):
     mod = _load(tmp_path, "k_arith", ARITH)
     ll = lk.compile_kernel(mod.arith, RES)
     assert isinstance(ll, lk.LLVMKernel)
@@ -97,14 +141,13 @@ def test_arithmetic_and_math_functions_are_bitwise_numbas(tmp_path):
                         [[1e300, 1e-300], [np.inf, 1.0], [np.nan, 1.0], [-1e-3, 3.0]]])
     with np.errstate(all="ignore"):
         a = _rows(ll, Y, 9)
-        b = _rows(_numba(mod.arith), Y, 9)
+        b = _rows(_reference(mod, "arith"), Y, 9)
     assert np.array_equal(a, b, equal_nan=True)
-    # A negative integer power of 0 is inf, as the modules' error model promises (numba's own
-    # x**-n raises ZeroDivisionError there, inside the kernel, with no usable result)
+    # A negative integer power of 0 is inf, as the modules' error model promises
     with np.errstate(all="ignore"):
         z = _rows(ll, np.array([[0.0, 1.0], [-0.0, 2.0]]), 9)
     assert z[0, 2] == np.inf and z[1, 2] == np.inf
-    # control: the translated code is not numba's by construction -- one changed operation shows
+    # control: the translated code is not the reference by construction -- one changed operation shows
     mod2 = _load(tmp_path, "k_arith2", ARITH.replace("_c0**2", "_c0*_c0*1.0000000001"))
     with np.errstate(all="ignore"):
         assert not np.array_equal(_rows(lk.compile_kernel(mod2.arith, RES), Y, 9), b, equal_nan=True)
@@ -140,15 +183,17 @@ def loops(_z, _y, _c, _h, _p, _r):
 """
 
 
-def test_loops_tables_views_and_unrolled_sums_are_bitwise_numbas(tmp_path):
+def test_loops_tables_views_and_unrolled_sums_are_bitwise_the_reference(tmp_path):
+    """Control: the same loops reading the table's other column differ."""
     mod = _load(tmp_path, "k_loops", LOOPS)
     ll = lk.compile_kernel(mod.loops, RES)
     Y = np.random.default_rng(2).normal(size=(50, 3))
-    assert np.array_equal(_rows(ll, Y, 5), _rows(_numba(mod.loops), Y, 5))
+    assert np.array_equal(_rows(ll, Y, 5), _rows(_reference(mod, "loops"), Y, 5))
+    other = _load(tmp_path, "k_loops2", LOOPS.replace("_u1 = _y[_IDX0[_k, 1]]", "_u1 = _y[_IDX0[_k, 0]]"))
+    assert not np.array_equal(_rows(lk.compile_kernel(other.loops, RES), Y, 5), _rows(ll, Y, 5))
 
 
 FLOW = """
-@numba.njit
 def _helper(a, b):
     d = b - a
     if abs(d) < 1.0:
@@ -157,14 +202,12 @@ def _helper(a, b):
     return hi - min(a, b) + (1.0 if d > 0.0 else -1.0)
 
 
-@numba.njit
 def _size(_y, _p):
     a = abs(_y[0])
     b = _p[0] * _y[1]
     return max(a, abs(b), abs(_y[2]))
 
 
-@numba.njit
 def _field(_y, _p, _out):
     _out[0] = _y[0] * _p[0]
     _out[1] = _y[1] - _p[1]
@@ -184,7 +227,7 @@ def flow(_z, _y, _c, _h, _p, _r):
         _r[1] = _y[1] if _y[1] <= _y[2] else -_y[2]
     _r[2] = _helper(_y[0], _y[1]) + _helper(_y[2], _y[0])
     _r[3] = max(_y[0], _y[1]) - min(_y[1], _y[2]) + max(abs(_y[0]), _y[1], -_y[2])
-    _F = numba.carray(_rt.stack_buffer(4), (2, 2))
+    _F = stack_array((2, 2))
     for _k in range(2):
         _field(_y, _p, _F[_k])
     _r[4] = _F[0, 0] + _F[1, 1] + _size(_y, _p)
@@ -192,19 +235,23 @@ def flow(_z, _y, _c, _h, _p, _r):
 """
 
 
-def test_control_flow_helpers_and_stack_buffers_are_bitwise_numbas(tmp_path):
+def test_control_flow_helpers_and_stack_buffers_are_bitwise_the_reference(tmp_path):
     """Variables carried across iterations, branches on run-time values (NaN compares false,
     except !=), the module's scalar helpers (called) and array kernels (inlined into a stack
     buffer's rows, or returning a float in an expression, as a scale kernel): translated, and
-    bitwise numba's on random inputs with NaN and inf."""
-    mod = _load(tmp_path, "k_flow", "from methodgen.runtime import nbruntime as _rt\n" + FLOW)
+    bitwise the reference on random inputs with NaN and inf.  Control: a helper's branch
+    inverted shows."""
+    mod = _load(tmp_path, "k_flow", FLOW)
     ll = lk.compile_kernel(mod.flow, RES)
     assert isinstance(ll, lk.LLVMKernel)
     rng = np.random.default_rng(3)
     Y = np.concatenate([rng.normal(size=(300, 3)) * 2.0,
                         [[np.nan, 1.0, 2.0], [1.0, np.nan, 0.0], [np.inf, -np.inf, np.nan], [0.3, 0.3, 0.3]]])
     with np.errstate(all="ignore"):
-        assert np.array_equal(_rows(ll, Y, 6), _rows(_numba(mod.flow), Y, 6), equal_nan=True)
+        ref = _rows(_reference(mod, "flow"), Y, 6)
+        assert np.array_equal(_rows(ll, Y, 6), ref, equal_nan=True)
+        inv = _load(tmp_path, "k_flow2", FLOW.replace("if abs(d) < 1.0:", "if abs(d) >= 1.0:"))
+        assert not np.array_equal(_rows(lk.compile_kernel(inv.flow, RES), Y, 6), ref, equal_nan=True)
 
 
 LOOP_EXITS = """
@@ -245,10 +292,10 @@ def exits(_z, _y, _c, _h, _p, _r):
 """
 
 
-def test_while_break_continue_and_integer_min_max_are_bitwise_numbas(tmp_path):
+def test_while_break_continue_and_integer_min_max_are_bitwise_the_reference(tmp_path):
     """The constructs of an iteration (the fused Newton loop): ``while`` with a counter,
     ``continue`` (back to the test), ``break`` (out, the index left where it broke), integer
-    ``min``/``max`` in bounds: bitwise numba's, NaN and inf included."""
+    ``min``/``max`` in bounds: bitwise the reference, NaN and inf included."""
     mod = _load(tmp_path, "k_exits", LOOP_EXITS)
     ll = lk.compile_kernel(mod.exits, RES)
     assert isinstance(ll, lk.LLVMKernel)
@@ -256,7 +303,7 @@ def test_while_break_continue_and_integer_min_max_are_bitwise_numbas(tmp_path):
     Y = np.concatenate([rng.normal(size=(300, 3)) * 5.0,
                         [[np.nan, 1.0, 2.0], [1.0, np.nan, -1.0], [np.inf, 2.0, 1.0], [40.0, 0.0, -1.0]]])
     with np.errstate(all="ignore"):
-        a, b = _rows(ll, Y, 5), _rows(_numba(mod.exits), Y, 5)
+        a, b = _rows(ll, Y, 5), _rows(_reference(mod, "exits"), Y, 5)
     assert np.array_equal(a, b, equal_nan=True)
     assert len(set(a[:, 1])) > 3 and set(a[:, 2]) == {0.0, 1.0}    # the exits were taken
     # control: a continue that skips the update changes the iterates
@@ -266,27 +313,38 @@ def test_while_break_continue_and_integer_min_max_are_bitwise_numbas(tmp_path):
 
 
 @pytest.mark.parametrize("body, why", [
-    ("    _r[0] = _y[0] % 2.0\n", "operator"),
-    ("    _r[0] = math.hypot(_y[0], _y[1])\n", "function"),
-    ("    for i in range(2):\n        _r[i] = 1.0\n    else:\n        _r[0] = 2.0\n", "for-else"),
-    ("    _r[0] = _helper(_y[0])\n", "python-call"),
+    ("    _r[0] = _y[0] % 2.0\n", "%.* of a float"),
+    ("    _r[0] = math.hypot(_y[0], _y[1])\n", "call of math.hypot"),
+    ("    for i in range(2):\n        _r[i] = 1.0\n    else:\n        _r[0] = 2.0\n", "for … else"),
+    ("    _r[0] = _helper(_y[0])\n", "call of _helper"),
 ])
-def test_what_is_not_translated_falls_back_to_numba(tmp_path, body, why):
-    """The translator refuses what it does not know (Unsupported); a kernel without a kernel-IR
-    table is compiled by numba (its text is never translated by the decorator), with numba's
-    results.  Control: a kernel with a table takes the LLVM route."""
-    src = "def _helper(x):\n    return 2.0 * x\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
-    if why == "python-call":     # a helper numba can call but that is not a compiled kernel here
-        src = "_helper = numba.njit(lambda x: 2.0 * x)\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
-    mod = _load(tmp_path, f"k_{why}", src)
-    with pytest.raises(lk.Unsupported):
+def test_what_is_not_translated_is_refused_by_name(tmp_path, body, why):
+    """The translator refuses what it does not know (Unsupported), naming the function and the
+    construct -- there is no other compiler to hand it to; a kernel without a kernel-IR table
+    is refused by name too (its text is never translated by the decorator).  Control: a kernel
+    with a table compiles."""
+    src = "_helper = len\n\n\ndef k(_z, _y, _c, _h, _p, _r):\n" + body
+    tag = str(abs(hash(why)))
+    mod = _load(tmp_path, f"k_{tag}", src)
+    with pytest.raises(lk.Unsupported, match=r"^in k: .*" + why):
         lk.compile_kernel(mod.k, RES)
-    got = lk.kernel(RES)(mod.k)
-    assert not isinstance(got, lk.LLVMKernel)          # numba compiled it
-    Y = np.array([[1.5, 2.5, 3.5], [-1.0, 0.5, 0.25]])
-    assert np.array_equal(_rows(got, Y, 2), _rows(_numba(mod.k), Y, 2))
-    fn, table = _table_kernel(tmp_path, f"k_ok_{why}")
+    with pytest.raises(lk.Unsupported, match=r"^k: no kernel-IR table"):
+        lk.kernel(RES, None)(mod.k)
+    fn, table = _table_kernel(tmp_path, f"k_ok_{tag}")
     assert isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
+
+
+def test_a_refusal_inside_an_inlined_kernel_names_it(tmp_path):
+    """A construct refused inside a function the translator inlines (a module's kernel in the
+    fused loop) names the chain of functions down to it.  Control: the same caller with a
+    translatable callee compiles."""
+    src = ("def _inner(_y, _out):\n    _out[0] = _y[0] % 2.0\n\n\n"
+           "def k(_z, _y, _c, _h, _p, _r):\n    _inner(_y, _r)\n")
+    mod = _load(tmp_path, "k_inlined", src)
+    with pytest.raises(lk.Unsupported, match=r"^in k: in _inner: .*of a float"):
+        lk.compile_kernel(mod.k, RES)
+    ok = _load(tmp_path, "k_inlined_ok", src.replace("_y[0] % 2.0", "_y[0] * 2.0"))
+    assert isinstance(lk.compile_kernel(ok.k, RES), lk.LLVMKernel)
 
 
 def _table_kernel(tmp_path, name):
@@ -300,27 +358,19 @@ def _table_kernel(tmp_path, name):
     return mod.k, kir.flatten([tree])[0]
 
 
-def test_the_numba_route_can_be_forced(tmp_path, monkeypatch):
-    fn, table = _table_kernel(tmp_path, "k_forced")
-    monkeypatch.setenv("METHODGEN_KERNELS", "numba")
-    assert not isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
-    monkeypatch.setenv("METHODGEN_KERNELS", "llvm")
-    assert isinstance(lk.kernel(RES, table)(fn), lk.LLVMKernel)
-
-
-def test_a_table_kernel_is_named_at_once_and_compiled_on_first_use(tmp_path):
+def test_a_table_kernel_is_named_at_once_and_never_compiled_for_itself(tmp_path):
     """A generated kernel (one with a kernel-IR table) is not compiled when its module is loaded
     (the fused loop inlines its tree): it gets its symbol then -- the one an eager compilation
-    names it by -- and its machine code on first use, the same code.  Control: another kernel's
-    symbol differs."""
+    names it by.  Called from Python it compiles its C entry and computes its tree; its own
+    machine code is never made.  Control: another kernel's symbol differs."""
     fn, table = _table_kernel(tmp_path, "k_lazy")
     k = lk.kernel(RES, table)(fn)
     assert isinstance(k, lk.LLVMKernel) and k._addr is None            # named, not compiled
     eager = lk.compile_kernel(fn, RES, globals_=getattr(fn, "__kir_names__", None))
     assert eager.symbol == k.symbol and eager._addr
     Y = np.array([[1.5, 2.5, 3.5], [-1.0, 0.5, 0.25]])
-    assert np.array_equal(_rows(k, Y, 1), Y[:, :1] + Y[:, 1:2])        # compiled on this first use
-    assert k._addr == eager._addr                                       # the same machine code
+    assert np.array_equal(_rows(k, Y, 1), Y[:, :1] + Y[:, 1:2])        # through its C entry
+    assert k._addr is None
     other = _load(tmp_path, "k_lazy_other", "def k(_z, _y, _c, _h, _p, _r):\n    _r[0] = _y[0] - _y[1]\n").k
     assert lk.compile_kernel(other, RES).symbol != k.symbol
 
@@ -348,9 +398,11 @@ def _chain(n):
 @pytest.mark.parametrize("case", ["kepler-sv8", "hh-em2", "nbody3-em2", "chain24-em2",
                                   # loops over like terms as nbody3-em2, at six bodies
                                   pytest.param("oss-em2", marks=pytest.mark.slow)])
-def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, monkeypatch, case):
-    """Every straight-line kernel of the module takes the LLVM route (straight-line code, loops
-    over like terms, like rows, unrolled sums); the trajectory is bitwise the numba route's."""
+def test_modules_compile_every_kernel_and_agree_with_numpy(tmp_path, monkeypatch, case):
+    """Every kernel of the module is an LLVM kernel (straight-line code, loops over like terms,
+    like rows, unrolled sums); the trajectory is bitwise the stepper run as Python with the
+    same kernels and equals the numpy module's to round-off.  Control: a step one ulp longer
+    changes the bits."""
     if case == "chain24-em2":
         system, y0 = _chain(24)            # 48 state components: like rows (lower_rows)
         method, opts, h, steps = "energy-momentum", {}, 0.05, 60
@@ -368,17 +420,18 @@ def test_modules_on_the_llvm_route_agree_bitwise_with_the_numba_route(tmp_path, 
     scheme = mg.discretize(system, method, **opts)
     if case in ("nbody3-em2", "oss-em2"):
         assert uses_loops(scheme)
-    runs = {}
-    for route in ("llvm", "numba"):
-        monkeypatch.setenv("METHODGEN_KERNELS", route)
-        mod = mg.generate(scheme, tmp_path / module_filename(system.name, f"{case}_{route}", "numba"),
-                          backend="numba")
-        kernels = {k: getattr(mod, k) for k in ("_nb_guess", "_nb_res", "_nb_resjac", "_nb_post", "_nb_check",
-                                                "_nb_hs") if hasattr(mod, k)}
-        assert kernels
-        assert all(isinstance(k, lk.LLVMKernel) == (route == "llvm") for k in kernels.values()), kernels
-        runs[route] = mod.integrate(y0, h, steps)
-    assert np.array_equal(runs["llvm"], runs["numba"])
+    mod = mg.generate(scheme, tmp_path / module_filename(system.name, case, "numba"), backend="numba")
+    ref = mg.generate(scheme, tmp_path / module_filename(system.name, case, "numpy"), backend="numpy")
+    kernels = {k: getattr(mod, k) for k in ("_nb_guess", "_nb_res", "_nb_resjac", "_nb_post", "_nb_check",
+                                            "_nb_hs") if hasattr(mod, k)}
+    assert kernels and all(isinstance(k, lk.LLVMKernel) for k in kernels.values()), kernels
+    compiled = mod.integrate(y0, h, steps)
+    monkeypatch.setenv("METHODGEN_STEPPER", "python")
+    assert np.array_equal(mod.integrate(y0, h, steps), compiled)
+    monkeypatch.delenv("METHODGEN_STEPPER")
+    scale = max(1.0, float(np.max(np.abs(compiled))))
+    np.testing.assert_allclose(compiled, ref.integrate(y0, h, steps), rtol=0, atol=1e-11 * scale)
+    assert not np.array_equal(mod.integrate(y0, np.nextafter(h, 1.0), steps), compiled)
 
 
 def test_kernels_compile_from_several_threads(tmp_path):
@@ -404,10 +457,10 @@ def test_kernels_compile_from_several_threads(tmp_path):
 
 def test_a_c_entry_called_through_ctypes_is_the_kernel(tmp_path):
     """compile_kernel(c_entry=True): the same machine code called from Python through ctypes
-    (arrays as numba's structures by pointer; the fused loop's route, no numba dispatcher) --
-    bitwise the compiled runtime's call of the kernel.  Arrays the translated code cannot index
+    (arrays as their structures by pointer; the fused loop's route) -- bitwise the kernel
+    called from Python.  Arrays the translated code cannot index
     (not C-contiguous, not float64) are refused by name, never passed."""
-    mod = _load(tmp_path, "k_centry", "from methodgen.runtime import nbruntime as _rt\n" + FLOW)
+    mod = _load(tmp_path, "k_centry", FLOW)
     ll = lk.compile_kernel(mod.flow, RES, c_entry=True)
     rng = np.random.default_rng(5)
     Y = rng.normal(size=(40, 3))
@@ -441,7 +494,7 @@ def guarded(_z, _y, _c, _h, _p, _r):
 
 @pytest.mark.parametrize("guard", [True, False])
 def test_and_or_short_circuit_as_python(tmp_path, guard):
-    """``a and b`` / ``a or b`` evaluate b only when a does not decide (as Python and numba):
+    """``a and b`` / ``a or b`` evaluate b only when a does not decide (as Python):
     a condition guarding an index never reads out of range; and a name first bound to a
     constant, then assigned in one branch, keeps the constant on the other path.  Control: without the guard the
     same read is made (the process dies of it), so the test sees an eager read."""
@@ -450,23 +503,15 @@ def test_and_or_short_circuit_as_python(tmp_path, guard):
 
     src = SHORT if guard else SHORT.replace("n > 0 and ", "").replace("n == 0 or ", "")
     path = tmp_path / "k_short.py"
-    path.write_text("import math\nimport numba\nimport numpy\n" + src)
+    path.write_text("import math\nimport numpy\n" + src)
     code = textwrap.dedent(f"""
-        import importlib.util, numba, numpy as np
-        from methodgen.codegen import llvmkernels as lk
-        from methodgen.runtime import nbruntime as rt
+        import importlib.util, numpy as np
+        from methodgen.codegen import abi, llvmkernels as lk
         spec = importlib.util.spec_from_file_location("k_short", {str(path)!r})
         mod = importlib.util.module_from_spec(spec); spec.loader.exec_module(mod)
-        ll = lk.compile_kernel(mod.guarded, rt.KERNEL_TYPES["res"])
-        t = numba.types
-        @numba.njit(t.void(t.FunctionType(rt.KERNEL_TYPES["res"]), t.float64[:, ::1], t.float64[:, ::1],
-                           t.float64, t.float64[::1], t.float64[:, ::1]))
-        def rows(res, Z, Y, h, p, R):
-            c = np.zeros(Y.shape[1])
-            for b in range(Z.shape[0]):
-                res(Z[b], Y[b], c, h, p, R[b])
+        ll = lk.compile_kernel(mod.guarded, abi.KERNEL_TYPES["res"])
         R = np.zeros((1, 2))
-        rows(ll, np.zeros((1, 3)), np.ones((1, 3)), 0.1, np.array([0.5]), R)
+        ll(np.zeros(3), np.ones(3), np.zeros(3), 0.1, np.array([0.5]), R[0])
         print("ok", R.tolist())
     """)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -480,10 +525,10 @@ def test_and_or_short_circuit_as_python(tmp_path, guard):
 
 
 # --- the constructs of the Wisdom–Holman runtime (methodgen.runtime.kepler_flow) ----------------------------
-# Compared with the same source run as Python (the runtime's fallback), each with a control.
+# Compared with the same source run as Python, each with a control.
 
 def _load_plain(tmp_path, name, source):
-    """A module of functions written to a file (no numba import: these need none)."""
+    """A module of functions written to a file (numpy imported as np)."""
     path = tmp_path / f"{name}.py"
     path.write_text("import math\nimport numpy as np\n\n" + textwrap.dedent(source))
     spec = importlib.util.spec_from_file_location(name, path)
@@ -579,7 +624,7 @@ def test_tuple_returns_unpacking_and_views_as_python(tmp_path):
     ("def k(x, out):\n    a, b = x[0]\n    out[0] = a\n", "unpacking of a non-tuple"),
 ])
 def test_tuple_mistakes_are_refused(tmp_path, body, why):
-    """What Python would reject or numba type differently is refused, never translated."""
+    """What Python would reject, or a compiler type differently, is refused, never translated."""
     mod = _load_plain(tmp_path, f"k_bad_{abs(hash(why))}", body)
     with pytest.raises(lk.Unsupported, match=why):
         lk.compile_kernel(mod.k, kt.none(_V, _V), c_entry=True)
@@ -687,3 +732,33 @@ def test_c_entry_returns_values_and_truth_values_as_python(tmp_path):
     assert _ccall(iv, np.array([np.nan] * 4), np.zeros(4)) == -1
     void = _load_plain(tmp_path, "k_void", "def k(x, out):\n    out[0] = x[0]\n")
     assert _ccall(lk.compile_kernel(void.k, kt.none(_V, _V), c_entry=True), np.ones(1), np.zeros(1)) is None
+
+
+TUPLE_TABLES = """
+_W = (0.5, 0.25, 0.125)
+_I = (1, 2, 0)
+_BAD = (1.0, "x")
+
+
+def k(_z, _y, _c, _h, _p, _r):
+    s = 0.0
+    for i in range(3):
+        s += _W[i] * _y[_I[i]]
+    _r[0] = s
+
+
+def bad(_z, _y, _c, _h, _p, _r):
+    _r[0] = _BAD[0]
+"""
+
+
+def test_module_tuples_of_numbers_are_constant_tables(tmp_path):
+    """A module-level tuple of numbers indexed at run time (the scalar helpers' Gauss–Legendre
+    nodes and weights, ``special_helpers._GL8_T``/``_GL8_W``, which a kernel calling
+    ``_f_dsincdd`` inlines) is a constant table: floats and integer indices, bitwise the source
+    run as Python.  Control: a tuple with a non-number is refused by name."""
+    mod = _load(tmp_path, "k_tuple_tables", TUPLE_TABLES)
+    Y = np.random.default_rng(8).normal(size=(20, 3))
+    assert np.array_equal(_rows(lk.compile_kernel(mod.k, RES), Y, 1), _rows(_reference(mod, "k"), Y, 1))
+    with pytest.raises(lk.Unsupported, match=r"in bad: _BAD is not a constant table"):
+        lk.compile_kernel(mod.bad, RES)

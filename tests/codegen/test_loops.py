@@ -185,7 +185,7 @@ def test_nbody8_keeps_energy_and_momenta(tmp_path):
 
 
 def test_numba_loops_agree_with_numpy(tmp_path):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scheme = mg.discretize(nbody_system(3), "energy-momentum")
     np_mod = _module(scheme, True, tmp_path)
     nb_mod = _module(scheme, True, tmp_path, backend="numba")

@@ -1,7 +1,8 @@
-"""The numba backend: same interface and, to round-off, the same results as the numpy backend.
+"""The compiled backend (backend="numba", compiled through llvmlite): same interface and, to
+round-off, the same results as the numpy backend.
 
-Each numba module is generated once per session into a temporary folder and
-compiled on first use (``cache=True`` keeps the machine code next to it).
+Each compiled module is generated once per session into a temporary folder and compiled on
+first use (its machine code kept in methodgen's cache).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import methodgen as mg
 from methodgen.codegen.build import default_path, scene_module_path
 from methodgen.codegen.emit import emit_source, module_filename, signature, template_hash
 
-pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
 #: (scene, method) pairs covering every kind of step: Newton (reduced energy-momentum),
 #: linearly implicit, explicit, constrained.
@@ -223,40 +224,54 @@ def test_without_llvmlite_falls_back_to_numpy(monkeypatch, tmp_path, kepler):
 
 
 def test_the_compiled_backend_runs_without_numba(tmp_path):
-    """numba is off the run path: with ``import numba`` failing, a compiled module of each step
-    kind (Newton, explicit with a lock-step batch, Gauss's stage kernels, a projected step) is
-    built, runs, and gives the bits of the same module with numba importable; a kernel the
-    translator refuses names what is missing (control: METHODGEN_KERNELS=numba asks for numba)."""
-    code = textwrap.dedent("""
-        import sys, json, os
+    """numba is not used: with ``import numba`` failing, a compiled module of each step kind
+    (Newton, explicit with a lock-step batch, Gauss's stage kernels, a projected step) is built,
+    runs, and gives the bits of the same module built in this process."""
+    cases = [("kepler", "energy-momentum", {}), ("henon-heiles-2d", "stormer-verlet", {"order": 4}),
+             ("kepler", "gauss", {"stages": 2}), ("henon-heiles-2d", "stormer-verlet", {"project": "energy"})]
+    code = textwrap.dedent(f"""
+        import sys, json
         sys.modules["numba"] = None
         import numpy as np, methodgen as mg
-        out = {}
-        for scene, method, kw in [("kepler", "energy-momentum", {}), ("henon-heiles-2d", "stormer-verlet", {"order": 4}),
-                                  ("kepler", "gauss", {"stages": 2}), ("henon-heiles-2d", "stormer-verlet", {"project": "energy"})]:
+        out = []
+        for scene, method, kw in {cases!r}:
             sc = mg.load_scene(scene)
             mod = mg.build(sc.system, method, backend="numba", **kw)
             y0 = np.array(sc.y0)
-            out[scene + method + str(kw)] = [mod.BACKEND, mod.integrate(y0, sc.h, 50)[-1].tolist(),
-                                             mod.integrate(np.stack([y0] * 20), sc.h, 5)[-1, -1].tolist()]
-        os.environ["METHODGEN_KERNELS"] = "numba"
-        try:
-            mg.build(mg.load_scene("kepler").system, "midpoint", backend="numba")
-            out["control"] = "built"
-        except ImportError as e:
-            out["control"] = str(e)
+            out.append([mod.BACKEND, mod.integrate(y0, sc.h, 50)[-1].tolist(),
+                        mod.integrate(np.stack([y0] * 20), sc.h, 5)[-1, -1].tolist()])
         print(json.dumps(out))
     """)
     env = dict(os.environ, METHODGEN_CACHE=str(tmp_path / "cache"))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert "numba is needed here" in out.pop("control")
-    assert len(out) == 4 and all(backend == "numba" for backend, _, _ in out.values())
-    # the same bits with numba importable (this process)
+    assert len(out) == 4 and all(backend == "numba" for backend, _, _ in out)
+    # the same bits in this process (control: another step size gives other bits)
     sc = mg.load_scene("kepler")
     mod = mg.build(sc.system, "energy-momentum", backend="numba")
-    assert mod.integrate(np.array(sc.y0), sc.h, 50)[-1].tolist() == out["kepler" + "energy-momentum" + "{}"][1]
+    assert mod.integrate(np.array(sc.y0), sc.h, 50)[-1].tolist() == out[0][1]
+    assert mod.integrate(np.array(sc.y0), sc.h * (1 + 2**-40), 50)[-1].tolist() != out[0][1]
+
+
+def test_a_kernel_without_a_tree_is_refused_by_name(monkeypatch, tmp_path):
+    """A kernel with an expression the kernel IR has no node for cannot be compiled (there is no
+    other compiler): generating its compiled module raises GenerationError naming the kernel and
+    the expression, and pointing to the numpy backend, which builds it.  Made here by taking
+    ``math.cos`` out of the IR's functions (the pendulum's kernels call it).  Control: with
+    ``math.cos`` known the same scheme compiles and runs."""
+    from methodgen.codegen import kir, kir_build
+
+    scene = mg.load_scene("simple-pendulum")
+    scheme = mg.discretize(scene.system, "midpoint")
+    monkeypatch.setattr(kir_build, "FUNCTIONS", kir.FUNCTIONS - {"math.cos"})
+    with pytest.raises(mg.GenerationError, match=r"cannot print the kernel _nb_\w+: .*math\.cos.* has no "
+                                                 r"kernel-IR node.*backend=\"numpy\""):
+        emit_source(scheme, backend="numba")
+    assert "numpy.cos(" in emit_source(scheme, backend="numpy")
+    monkeypatch.undo()
+    mod = mg.generate(scheme, tmp_path / "pendulum_midpoint_numba.py", backend="numba")
+    assert mod.BACKEND == "numba" and mod.integrate(np.array(scene.y0), scene.h, 3).shape == (4, 2)
 
 
 def test_unknown_backend(kepler):
@@ -303,31 +318,10 @@ def test_emitted_source_is_deterministic_and_self_contained(kepler):
             imported |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom):
             imported |= {f"{node.module}.{a.name}" for a in node.names}
-    # numpy, numba and, of methodgen, only its compiled runtime (on the shared route its
-    # numba-free interface nbabi) and the LLVM kernel compiler (never SymPy or the generator)
-    assert imported <= {"math", "operator", "sys", "numba", "numpy", "methodgen.runtime.nbruntime", "methodgen.runtime.nbabi",
+    # numpy and, of methodgen, only its compiled runtime's interface nbabi and the LLVM kernel
+    # compiler (never numba, SymPy or the generator)
+    assert imported <= {"math", "operator", "sys", "numpy", "methodgen.runtime.nbabi",
                         "methodgen.codegen.llvmkernels"}
-
-
-def test_compiled_code_is_cached_on_disk(tmp_path, monkeypatch):
-    """Kernels numba compiles are cached next to the module; straight-line kernels compiled
-    through LLVM IR (methodgen.codegen.llvmkernels, milliseconds) are compiled in each process."""
-    from methodgen.codegen import llvmkernels
-
-    scheme = mg.discretize(mg.load_scene("kepler").system, "energy-momentum")
-    y0 = np.array(mg.load_scene("kepler").y0)
-    monkeypatch.setenv("METHODGEN_KERNELS", "numba")
-    nb_mod = mg.generate(scheme, tmp_path / "kep_em_numba.py", backend="numba")
-    nb_mod.integrate(y0, 0.01, 2)
-    cache = tmp_path / "__pycache__"
-    assert any(f.startswith("kep_em_numba") and f.endswith(".nbi") for f in os.listdir(cache))
-    # the default route: the same module's kernels through LLVM, nothing of them on disk
-    monkeypatch.setenv("METHODGEN_KERNELS", "llvm")
-    ll_mod = mg.generate(scheme, tmp_path / "sub" / "kep_em_numba.py", backend="numba")
-    assert isinstance(ll_mod._nb_res, llvmkernels.LLVMKernel)
-    assert np.array_equal(ll_mod.integrate(y0, 0.01, 2), nb_mod.integrate(y0, 0.01, 2))
-    sub = tmp_path / "sub" / "__pycache__"
-    assert not sub.exists() or not any(f.endswith(".nbi") and "_nb_res" in f for f in os.listdir(sub))
 
 
 def test_more_than_three_unknowns_uses_gaussian_elimination(tmp_path):

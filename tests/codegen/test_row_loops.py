@@ -26,7 +26,7 @@ import methodgen.codegen.lower_rows as LR
 from methodgen.codegen.emit import load_module, render, write_atomic
 from methodgen.codegen.lower import lower
 
-numba = pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
 
 def toda(n):

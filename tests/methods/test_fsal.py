@@ -40,7 +40,7 @@ def sv4(hh):
 
 @pytest.fixture(scope="module")
 def sv4_numba(hh):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     return mg.build(hh, "stormer-verlet", order=4, backend="numba")
 
 

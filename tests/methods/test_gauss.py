@@ -119,7 +119,7 @@ def test_keys_name_the_stages():
 
 @pytest.mark.slow
 def test_numba_equals_numpy(gauss):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     a, b = gauss("henon-heiles-2d", 3), gauss("henon-heiles-2d", 3, "numba")
     assert np.abs(a.integrate(HH_Y0, 0.2, 200) - b.integrate(HH_Y0, 0.2, 200)).max() < 1e-13
 

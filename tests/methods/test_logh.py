@@ -509,7 +509,7 @@ def test_control_certificates_refute_the_sign_flipped_lambda(logh):
 def test_numba_order_10_reaches_T_to_1e10_with_energy_to_round_off(logh, tmp_path):
     # The benchmark's configuration on a shorter T (numba compile ~20 s: slow; the numpy runs
     # above cover the same generated step).  Measured: T = 2000, 16 steps per orbit: 7.7e-12.
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scheme = mg.discretize(logh, "stormer-verlet", order=10)
     mod = mg.generate(scheme, tmp_path / "logh_o10_numba.py", backend="numba")
     info = {}

@@ -166,7 +166,7 @@ def test_clear_errors(kep):
 
 
 def test_numba_agrees_with_numpy(kep):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     P = build_processed(kep, "stormer-verlet", 8)
     F = build_processed(kep, "stormer-verlet", 8, backend="numba")
     assert F.BACKEND == "numba" and F.kernel.BACKEND == "numba"

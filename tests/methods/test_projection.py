@@ -165,7 +165,7 @@ def test_key_and_traits(hh):
 
 
 def test_numba_agrees(hh):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     nb = mg.build(hh, "stormer-verlet", project="energy", backend="numba")
     npy = mg.build(hh, "stormer-verlet", project="energy")
     a = nb.integrate(HH_Y0, H, 200)
@@ -242,7 +242,7 @@ def test_bench_and_run_take_the_method():
 def test_numba_several_invariants(kepler):
     """The numba loop with m = 4 (elimination, Broyden over 4 multipliers); fast sibling:
     test_kepler_3d_projection_onto_four_invariants (numpy)."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
     nb = mg.build(kepler, "stormer-verlet", project="invariants", backend="numba")
     npy = mg.build(kepler, "stormer-verlet", project="invariants")

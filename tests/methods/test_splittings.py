@@ -204,7 +204,7 @@ def test_chunks_are_bitwise_one_piece(hh, batch):
 
 
 def test_numba_chunks_and_agreement(hh):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     nb = mg.build(hh, "stormer-verlet", order=4, composition="blanes-moan", backend="numba")
     npm = mg.build(hh, "stormer-verlet", order=4, composition="blanes-moan")
     whole = nb.integrate(HH_Y0, 0.2, 200)
@@ -329,7 +329,7 @@ def test_an_unresolved_step_is_refused(hh, backend):
     """The per-stage local error estimate refuses a step that does not resolve the dynamics
     (Hénon–Heiles, SRKN_11^b, h = 2: estimate 0.118 > 0.1), naming the stage; h = 1 runs."""
     if backend == "numba":
-        pytest.importorskip("numba")
+        pytest.importorskip("llvmlite")
     mod = mg.build(hh, "stormer-verlet", order=6, composition="blanes-moan-rkn", backend=backend)
     assert np.isfinite(mod.integrate(HH_Y0, 1.0, 200)).all()
     with pytest.raises(mod.ResolutionError, match=r"DRIFT\[\d+\] \* h") as exc:

@@ -118,7 +118,7 @@ def test_chunks_equal_one_piece(std2):
 
 
 def test_numba_agrees(hh, std2):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     nb = mg.build(hh, "stormer-verlet", project="energy-standard", backend="numba")
     a = nb.integrate(HH_Y0, H, 300)
     b = std2.integrate(HH_Y0, H, 300)

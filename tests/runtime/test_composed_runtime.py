@@ -188,7 +188,7 @@ def test_unresolved_stage_names_the_composed_step(composed):
     pytest.param("henon-heiles-2d", "stormer-verlet", 6, HH_Y0, 0.2, 200, marks=pytest.mark.slow),
 ])
 def test_numba_equals_numpy(composed, scene, method, order, y0, h, steps):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     a = composed(scene, method, order)
     b = composed(scene, method, order, backend="numba")
     assert b.BACKEND == "numba" and b.GAMMAS == a.GAMMAS

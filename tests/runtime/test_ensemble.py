@@ -23,7 +23,7 @@ import pytest
 import methodgen as mg
 from methodgen.codegen.emit import module_filename
 
-pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
 from methodgen.codegen import abi, llvmkernels  # noqa: E402
 from methodgen.runtime import fused, nbabi, stepper  # noqa: E402

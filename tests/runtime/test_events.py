@@ -16,7 +16,7 @@ import methodgen as mg
 from methodgen.errors import InputError, ParseError
 
 BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
-    __import__("importlib").util.find_spec("numba") is None, reason="numba not installed"))]
+    __import__("importlib").util.find_spec("llvmlite") is None, reason="llvmlite not installed"))]
 Y0 = np.array([0.0, 0.1, 0.35, 0.2])      # Hénon–Heiles (q1, q2, p1, p2), H ≈ 0.086
 H = 0.05
 

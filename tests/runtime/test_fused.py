@@ -17,7 +17,7 @@ import pytest
 
 import methodgen as mg
 
-pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
 
 E = 0.99

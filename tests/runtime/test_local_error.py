@@ -189,7 +189,7 @@ def test_no_false_alarm_sweep(modules):
 
 @pytest.fixture(scope="module")
 def kepler_numba(modules, kepler, tmp_path_factory):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scheme, np_mod = modules(kepler, "energy-momentum")
     path = tmp_path_factory.mktemp("numba_lerr") / "kepler_energy_momentum_numba.py"
     return np_mod, mg.generate(scheme, path, backend="numba")

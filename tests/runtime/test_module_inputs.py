@@ -21,12 +21,12 @@ Y0 = np.array([0.4, 0.0, 0.0, 0.0, 1.6, 1.2])
 
 @pytest.fixture(scope="module")
 def both(modules, kepler, tmp_path_factory):
-    """The numpy module and, if numba is installed, the numba module (never compiled here:
+    """The numpy module and, if llvmlite is installed, the compiled module (never compiled here:
     every call below is refused before the compiled loop runs)."""
     scheme, np_mod = modules(kepler, "energy-momentum")
     mods = [np_mod]
     try:
-        import numba  # noqa: F401
+        import llvmlite  # noqa: F401
     except ImportError:
         return mods
     path = tmp_path_factory.mktemp("numba_inputs") / "kepler_energy_momentum_numba.py"

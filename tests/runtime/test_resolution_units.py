@@ -110,7 +110,7 @@ def test_units_do_not_change_the_verdict(gen):
 
 
 def test_double_pendulum_numba(gen, reference):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     mod = gen("midpoint", backend="numba")
     tr = mod.integrate(_y0(PARAMS), H_STEP, STEPS)
     assert np.abs(tr[:, :2] - reference[:, :2]).max() < 0.02

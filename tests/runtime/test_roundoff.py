@@ -87,7 +87,7 @@ def test_default_stepper_has_no_systematic_round_off_drift(tmp_path, monkeypatch
 @pytest.mark.slow   # two numba compiles (~20 s); the numpy test above runs the same kernels' expressions
 def test_numba_stepper_has_no_systematic_round_off_drift(tmp_path, monkeypatch, pair):
     """The same measurement on the numba backend (its kernels are the same expressions)."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scene = mg.load_scene("harmonic")
     _, nb = pair("harmonic", "midpoint")
     Y0 = _harmonic_phases()
@@ -105,7 +105,7 @@ def test_kepler_stepper_drifts_less(tmp_path, monkeypatch, pair):
     stage sums at least halve the drift.  They do not remove it here: the divided difference
     also reads |q0| at the stored state alone, where the compensation rounds away (measured:
     -1.7e-16 plain, -8e-17 default; see the issue-16 note)."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scene = mg.load_scene("kepler")
     _, nb = pair("kepler", "energy-momentum")
     orbit = nb.integrate(np.array(scene.y0), scene.h, 1000)

@@ -47,7 +47,7 @@ def test_numpy_rows_are_bitwise_the_full_runs(modules, scene_name, method, steps
 
 
 def test_composed_and_numba_rows_are_bitwise(modules, pair, tmp_path):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     kep = mg.load_scene("kepler")
     mod = mg.build(kep.system, "energy-momentum", tmp_path / "k8.py", order=8)
     _check(mod, np.array(kep.y0), kep.h, 103, 10)
@@ -80,7 +80,7 @@ def test_a_failure_hands_back_the_kept_rows_before_it(modules, pair, backend):
     estimate stops the run; the trajectory handed back holds the kept rows up to the
     failing step (here the failure is at step n, so n // k + 1 rows)."""
     if backend == "numba":
-        pytest.importorskip("numba")
+        pytest.importorskip("llvmlite")
         _, mod = pair("kepler", "energy-momentum")
     else:
         _, mod = modules(mg.load_scene("kepler").system, "energy-momentum")

@@ -16,7 +16,7 @@ import pytest
 import methodgen as mg
 
 BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
-    __import__("importlib").util.find_spec("numba") is None, reason="numba not installed"))]
+    __import__("importlib").util.find_spec("llvmlite") is None, reason="llvmlite not installed"))]
 
 
 @pytest.fixture(scope="module", params=BACKENDS)

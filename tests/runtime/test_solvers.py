@@ -27,7 +27,7 @@ def tt_avf(tmp_path_factory):
     """Kepler e = 0.99 under the time transformation g = |q| (8 unknowns): numpy, numba."""
     sc = mg.load_scene("kepler-eccentric")
     np_mod = load_generated("kepler_eccentric_tt_avf")
-    numba = pytest.importorskip("numba")  # noqa: F841
+    pytest.importorskip("llvmlite")
     scheme = mg.discretize(sc.run_system, "avf")
     path = tmp_path_factory.mktemp("solvers") / module_filename(sc.run_system.name, "avf", "numba")
     nb_mod = mg.generate(scheme, path, backend="numba")
@@ -133,7 +133,7 @@ def test_chunks_equal_one_piece(pair, solver):
     # The solver state (auto's Newton hold, reuse's kept matrix) continues from chunk to
     # chunk through info, like the compensation: iterate() in chunks of 7 steps is bitwise
     # the run in one piece, on both backends.  h = 0.5 makes "auto" switch back and forth.
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     np_mod, nb_mod = pair("henon-heiles", "midpoint")
     y0 = np.array(mg.load_scene("henon-heiles").y0, dtype=float)
     for mod in (np_mod, nb_mod):
@@ -160,7 +160,7 @@ def test_chunks_equal_one_piece(pair, solver):
 def test_solver_state_is_not_taken_across_backends_or_solvers(pair):
     # One info dict handed from a numpy run to a numba run (or to another solver): the
     # state that does not belong to it is ignored, never misread.
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     np_mod, nb_mod = pair("henon-heiles", "midpoint")
     y0 = np.array(mg.load_scene("henon-heiles").y0, dtype=float)
     info = {}

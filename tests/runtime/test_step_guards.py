@@ -132,7 +132,7 @@ def test_initial_state_refuses_g_not_positive(tt_modules):
 
 
 def test_g_guards_numba(tt_modules):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     _check_g_guards(tt_modules("midpoint", "numba"))
 
 
@@ -176,7 +176,7 @@ def test_linear_warning_numpy(linear_modules):
 
 
 def test_linear_warning_numba(linear_modules):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     _check_linear_warning(linear_modules("numba"))
 
 
@@ -238,7 +238,7 @@ def test_barrier_energy_jump_numpy(barrier_modules, method):
 
 
 def test_barrier_energy_jump_numba(barrier_modules):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     _check_barrier(barrier_modules("stormer-verlet", "numba"))
 
 
@@ -323,5 +323,5 @@ def test_barrier_thinner_than_a_step_is_invisible(barrier_modules):
 
 
 def test_roundoff_residual_message_numba(tt_modules):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     _check_roundoff_residual_message(tt_modules("avf", "numba"))

@@ -16,7 +16,7 @@ import pytest
 
 import methodgen as mg
 
-pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
 E = 0.99
 APO = np.array([1 + E, 0.0, 0.0, 0.0, math.sqrt((1 - E) / (1 + E)), 0.0])

@@ -22,7 +22,7 @@ MASS = mg.Hamiltonian("p**2/(2*m) + q**4/4", q=["q"], p=["p"], params={"m": 1.0}
 
 @pytest.fixture(scope="module")
 def numba_log(modules, tmp_path_factory):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scheme, _ = modules(LOG, "midpoint")
     return mg.generate(scheme, tmp_path_factory.mktemp("numba_domain") / "logq_midpoint_numba.py",
                        backend="numba")
@@ -116,7 +116,7 @@ def test_zero_mass_is_not_a_step_size_problem(modules):
 
 
 def test_numba_initial_zero_mass(modules, tmp_path):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     scheme, _ = modules(MASS, "stormer-verlet")
     mod = mg.generate(scheme, tmp_path / "quartic_m_stormer_verlet_numba.py", backend="numba")
     with pytest.raises(mod.NonFiniteError, match="initial state") as err:  # raised before compiling

@@ -51,7 +51,7 @@ def test_negative_control_segments_without_the_carried_state_differ(modules):
 
 
 def test_numba_rows_equal_numpy_rows(pair):
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     np_mod, nb_mod = pair("kepler", "energy-momentum")
     y0 = np.array(mg.load_scene("kepler").y0, dtype=float)
     h = mg.load_scene("kepler").h

@@ -169,7 +169,7 @@ def test_energy_kept_on_numba(tmp_path):
     """Numerical: the same on the numba backend (one compiled module, energy-momentum; ~45 s
     of compilation: slow.  The fast sibling is tests/test_helper_availability.py, which
     compiles every helper, _sincdd included, and compares it at these switch points)."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     mod = mg.build(_sinc_system(), "energy-momentum", tmp_path / "s_nb.py", backend="numba")
     for y0, h, n in STARTS:
         Y = mod.integrate(np.array(y0), h, n, check_resolution=False)

@@ -160,7 +160,7 @@ def test_no_expanded_jacobian_is_derived(monkeypatch, backend):
                                                   ("three-body", "gauss", 2)])
 def test_numba_agrees_with_expanded(modules, case, method, stages):
     """The compiled stage loops: numba structured vs numba expanded vs numpy structured."""
-    pytest.importorskip("numba")
+    pytest.importorskip("llvmlite")
     _, y0, h = CASES[case]
     a = modules(case, method, stages, False, "numba").integrate(y0, h, 100)
     b = modules(case, method, stages, True, "numba").integrate(y0, h, 100)

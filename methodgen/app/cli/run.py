@@ -292,7 +292,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
     steps, or more states kept at once than fit in half the machine's memory.
     """
     if extended and backend != "numpy":
-        raise InputError("--extended needs the numpy backend (numba has no long double)")
+        raise InputError("--extended needs the numpy backend (the compiled backend is float64 only)")
     if save is not None:
         save = str(check_output_file(save, "--save"))
         if check_suffix(save, "--save") == "hdf5":   # .npz or .h5, else refused before any work
@@ -391,7 +391,7 @@ def run_scene(scene_name: str, method: str | None = None, h: float | None = None
         y = module.initial_state(y, scene.t0, params)   # the extended state on K = 0 (e = -H(y0, t0))
     n_stages = effective_stages(method, options)
     if getattr(module, "BACKEND", "numpy") == "numba":
-        # Compile (or load from numba's disk cache) before the timed region.
+        # Compile (or load from the machine-code cache) before the timed region.
         try:
             # about the module: its line names it, and the estimate is the last compile of that module
             with about(Path(module.__file__).name), phase("compile"):

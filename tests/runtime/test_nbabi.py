@@ -1,14 +1,14 @@
-"""The numba backend's runtime (methodgen.runtime.nbabi, methodgen.runtime.nbruntime).
+"""The compiled backend's runtime interface (methodgen.runtime.nbabi).
 
-A numba module compiles only its kernels and runs on the stepper (methodgen.runtime.stepper).
-These tests check that every step structure takes it, that it reads its per-stage
-coefficients from the module, and that a stale cached runtime is rebuilt, never loaded.
+A compiled module (backend="numba") holds its kernels only and runs on the stepper
+(methodgen.runtime.stepper).  These tests check that every step structure takes it, that it
+reads its per-stage coefficients from the module, and that a module refuses a runtime it was
+not generated for.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -20,9 +20,11 @@ import methodgen as mg
 from methodgen.codegen import emit
 from methodgen.codegen.emit import emit_source, module_filename
 
-pytest.importorskip("numba")
+pytest.importorskip("llvmlite")
 
-from methodgen.runtime import nbabi, nbruntime  # noqa: E402
+from methodgen.codegen import abi  # noqa: E402
+from methodgen.codegen import llvmkernels as lk  # noqa: E402
+from methodgen.runtime import nbabi  # noqa: E402
 
 
 def _module(tmp_path, scene_name, method, order=2, **options):
@@ -113,114 +115,52 @@ def test_explicit_stage_reads_its_steps_from_the_stage_coefficients(tmp_path):
 
 def test_configuration_is_checked_by_name():
     with pytest.raises(ValueError, match="missing .*'N'"):
-        nbabi.int_config(**{k: 0 for k in nbruntime.CFG if k != "N"})
+        nbabi.int_config(**{k: 0 for k in abi.CFG if k != "N"})
     with pytest.raises(ValueError, match="unknown .*'BOGUS'"):
-        nbabi.float_config(**{k: 0.0 for k in nbruntime.FCFG}, BOGUS=1.0)
-    cfg = nbabi.int_config(**{k: i for k, i in nbruntime.CFG.items()})
-    assert cfg.tolist() == list(range(len(nbruntime.CFG)))
+        nbabi.float_config(**{k: 0.0 for k in abi.FCFG}, BOGUS=1.0)
+    cfg = nbabi.int_config(**{k: i for k, i in abi.CFG.items()})
+    assert cfg.tolist() == list(range(len(abi.CFG)))
 
 
 def test_status_codes_match_the_modules(tmp_path):
     _, mod = _module(tmp_path, "simple-pendulum", "midpoint")
-    for name, code in nbruntime.STATUS.items():
+    for name, code in abi.STATUS.items():
         assert getattr(mod, "_" + name) == code, name
 
 
 # --- cache stamp -------------------------------------------------------------------------
 
 def test_the_runtime_is_stamped_with_its_content_hash():
-    # the stamp covers the runtime and the contract whose layout it compiles in (abi, nbabi)
+    # the stamp covers the runtime's interface and the contract whose layout it compiles in
     import hashlib
     h = hashlib.sha256()
-    package = os.path.dirname(os.path.dirname(nbruntime.__file__))
-    for name in ("codegen/abi.py", "runtime/nbabi.py", "runtime/nbruntime.py"):
+    package = os.path.dirname(os.path.dirname(nbabi.__file__))
+    for name in ("codegen/abi.py", "runtime/nbabi.py"):
         with open(os.path.join(package, name), "rb") as f:
             h.update(hashlib.sha256(f.read()).digest())
-    assert h.hexdigest() == nbruntime.SOURCE_SHA256
+    assert h.hexdigest() == nbabi.SOURCE_SHA256 == abi.RUNTIME_SHA256
 
 
-_TINY = '''
-import os, sys
-from methodgen.codegen.nbcache import install_stamp_guard, source_digest
-P = os.path.abspath(__file__)
-install_stamp_guard(P, {stamp})
-import numba
-
-@numba.njit("int64()", cache=True)
-def f():
-    return 1111
-
-print(f(), sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))
-'''
-
-
-def _stale_roundtrip(tmp_path, stamp, user_cache_dir=True):
-    """Compile, load, then edit the source keeping its size and mtime: what runs?
-
-    ``user_cache_dir``: the cache in ``NUMBA_CACHE_DIR``; else NUMBA_CACHE_DIR unset and
-    numba's default, ``__pycache__`` next to the source (another locator class)."""
-    src = tmp_path / "tiny_rt.py"
-    src.write_text(_TINY.format(stamp=stamp))
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path)] + sys.path)
-    if user_cache_dir:
-        env["NUMBA_CACHE_DIR"] = str(tmp_path / "nbcache")
-
-    def run():
-        out = subprocess.run([sys.executable, "-c", "import tiny_rt"], cwd=tmp_path, env=env,
-                             capture_output=True, text=True, check=True).stdout.split()
-        return tuple(int(x) for x in out)
-
-    first = run()
-    second = run()
-    st = os.stat(src)
-    text = src.read_text()
-    src.write_text(text.replace("return 1111", "return 2222"))   # same size
-    os.utime(src, ns=(st.st_atime_ns, st.st_mtime_ns))            # same mtime
-    assert os.stat(src).st_size == st.st_size
-    edited = run()
-    assert (tmp_path / "nbcache").is_dir() == user_cache_dir   # the locator meant was used
-    assert (tmp_path / "__pycache__").is_dir() != user_cache_dir
-    return first, second, edited
-
-
-@pytest.mark.parametrize("user_cache_dir", [True, False], ids=["NUMBA_CACHE_DIR", "in-tree"])
-def test_a_stale_cached_runtime_is_rebuilt_never_loaded(tmp_path, user_cache_dir):
-    first, second, edited = _stale_roundtrip(tmp_path, "source_digest(P)", user_cache_dir)
-    assert first == (1111, 0, 1)     # compiled
-    assert second == (1111, 1, 0)    # loaded from the cache
-    assert edited == (2222, 0, 1)    # the edit is compiled, not the stale code loaded
-
-
-@pytest.mark.parametrize("user_cache_dir", [True, False], ids=["NUMBA_CACHE_DIR", "in-tree"])
-def test_stale_runtime_negative_control(tmp_path, user_cache_dir):
-    """A stamp that does not see the edit (as (mtime, size) would not) loads stale code:
-    the test above can fail."""
-    first, second, edited = _stale_roundtrip(tmp_path, "'fixed'", user_cache_dir)
-    assert second == (1111, 1, 0)
-    assert edited == (1111, 1, 0)
-
-
-def test_a_numba_module_runs_without_compiling_or_loading_a_numba_function(tmp_path):
-    """In a fresh process, a numba module's steps run on its compiled stepper: no numba
-    dispatcher is compiled or loaded (not even the stand-ins of missing kernels), and numba is
-    not imported.  Control: the stepper's machine code is there (fused._LOOPS)."""
+def test_a_compiled_module_runs_without_numba(tmp_path):
+    """In a fresh process where ``import numba`` fails, a compiled module is built and its steps
+    run on its compiled stepper.  Control: the stepper's machine code is there (fused._LOOPS)."""
     scene = mg.load_scene("double-well")
     path = tmp_path / module_filename("dw", "midpoint", "numba")
     mg.generate(mg.discretize(scene.system, "midpoint"), path, backend="numba")
     code = textwrap.dedent(f"""
         import sys, numpy as np
+        sys.modules["numba"] = None
         from methodgen.runtime import fused
         from methodgen.codegen.emit import load_module
         m = load_module({str(path)!r})
         m.integrate(np.array({list(scene.y0)!r}), {scene.h!r}, 3)
         assert fused._LOOPS
-        print("numba" in sys.modules)
+        print("ran", sys.modules["numba"])
     """)
-    env = {k: v for k, v in os.environ.items() if k not in ("METHODGEN_KERNELS", "METHODGEN_STEPPER")}
+    env = {k: v for k, v in os.environ.items() if k != "METHODGEN_STEPPER"}
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stdout.split() == ["False"]
+    assert proc.stdout.split() == ["ran", "None"]
 
 
 # --- the runtime a module was generated for ----------------------------------------------
@@ -240,12 +180,12 @@ def test_a_module_refuses_a_runtime_it_was_not_generated_for(tmp_path, monkeypat
     something else) was run on it silently; it now raises ImportError naming the remedy.
     Control: under the runtime it was generated for it imports and runs."""
     scene, mod = _module(tmp_path, "simple-pendulum", "midpoint")
-    assert mod._RUNTIME_SHA256 == nbruntime.SOURCE_SHA256 == emit.runtime_sha256()
+    assert mod._RUNTIME_SHA256 == nbabi.SOURCE_SHA256 == emit.runtime_sha256()
     path = mod.__file__
     ok = _import_fresh(path, "rt_same")
     assert ok.integrate(np.array(scene.y0), scene.h, 3).shape == (4, 2)
-    monkeypatch.setattr(nbabi, "SOURCE_SHA256", "0" * 64)   # (what a module checks, numba-free)
-    with pytest.raises(ImportError, match=r"generated for another methodgen\.runtime\.nbruntime .*installed 0{16}.*regenerate"):
+    monkeypatch.setattr(nbabi, "SOURCE_SHA256", "0" * 64)   # (what a module checks)
+    with pytest.raises(ImportError, match=r"generated for another methodgen runtime .*installed 0{16}.*regenerate"):
         _import_fresh(path, "rt_other")
 
 
@@ -320,90 +260,56 @@ def test_stage_systems_by_structure_run_on_the_shared_runtime(tmp_path, monkeypa
     assert not np.allclose(forced.residual(z, y0, 0.1), ref.residual(z, y0, 0.1), rtol=1e-6, atol=1e-9)
 
 
-_PLAIN = '''
-import numba
-
-
-@numba.njit("int64()", cache=True)
-def f():
-    return 4242
-'''
-
-
-def test_a_module_loaded_by_methodgen_can_be_imported_by_its_plain_name(tmp_path):
-    """numba records the importing module's name in a cached function; methodgen's loader
-    imports a generated module under a private name.  A plain ``import`` of the same file in a
-    later process must not load that entry (it would import the private name and fail)."""
-    (tmp_path / "plainmod.py").write_text(_PLAIN)
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path)] + sys.path)
-    load = ("from pathlib import Path; import methodgen.codegen.emit as e, {patch}; "
-            "p = Path({path!r}).resolve(); m = e._exec_source(p, p.read_bytes()); "
-            "print(m.f(), sum(m.f.stats.cache_hits.values()))")
-
-    def run(code):
-        return subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)
-
-    path = str(tmp_path / "plainmod.py")
-    assert run(load.format(patch="sys", path=path)).stdout.split() == ["4242", "0"]    # compiled, cached
-    assert run(load.format(patch="sys", path=path)).stdout.split() == ["4242", "1"]    # methodgen: cache hit
-    plain = run("import plainmod; print(plainmod.f())")
-    assert plain.returncode == 0, plain.stderr
-    assert plain.stdout.split() == ["4242"]
-    # control: without the per-name cache entries the plain import loads the private one and fails
-    shutil.rmtree(tmp_path / "__pycache__")
-    off = "methodgen.codegen.nbcache as c; c.install_stamp_guard = lambda *a, **k: None"
-    assert run(load.format(patch=off, path=path)).stdout.split() == ["4242", "0"]
-    plain = run("import plainmod; print(plainmod.f())")
-    assert plain.returncode != 0 and "methodgen_generated" in plain.stderr
-
-
 # --- per-step cost: work arrays on the stack ----------------------------------------------
 
-def test_stack_buffers_are_distinct_and_writable():
-    """nbruntime.stack_buffer: each call is its own buffer in the caller's frame.  Control:
-    two views of one buffer (what a shared buffer would be) fail the same check."""
-    import numba
+_TWO = """
+def two(_z, _y, _c, _h, _p, _r):
+    a = stack_array((3,))
+    b = stack_array((3,))
+    for i in range(3):
+        a[i] = _y[0]
+        b[i] = -_y[0]
+    _r[0] = a[0] + a[1] + a[2]
 
-    @numba.njit
-    def two(x, alias):
-        a = numba.carray(nbruntime.stack_buffer(3), 3)
-        b = numba.carray(nbruntime.stack_buffer(3), 3)
-        if alias:
-            b = a
-        for i in range(3):
-            a[i] = x
-            b[i] = -x
-        return a[0] + a[1] + a[2]
 
-    assert two(1.5, False) == 4.5
-    assert two(1.5, True) == -4.5
+def alias(_z, _y, _c, _h, _p, _r):
+    a = stack_array((3,))
+    b = a
+    for i in range(3):
+        a[i] = _y[0]
+        b[i] = -_y[0]
+    _r[0] = a[0] + a[1] + a[2]
+"""
+
+
+def test_stack_arrays_are_distinct_and_writable(tmp_path):
+    """``stack_array(shape)`` (the stepper's work arrays): each is its own buffer in the
+    compiled function's frame.  Control: two names of one buffer (what a shared buffer would
+    be) fail the same check."""
+    path = tmp_path / "two_buffers.py"
+    path.write_text(_TWO)
+    mod = _import_fresh(path, "two_buffers")
+    res = abi.KERNEL_TYPES["res"]
+    out = {}
+    for name in ("two", "alias"):
+        r = np.zeros(1)
+        lk.compile_kernel(getattr(mod, name), res)(np.zeros(1), np.array([1.5]), np.zeros(1), 0.1, np.zeros(1), r)
+        out[name] = r[0]
+    assert out == {"two": 4.5, "alias": -4.5}
 
 
 def test_stage_kernels_keep_their_work_arrays_on_the_stack(tmp_path):
-    """Gauss's stage kernels on the shared runtime take their work arrays (f, f' at the stage
-    points) from the stack instead of allocating them per call (a fifth of Kepler gauss
-    s = 3's step); residual, Jacobian and trajectory are bitwise those of the same kernels
-    allocating with numpy.empty.  Control: the comparison sees a one-ulp change of h."""
-    import re
-
+    """Gauss's stage kernels take their work arrays (f, f' at the stage points) from the stack
+    (``stack_array``) instead of allocating them per call (a fifth of Kepler gauss s = 3's step
+    when they were numpy arrays).  Control: energy collocation's kernels, printed by the same
+    code, have them too, and no stage kernel allocates."""
     scene = mg.load_scene("kepler")
-    nb = mg.generate(mg.discretize(scene.system, "gauss", stages=2), tmp_path / "stack_numba.py", backend="numba")
-    src = open(nb.__file__).read()
-    stage = src[src.index("def _nb_resjac("):src.index("def _nb_post(")]
-    assert stage.count("_rt.stack_buffer(") == 6 and "numpy.empty(" not in stage
-    heap_src = re.sub(r"numba\.carray\(_rt\.stack_buffer\(\d+\), (\([^)]*\))\)", r"numpy.empty(\1)", src)
-    assert heap_src.count("numpy.empty(") == src.count("numpy.empty(") + 6
-    (tmp_path / "heap_numba.py").write_text(heap_src)
-    heap = _import_fresh(tmp_path / "heap_numba.py", "heap_numba")
-    y0 = np.array(scene.y0)
-    z = 0.01 * np.sin(np.arange(len(nb.UNKNOWN_NAMES)) + 1.0)
-    for fn in ("residual", "jacobian"):
-        assert np.array_equal(getattr(nb, fn)(z, y0, 0.1), getattr(heap, fn)(z, y0, 0.1)), fn
-    for solver in ("newton", "fixed-point"):
-        a = nb.integrate(y0, scene.h, 200, solver=solver)
-        assert np.array_equal(a, heap.integrate(y0, scene.h, 200, solver=solver)), solver
-        assert not np.array_equal(a, heap.integrate(y0, np.nextafter(scene.h, 1.0), 200, solver=solver)), solver
+    for method in ("gauss", "energy-collocation"):
+        nb = mg.generate(mg.discretize(scene.system, method, stages=2), tmp_path / f"stack_{method}_numba.py".replace("-", "_"),
+                         backend="numba")
+        src = open(nb.__file__).read()
+        stage = src[src.index("def _nb_resjac("):src.index("def _nb_post(")]
+        assert stage.count("stack_array(") == 6 and "numpy.empty(" not in stage and "numpy.zeros(" not in stage, method
 
 
 def test_a_continued_run_skips_the_initial_check_and_control(kepler, monkeypatch):
