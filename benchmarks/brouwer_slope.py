@@ -5,6 +5,8 @@ Not a test: run it and read the line.
 
     python benchmarks/brouwer_slope.py kepler --backend numba [--steps 1e6] [--phases 8] [--h 0.01]
     python benchmarks/brouwer_slope.py outer-solar-system --backend numpy
+    python benchmarks/brouwer_slope.py henon-heiles-2d --method stormer-verlet --order 10 --h 0.1 \
+        --backend numba --steps 1e7 --phases 16 [--compensated False]
 
 Phases: the states of one run from the scene's y0 at evenly spaced steps (4000 steps).  The
 energy is that of the exact numerical state y + c (the compensation the module carries),
@@ -34,13 +36,18 @@ def main(argv=None):
     ap.add_argument("--steps", type=float, default=1e6)
     ap.add_argument("--phases", type=int, default=8)
     ap.add_argument("--h", type=float, default=None, help="default: the scene's step")
+    ap.add_argument("--order", type=int, default=2, help="compose the method to this order (default 2: the "
+                    "method itself)")
+    ap.add_argument("--compensated", default="True", choices=["True", "False"],
+                    help="integrate's compensated (default True)")
     ap.add_argument("--one-by-one", action="store_true",
                     help="integrate each phase as one trajectory (the numpy backend's scalar path, "
                          "faster than its batch path for looped modules and small batches)")
     args = ap.parse_args(argv)
     scene = mg.load_scene(args.scene)
     system = scene.system
-    mod = build(system, args.method, backend=args.backend)
+    mod = build(system, args.method, backend=args.backend, order=args.order)
+    comp_opt = args.compensated == "True"
     h = args.h or scene.h
     steps = int(args.steps)
     pre = mod.integrate(np.array(scene.y0, float), h, 4000)
@@ -60,17 +67,18 @@ def main(argv=None):
     for target in record:
         if args.one_by_one:
             for b in range(len(Y)):
-                Y[b] = mod.integrate(Y[b], h, int(target - done), info=infos[b])[-1]
+                Y[b] = mod.integrate(Y[b], h, int(target - done), info=infos[b], compensated=comp_opt)[-1]
             comp = np.array([i["compensation"] for i in infos])
         else:
-            Y = mod.integrate(Y, h, int(target - done), info=info)[-1]
+            Y = mod.integrate(Y, h, int(target - done), info=info, compensated=comp_opt)[-1]
             comp = info["compensation"]
         done = target
         rms.append(float(np.sqrt(np.mean((energy(Y, comp) - H0) ** 2))))
     t, rms = record * h, np.array(rms)
     keep = (rms > 0) & (t >= t[-1] / 100)
     slope = np.polyfit(np.log(t[keep]), np.log(rms[keep]), 1)[0]
-    print(f"{args.scene} {args.method} {args.backend} h={h} steps={steps} phases={args.phases}: "
+    print(f"{args.scene} {args.method} o{args.order} compensated={args.compensated} {args.backend} h={h} "
+          f"steps={steps} phases={args.phases}: "
           f"slope {slope:.3f}, RMS at the end {rms[-1]:.2e}, {time.process_time() - t0:.0f} s CPU")
 
 

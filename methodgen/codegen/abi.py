@@ -159,6 +159,7 @@ CFG = {name: i for i, name in enumerate((
     "KL", "KU",     # bandwidths of the Newton matrix
     "PROJ",         # invariants projected on (methodgen.symbolic.projection): 0 none
     "PROJ_SYM",     # 1: symmetric projection, 0: standard
+    "MERGED",       # 1: composed Störmer–Verlet stages with merged kicks (ModuleIR.merged_kicks)
 ))}
 
 #: Positions in the float configuration array ``fcfg`` of the compiled runtime.
@@ -192,7 +193,8 @@ def int_config_values(ir) -> dict:
         HAS_SCALE=int("scale" in ir.scalar), RESOLUTION=_RESOLUTION_CODES[ir.resolution] if n else 0,
         KIND=2 if not n else (1 if ir.kind == "linear" else 0),
         KL=ir.band[0] if n else 0, KU=ir.band[1] if n else 0,
-        PROJ=len(ir.projection), PROJ_SYM=int(bool(ir.projection and ir.projection_symmetric)))
+        PROJ=len(ir.projection), PROJ_SYM=int(bool(ir.projection and ir.projection_symmetric)),
+        MERGED=int(ir.merged_kicks))
     return {name: values[name] for name in CFG}
 
 

@@ -330,7 +330,13 @@ def _block(name, kern, ir, lanes):
     lane += [("=", at("_g", i), kir.tree_of(c)) for i, c in enumerate(flat[d:d + nf])]
     lane += [("=", at("_out", d + nf + i), kir.tree_of(c)) for i, c in enumerate(flat[d + nf:])]
     bad = ("if", ("not", ("==", ("-", _v("_us"), _v("_us")), _n(0.0))), (("+=", _v("_ubad"), _n(1)),), ())
-    comp, plain = list(lane), list(lane)
+    comp, plain, merged = list(lane), list(lane), list(lane)
+    # merged kicks (ModuleIR.merged_kicks; _comp 2): _c holds D, y stays; D_q takes the drift,
+    # D_p the stage's kick (the stepper's sums, operation for operation)
+    for i in range(nf if ir.merged_kicks else 0):
+        merged += [("=", at("_c", i), _add(_v(ir.comp_vars[i]), _v(f"_bd{i}")))]
+    for i in range(nf if ir.merged_kicks else 0):
+        merged += [("=", at("_c", nf + i), ("-", _v(ir.comp_vars[nf + i]), _mul(_v("_ha"), _v(ir.fsal_vars[i]))))]
     for i, v in enumerate(ir.state_vars):
         comp += [("=", _v("_ua"), _add(_v(f"_bd{i}"), _v(ir.comp_vars[i]))),
                  ("=", _v("_us"), _add(_v(v), _v("_ua"))),
@@ -342,7 +348,8 @@ def _block(name, kern, ir, lanes):
     body = [("#", "the stage's step h·γ_k"), ("=", _v("_h"), _v("_hd"))]
     body += [("=", _v(v), _el("_p", _n(i))) for i, v in enumerate(ir.param_vars)]
     body += [("=", _v("_ubad"), _n(0)),
-             ("if", ("!=", _v("_comp"), _n(0)), (_for("_l", _v("_nl"), comp),), (_for("_l", _v("_nl"), plain),)),
+             ("if", ("==", _v("_comp"), _n(2)), (_for("_l", _v("_nl"), merged),),
+              (("if", ("!=", _v("_comp"), _n(0)), (_for("_l", _v("_nl"), comp),), (_for("_l", _v("_nl"), plain),)),)),
              ("#", "(an integer count in the loops: a float sum would not vectorise)"),
              ("return", _mul(_n(1.0), _v("_ubad")))]
     params = ("_y", "_c", "_g", "_ha", "_hd", "_hb", "_p", "_out", "_nl", "_comp")

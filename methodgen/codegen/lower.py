@@ -34,7 +34,7 @@ from ..symbolic.compensate import compensate, compensation_symbols
 from .lower_loops import (acc_symbol, force_plan, jacobian_row_scales, jacobian_via_sums, loop_prefix, potential_via_sums,
                           sum_pattern, table_names)
 from ..symbolic.derive import Invariant, casimir_invariants, separable_split, vector_field
-from ..symbolic.fsal import fsal_applies, fsal_plan
+from ..symbolic.fsal import fsal_applies, fsal_plan, merged_stage
 from ..symbolic.splittings import composition_stages, is_splitting
 from ..problem.poisson import is_poisson
 from ..errors import InputError
@@ -332,6 +332,16 @@ class ModuleIR:
     stage_kick_b: tuple[str, ...] = ("0.5",)
     #: True for a splitting family (stages that are not Störmer–Verlet steps).
     splitting: bool = False
+    #: A composed first-same-as-last Störmer–Verlet step run with merged kicks (every runtime:
+    #: :func:`methodgen.runtime.stepper.stepper`): the state (q0, p0) stays fixed through the
+    #: composed step, its increment so far D (starting from the compensation) is what the stages
+    #: add to, each stage's post kernel is called at (q0, p0) + D with the kick ``_ha`` the merged
+    #: b_{k-1} + a_k and ``_hb`` 0 (the stage's own last kick is the next stage's first), and
+    #: (q0, p0) + D is summed once per composed step (Kahan).  Only where each stage's values read
+    #: the state through y + c (no domain condition, time transformation, stage H, projection,
+    #: carried estimate), the state is (q, p), T is quadratic (the estimate reads Δq and the
+    #: forces, not Δp) and the stages are Störmer–Verlet steps (not a splitting's).
+    merged_kicks: bool = False
     #: An s-stage implicit method lowered by structure (:func:`stage_tables`): the tables
     #: its residual and Newton-matrix loops read (float reprs); None where the residual and
     #: the Newton matrix are straight-line kernels.
@@ -656,7 +666,10 @@ def local_error_plan(scheme, dy=None, field_at_end=None, fsal=None) -> LocalErro
         sep = separable_split(system)
         if fsal is not None:
             G0, G1, (ha, hd, hb) = fsal
-            w = hd * (ha + hb) / 4
+            # a Störmer–Verlet stage (a composition's: kicks hd/2, exactly so in binary) reads
+            # the drift alone, so that a stage called with merged kicks (ModuleIR.merged_kicks)
+            # has the same estimate; a splitting's stage its own kicks
+            w = hd * (ha + hb) / 4 if is_splitting(scheme.composition) else hd * hd / 4
             if sep.Minv is not None:
                 M = sep.Minv.inv()
                 E = [w * (G1[i] - G0[i]) for i in q]
@@ -989,6 +1002,11 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
              + [u.xreplace(at1) for u in tguard] + ejump1)
     shared = lplan.shared if lplan else ()
     vsource = "d" if splan is not None else "z"
+    merged = _merged_kicks(scheme, fplan, lplan, conds, tguard, ejump, ejump_step)
+    if merged and splan is None:
+        # a composed step with merged kicks: the stage at y + D (D the step's increment so far)
+        # written for a short chain of dependent operations (methodgen.symbolic.fsal.merged_stage)
+        first = merged_stage(fplan, system, comp)
     for flavour, printer, lp in ((scalar, sp_, CheckPrinter({"fully_qualified_modules": True})),
                                  (vector, vp, None))[:2 if batch else 1]:
         k = _with_loops(_chained_kernel(first, later, first_links, printer, rename, lp, shared),
@@ -1088,11 +1106,25 @@ def lower(scheme, signature: str, module_name: str, loops: bool | None = None, *
         loop_tables=_loop_tables(plan),
         band=band if n else (0, 0),
         fsal_vars=tuple(str(g) for g in fplan.symbols) if fplan is not None else (),
+        merged_kicks=merged,
         **(_stage_fields(scheme) if fplan is not None else {}),
         stage=stage_tables(stage) if stage is not None else None,
         projection=tuple(scheme.projection),
         projection_symmetric=bool(getattr(scheme, "projection_symmetric", True)),
     )
+
+
+def _merged_kicks(scheme, fplan, lplan, conds, tguard, ejump, ejump_step) -> bool:
+    """:attr:`ModuleIR.merged_kicks` for a lowered scheme."""
+    comp = getattr(scheme, "composition", None)
+    system = scheme.system
+    if fplan is None or comp is None or comp.stages < 2 or is_splitting(comp) or is_poisson(system):
+        return False
+    sep = separable_split(system)
+    return (getattr(comp, "role", "method") in ("method", "kernel") and not conds and not tguard
+            and (ejump_step or not ejump) and not system.constraints and not scheme.projection
+            and (lplan is None or lplan.kind == "direct") and sep is not None and sep.Minv is not None
+            and len(system.y) == 2 * len(fplan.symbols))
 
 
 def stage_tables(stage) -> dict:

@@ -11,6 +11,12 @@ configuration (:mod:`methodgen.codegen.abi`) as constants (``_DIM``, ``_N``, ``_
 (``guess``, ``res``, ``resjac``, ``post``, ``hs``, ``check``, ``scale``), compiles it with the
 kernels inlined, and drives it.
 
+A composed first-same-as-last Störmer–Verlet step whose module says so (``_MERGED``,
+:attr:`methodgen.codegen.lower.ModuleIR.merged_kicks`) runs with merged kicks: the state stays
+at the step's start, the compensation array holds D, the step's increment so far, each stage
+adds its drift and its kick (b_{k-1} + a_k, one kick) to D, and y + D is summed once at the
+step's end (Kahan's sum; the checks of the step's end follow it).
+
 One check needs what the loop does not have: where the row-sum bound of ``J - I`` is above
 the resolution threshold, the verdict is the spectral radius of ``J - I``, from its
 eigenvalues.  There the stepper **stops and asks**: it leaves the matrix in ``_jout``, the
@@ -101,6 +107,7 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
     _yl = stack_array((_DIM,))
     _cl = stack_array((_DIM,))
     _gl = stack_array((_NG,))
+    _cst = stack_array((_DIM,))   # the compensation as it came (merged, plain)
     _hh = 0.5 * _h * _GAMMA0
     _limit = _n1
     _st[0] = 0.0
@@ -111,6 +118,7 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
         for _i in range(_DIM):
             _yl[_i] = _Y[_b, _i]
             _cl[_i] = _C[_b, _i]
+            _cst[_i] = _cl[_i]
         for _i in range(_NG):
             _gl[_i] = _G[_b, _i]
         if _PROJ != 0:
@@ -420,10 +428,31 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
                         _fval[_b] = _val
                         _failed = 1
                         break
-                # the increment, then what the checks need at y1
-                post(_z, _yl, _cl, _gl, _h * _ka[_k], _hs, _h * _kb[_k], _p, _out)
                 _bad = 0.0
+                if _MERGED != 0:
+                    # a composed Störmer–Verlet step with merged kicks: y stays (q0, p0) through
+                    # the step and _cl holds D, the step's increment so far (from the carried
+                    # compensation); the stage is called at y + D with the kick the last stage's
+                    # closing one and its own merged (b_{k-1} + a_k), and no closing kick (_hb 0:
+                    # the next stage's, or the step's end, makes it).  D_q takes the drift, D_p
+                    # the kick here (the kernel's own sum p + (D_p - kick), which LLVM shares);
+                    # the stage's unread Δp is dropped.  From one force to the next: the kick, the
+                    # drift, q0 + D_q and the force (about 10 dependent operations on
+                    # Hénon–Heiles, 15 with Kahan's sum at every stage).
+                    if _k == 0:
+                        _hk = _h * _ka[0]
+                    else:
+                        _hk = _h * (_kb[_k - 1] + _ka[_k])
+                    post(_z, _yl, _cl, _gl, _hk, _hs, 0.0, _p, _out)
+                    for _i in range(_NF):
+                        _cl[_i] = _cl[_i] + _out[_i]
+                        _cl[_NF + _i] = _cl[_NF + _i] - _hk * _gl[_i]
+                else:
+                    # the increment, then what the checks need at y1
+                    post(_z, _yl, _cl, _gl, _h * _ka[_k], _hs, _h * _kb[_k], _p, _out)
                 for _i in range(_DIM):
+                    if _MERGED != 0:
+                        continue
                     if _comp != 0:
                         # compensated (Kahan) summation: the rounding error of y + Δy is
                         # carried to the next stage
@@ -497,6 +526,32 @@ def stepper(_Y, _C, _G, _K, _PRJ, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _
                     _e0 = _out[_PJ]
                     _e1 = _out[_PJ + 1]
                 _k += 1
+            if _MERGED != 0 and _stop == 0:
+                # the composed step's end (or a failed stage's): its closing kick, then y + D in
+                # one sum, compensated (Kahan: the new compensation is its rounding error) or
+                # plain (the compensation left as it came, as every stage leaves it then)
+                if _failed == 0:
+                    _hk = _h * _kb[_STAGES - 1]
+                    for _i in range(_NF):
+                        _cl[_NF + _i] = _cl[_NF + _i] - _hk * _gl[_i]
+                for _i in range(_DIM):
+                    _a = _cl[_i]
+                    if _comp != 0:
+                        _s = _yl[_i] + _a
+                        _cl[_i] = _a - (_s - _yl[_i])
+                    else:
+                        _s = _yl[_i] + (_a - _cst[_i])
+                        _cl[_i] = _cst[_i]
+                    _yl[_i] = _s
+                    if not (_s - _s == 0.0):
+                        _bad = 1.0
+                if _bad != 0.0 and _failed == 0:
+                    _fst[_b, 0] = _S_NON_FINITE
+                    _fst[_b, 1] = _n
+                    _fst[_b, 2] = 0
+                    _fval[_b] = math.nan
+                    _failed = 1
+                    _k = _STAGES - 1
             if _EJUMP == 2 and _failed == 0 and _stop == 0 and _PROJ == 0:
                 # a composition: the energy jump of the composed step, H at its end against its
                 # start (stage -1 in the record: the composed step, no stage of it)
@@ -998,6 +1053,7 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
     row, ``_fst`` / ``_fval`` the failures)."""
     _YS = stack_array((_DIM * _L,))
     _CS = stack_array((_DIM * _L,))
+    _CST = stack_array((_DIM * _L,))   # the compensation as it came (merged, plain)
     _FS = stack_array((_NG * _L,))
     _PS = stack_array((_PL * _L,))
     _G0 = stack_array((_NK * _L,))     # (h_prev/2) f per lane ("carry")
@@ -1025,6 +1081,7 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
             for _i in range(_DIM):
                 _YS[_i * _L + _l] = _Y[_b, _i]
                 _CS[_i * _L + _l] = _C[_b, _i]
+                _CST[_i * _L + _l] = _C[_b, _i]
             for _i in range(_NF):
                 _FS[_i * _L + _l] = _G[_b, _i]
             if _EJUMP:
@@ -1042,7 +1099,15 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
             for _k in range(_STAGES):
                 # the stage for the whole block: y (compensated or not) and the carried force
                 # updated in place, the check values in _PS, the count of non-finite components
-                _nbad = post_block(_YS, _CS, _FS, _h * _ka[_k], _h * _kd[_k], _h * _kb[_k], _p, _PS, _nl, _comp)
+                if _MERGED != 0:
+                    # merged kicks (the stepper's stage): _CS holds D, _YS stays
+                    if _k == 0:
+                        _hk = _h * _ka[0]
+                    else:
+                        _hk = _h * (_kb[_k - 1] + _ka[_k])
+                    _nbad = post_block(_YS, _CS, _FS, _hk, _h * _kd[_k], 0.0, _p, _PS, _nl, 2)
+                else:
+                    _nbad = post_block(_YS, _CS, _FS, _h * _ka[_k], _h * _kd[_k], _h * _kb[_k], _p, _PS, _nl, _comp)
                 _rk = _RATIOS[_k]
                 # the other checks: a count of failing lanes, one row of lanes at a time (an
                 # integer count: LLVM vectorises the lane loops; a float sum it may not reorder)
@@ -1112,6 +1177,45 @@ def lockstep(_Y, _C, _G, _T, _p, _ka, _kd, _kb, _h, _n0, _n1, _every, _nxt0, _ro
                 if _EJUMP == 1:
                     for _l in range(2 * _L):
                         _EJS[_l] = _PS[_PJ * _L + _l]    # H and its size: two consecutive rows
+            if _MERGED != 0:
+                # the composed step's end, lane by lane as in the stepper: a lane that failed at a
+                # stage from its state then (no closing kick), the others after the closing
+                # kick; then y + D (Kahan, or plain with the compensation as it came)
+                _hk = _h * _kb[_STAGES - 1]
+                for _l in range(_nl):
+                    if _DEAD[_l] != 0.0:
+                        for _i in range(_DIM):
+                            _YS[_i * _L + _l] = _SAVE[_i * _L + _l]
+                            _CS[_i * _L + _l] = _SAVE[(_DIM + _i) * _L + _l]
+                        for _i in range(_NF):
+                            _FS[_i * _L + _l] = _SAVE[(2 * _DIM + _i) * _L + _l]
+                    else:
+                        for _i in range(_NF):
+                            _CS[(_NF + _i) * _L + _l] = _CS[(_NF + _i) * _L + _l] - _hk * _FS[_i * _L + _l]
+                    _lbad = 0
+                    for _i in range(_DIM):
+                        _a = _CS[_i * _L + _l]
+                        _y0 = _YS[_i * _L + _l]
+                        if _comp != 0:
+                            _s = _y0 + _a
+                            _CS[_i * _L + _l] = _a - (_s - _y0)
+                        else:
+                            _s = _y0 + (_a - _CST[_i * _L + _l])
+                            _CS[_i * _L + _l] = _CST[_i * _L + _l]
+                        _YS[_i * _L + _l] = _s
+                        if not (_s - _s == 0.0):
+                            _lbad = 1
+                    if _DEAD[_l] != 0.0:
+                        _DEAD[_l] = _STAGES      # (its state is that of the failing stage, folded)
+                    elif _lbad != 0:
+                        _b = _b0 + _l
+                        _fst[_b, 0] = _S_NON_FINITE
+                        _fst[_b, 1] = _n
+                        _fst[_b, 2] = 0
+                        _fst[_b, 3] = _STAGES - 1
+                        _fval[_b] = math.nan
+                        _DEAD[_l] = _STAGES
+                        _failed = 1
             if _EJUMP == 2:
                 # a composition: each live lane's energy jump over the composed step (stepper's
                 # test, on the same values)

@@ -18,6 +18,10 @@ the compensated stage sums at ``q0 + (Δq + c)`` -- the exact numerical state at
 end.  The step without first-same-as-last evaluated it afresh at ``q1 + c1`` (the stored
 state plus its new compensation): the same point in exact arithmetic, rounded differently.
 So the two agree to round-off, not to the bit.
+
+A composed step runs its stages with merged kicks where it can (:func:`merged_stage`): the
+stage is then written at y + D, D the composed step's increment so far, for a short chain of
+dependent operations from one force to the next.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ import sympy as sp
 from .derive import separable_gradients, separable_split
 from .schemes.base import STEP
 
-__all__ = ["FsalPlan", "fsal_plan", "STAGE_STEPS"]
+__all__ = ["FsalPlan", "fsal_plan", "merged_stage", "STAGE_STEPS"]
 
 #: The three step symbols of a stage (the post kernel's arguments ``_ha, _hd, _hb``).
 STAGE_STEPS = (sp.Symbol("_ha", real=True), sp.Symbol("_hd", real=True), sp.Symbol("_hb", real=True))
@@ -112,3 +116,37 @@ def fsal_plan(scheme, full: bool = True) -> FsalPlan | None:
         return None
     return FsalPlan(symbols=tuple(G0), steps=STAGE_STEPS, increment=list(inc), end_force=list(g1),
                     start_force=list(gradU))
+
+
+def merged_stage(plan: FsalPlan, system, comp) -> list:
+    """A stage's Δy and end force for a composed step run with merged kicks: the post kernel's
+    first expressions where :attr:`methodgen.codegen.lower.ModuleIR.merged_kicks` holds.
+
+    There the kernel is called at ``(q0, p0) + D``, D the composed step's increment so far
+    (the compensation symbols ``comp`` stand for it: O(h), not below ulp(y), so ``p0 + D_p`` is
+    an ordinary sum), with ``ha`` the merged kick and ``hb`` 0.  Written so that few operations
+    depend on the carried force G0 (the stage is latency-bound): with K = ha·G0 (the runtime's
+    own kick of D_p, the same product) and T quadratic (∇T(p) = M⁻¹p),
+
+        X  = q0 + ((D_q + hd M⁻¹(p0 + D_p)) - hd M⁻¹K)      (the stage's end, rounded)
+        Δq = hd M⁻¹(p0 + D_p) - hd M⁻¹K,   Δp = -K - hb ∇U(X),   end force ∇U(X),
+
+    the same as the plan's increment and end force at y + D in exact arithmetic.  The force
+    is evaluated at the rounded point X, its linear part included: every rounding here is of
+    a sum of O(h) terms (Brouwer's law measured kept, ``benchmarks/brouwer_slope.py``)."""
+    from .compensate import grouped
+    from .derive import separable_split
+
+    Minv = separable_split(system).Minv
+    q0, p0 = list(system.q), list(system.p)
+    ha, hd, hb = plan.steps
+    K = sp.Matrix([grouped(ha * g) for g in plan.symbols])   # (the runtime's product)
+    P = Minv * sp.Matrix([p + comp[p] for p in p0])
+    MK = Minv * K
+    drift = [hd * grouped(P[i]) for i in range(len(q0))]
+    X = [grouped(q + grouped(grouped(comp[q] + drift[i]) - hd * MK[i])) for i, q in enumerate(q0)]
+    _, gU = separable_gradients(system)
+    g1 = [sp.sympify(e).xreplace(dict(zip(q0, X))) for e in gU]
+    dq = [drift[i] - hd * MK[i] for i in range(len(q0))]
+    dp = [-K[i] - hb * g1[i] for i in range(len(q0))]
+    return dq + dp + g1
