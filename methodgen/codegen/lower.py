@@ -41,8 +41,8 @@ from ..errors import InputError
 from ..symbolic.schemes.base import LOOP_MIN_INSTANCES, STEP, is_linear_field  # noqa: F401 (re-exported)
 from ..problem.special import HELPER_DEPENDENCIES, SPECIAL_FUNCTIONS
 from ..symbolic.timetransform import time_scale_guard
-from .kir import Code
-from .kir_build import MAX_PRODUCT_POWER
+from .kir import Code, python
+from .kir_build import MAX_PRODUCT_POWER, _power_by_squaring, _strip
 from .kir_build import code as _code
 
 __all__ = ["Kernel", "ModuleIR", "lower", "sanitize_names"]
@@ -74,15 +74,10 @@ def _special_printer(prefix: str):
 
 
 def _squaring(base: str, n: int) -> str:
-    """``base**n`` (n ≥ 2) as the products of exponentiation by squaring."""
-    res, val = None, base
-    while n:
-        if n & 1:
-            res = val if res is None else f"({res}*{val})"
-        n >>= 1
-        if n:
-            val = f"({val}*{val})"
-    return res
+    """``base**n`` (n ≥ 2) as the products of exponentiation by squaring, parenthesised: the
+    text of :func:`methodgen.codegen.kir_build._power_by_squaring`'s tree (one source of the
+    order of the products)."""
+    return f"({python(_strip(_power_by_squaring(('v', base), n)))})"
 
 
 def _root_power(root: str, k: int) -> str:
